@@ -1,0 +1,92 @@
+"""`Views`: a set of images with their cameras; the unit that datasets, the trainer and the oracle
+exchange."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import torch
+from torch import Tensor
+
+from nerfaug.cameras import Cameras
+
+
+@dataclass
+class Views:
+    """Images (composited over the background) and the cameras that took them.
+
+    Attributes:
+        cameras: `n` cameras sharing one image size.
+        images: Tensor with shape (n, height, width, 3), float32 in [0, 1]; or None while lazy.
+        names: one name per view (the `file_path` of the Blender format).
+        alphas: Tensor with shape (n, height, width) in [0, 1] when the source had an alpha channel.
+        loader: for lazy views, loads image `i` as (image (h, w, 3), alpha (h, w) or None).
+    """
+
+    cameras: Cameras
+    images: Tensor | None
+    names: list[str]
+    alphas: Tensor | None = None
+    loader: Callable[[int], tuple[Tensor, Tensor | None]] | None = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    def image(self, index: int) -> Tensor:
+        """Image `index` with shape (height, width, 3), loading it if the views are lazy."""
+        if self.images is not None:
+            return self.images[index]
+        assert self.loader is not None
+        return self.loader(index)[0]
+
+    def materialised(self) -> "Views":
+        """The same views with every image in memory."""
+        if self.images is not None:
+            return self
+        assert self.loader is not None
+        loaded = [self.loader(i) for i in range(len(self))]
+        alphas = None
+        if all(a is not None for _, a in loaded):
+            alphas = torch.stack([a for _, a in loaded])
+        return Views(self.cameras, torch.stack([im for im, _ in loaded]), list(self.names), alphas)
+
+    def subset(self, indices) -> "Views":
+        """The views at `indices` (a list of ints), in that order."""
+        indices = [int(i) for i in indices]
+        full = self.materialised()
+        return Views(
+            full.cameras[indices], full.images[indices], [full.names[i] for i in indices],
+            None if full.alphas is None else full.alphas[indices],
+        )
+
+    @staticmethod
+    def cat(parts: list["Views"]) -> "Views":
+        parts = [p.materialised() for p in parts]
+        alphas = None
+        if all(p.alphas is not None for p in parts):
+            alphas = torch.cat([p.alphas for p in parts])
+        return Views(
+            Cameras.cat([p.cameras for p in parts]), torch.cat([p.images for p in parts]),
+            [n for p in parts for n in p.names], alphas,
+        )
+
+
+def load_dataset(root: str | Path, split: str = "train", **kwargs) -> Views:
+    """Load a split from a Blender (`transforms_{split}.json`) or nerfstudio (`transforms.json`)
+    folder, whichever `root` holds."""
+    from nerfaug.data.blender import load_blender_split
+    from nerfaug.data.errors import DatasetError
+    from nerfaug.data.nerfstudio import load_nerfstudio
+
+    root = Path(root)
+    if (root / f"transforms_{split}.json").exists():
+        return load_blender_split(root, split, **kwargs)
+    if (root / "transforms.json").exists():
+        return load_nerfstudio(root, **kwargs)
+    if not root.is_dir():
+        raise DatasetError(root, "dataset folder does not exist")
+    raise DatasetError(
+        root, f"no transforms_{split}.json (Blender format) nor transforms.json (nerfstudio format)"
+    )

@@ -1,0 +1,1 @@
+"""The NeRF engine: encodings and fields, samplers, volume rendering, and the trainer."""
