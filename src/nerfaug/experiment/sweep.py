@@ -1,0 +1,254 @@
+"""The sweep driver: plan every (scene, method, trial), skip completed runs, execute the rest on
+a backend (this process, a process pool, or Ray), and show progress across runs.
+
+Resuming is the default: re-running the same command skips every run whose result.json is valid
+for this configuration and redoes only missing, partial or corrupted runs.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as futures
+import json
+import multiprocessing
+import platform
+import sys
+import time
+import traceback
+from dataclasses import asdict, dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Literal
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from nerfaug.experiment.config import ExperimentConfig
+from nerfaug.experiment.protocol import prepare_scene, run_trial
+from nerfaug.experiment.store import RunKey, check_sweep, clear_incomplete, fingerprint, read_result
+
+Backend = Literal["local", "ray"]
+PROGRESS_FILE = "progress.json"
+console = Console(stderr=True)
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep ended with: every valid result (old and new) and the runs that failed."""
+
+    results: list[dict]
+    failed: dict[str, str] = field(default_factory=dict)
+    skipped: int = 0
+
+
+def plan_runs(config: ExperimentConfig) -> list[RunKey]:
+    return [
+        RunKey(scene_name(scene), method, trial)
+        for scene in config.scenes for method in config.methods for trial in range(config.trials)
+    ]
+
+
+def scene_name(scene: str) -> str:
+    """The name a scene has in results: a built-in name, or a dataset folder's name."""
+    return Path(scene).name if Path(scene).is_dir() else scene
+
+
+def versions() -> dict[str, str]:
+    found = {"python": platform.python_version(), "platform": platform.platform()}
+    for package in ("nerfaug", "torch", "numpy", "scipy", "torchmetrics", "bpy", "ray"):
+        try:
+            found[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            pass
+    return found
+
+
+def sweep_record(config: ExperimentConfig, command: list[str] | None = None) -> dict:
+    fingerprinted = config.fingerprinted()
+    return {
+        "fingerprint": fingerprint(fingerprinted), "fingerprinted": fingerprinted,
+        "config": asdict(config), "command": command or sys.argv, "versions": versions(),
+    }
+
+
+def _run_and_report(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Path) -> dict:
+    """A run as a backend executes it (top-level so process pools and Ray can pickle it)."""
+    return run_trial(key, dataset_dir, config, root, progress=False)
+
+
+def run_sweep(
+    config: ExperimentConfig, root: Path, backend: Backend = "local", workers: int = 1,
+    address: str | None = None, force: bool = False, progress: bool = True,
+    command: list[str] | None = None,
+) -> SweepOutcome:
+    """Run every missing run of the sweep and return all results.
+
+    Args:
+        root: the results folder (created; shared storage when Ray spans machines).
+        backend: "local" (this process when workers == 1, else a process pool) or "ray".
+        workers: concurrent runs for the local backend.
+        address: a Ray cluster to join ("auto", "ray://host:10001"); None starts a local Ray.
+        force: discard existing runs and redo everything.
+    """
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    record = sweep_record(config, command)
+    check_sweep(root, record, force=force)
+    datasets = {scene_name(s): prepare_scene(root, s, config, progress=progress) for s in config.scenes}
+
+    results, todo = [], []
+    for key in plan_runs(config):
+        folder = key.folder(root)
+        result = read_result(folder, record["fingerprint"])
+        if result is not None:
+            results.append(result)
+            continue
+        if clear_incomplete(folder):
+            console.print(f"[yellow]redoing {key}: its folder had no valid result (interrupted or corrupted)")
+        todo.append(key)
+    skipped = len(results)
+    if skipped:
+        console.print(f"{skipped} completed run(s) kept, {len(todo)} to run")
+
+    execute = {"local": _execute_local, "ray": _execute_ray}[backend]
+    new_results, failed = execute(todo, datasets, config, root, workers, address, progress)
+    return SweepOutcome(results + new_results, failed, skipped)
+
+
+class _Display:
+    """Progress across runs (done / running / failed, ETA) and each running run's iterations,
+    read from the progress files the runs write."""
+
+    def __init__(self, total: int, root: Path, steps: int, enabled: bool):
+        self.root, self.steps = root, steps
+        self.progress = Progress(
+            TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            TimeRemainingColumn(), console=console, disable=not enabled, transient=False,
+        )
+        self.overall = self.progress.add_task("runs", total=total)
+        self.running: dict[RunKey, int] = {}
+        self.done = self.failed = 0
+
+    def __enter__(self):
+        self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self.progress.__exit__(*exc)
+
+    def started(self, key: RunKey) -> None:
+        self.running[key] = self.progress.add_task(f"  {key}", total=self.steps)
+        self._describe()
+
+    def finished(self, key: RunKey, ok: bool) -> None:
+        task = self.running.pop(key, None)
+        if task is not None:
+            self.progress.remove_task(task)
+        self.done += ok
+        self.failed += not ok
+        self.progress.advance(self.overall)
+        self._describe()
+
+    def poll(self) -> None:
+        for key, task in self.running.items():
+            try:
+                step = json.loads((key.folder(self.root) / PROGRESS_FILE).read_text())["step"]
+            except (OSError, ValueError, KeyError):
+                continue
+            self.progress.update(task, completed=step)
+
+    def _describe(self) -> None:
+        self.progress.update(
+            self.overall,
+            description=f"runs: {self.done} done, {len(self.running)} running, {self.failed} failed",
+        )
+
+
+def _execute_local(todo, datasets, config, root, workers, address, progress):
+    results, failed = [], {}
+    with _Display(len(todo), root, config.steps, progress) as display:
+        if workers <= 1:
+            for key in todo:
+                display.started(key)
+                try:
+                    results.append(_run_in_process(key, datasets[key.scene], config, root, display))
+                    display.finished(key, True)
+                except Exception as error:  # one failed run must not end the sweep
+                    failed[str(key)] = _describe_failure(key, error)
+                    display.finished(key, False)
+            return results, failed
+        # Spawned workers: each run sets its own thread count; fork would inherit torch's pools.
+        context = multiprocessing.get_context("spawn")
+        with futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            pending = {}
+            for key in todo:
+                pending[pool.submit(_run_and_report, key, datasets[key.scene], config, root)] = key
+                display.started(key)
+            while pending:
+                done, _ = futures.wait(pending, timeout=0.5, return_when=futures.FIRST_COMPLETED)
+                display.poll()
+                for future in done:
+                    key = pending.pop(future)
+                    try:
+                        results.append(future.result())
+                        display.finished(key, True)
+                    except Exception as error:
+                        failed[str(key)] = _describe_failure(key, error)
+                        display.finished(key, False)
+    return results, failed
+
+
+def _run_in_process(key, dataset_dir, config, root, display: _Display) -> dict:
+    # In this process the display is live, so poll it from the run's own progress writes.
+    from nerfaug.experiment import protocol
+
+    protocol.on_progress = lambda: display.poll()
+    try:
+        return run_trial(key, dataset_dir, config, root, progress=False)
+    finally:
+        protocol.on_progress = None
+
+
+def _describe_failure(key: RunKey, error: BaseException) -> str:
+    text = "".join(traceback.format_exception_only(type(error), error)).strip()
+    console.print(f"[red]run {key} failed: {text}")
+    return text
+
+
+def _execute_ray(todo, datasets, config, root, workers, address, progress):
+    try:
+        import ray
+    except ImportError as error:
+        raise RuntimeError("the Ray backend needs ray: pip install 'nerfaug[ray]'") from error
+    started_here = not ray.is_initialized()
+    if started_here:
+        if address:
+            ray.init(address=address, log_to_driver=False)
+        else:
+            ray.init(num_cpus=max(workers * config.threads_per_run, config.threads_per_run),
+                     include_dashboard=False, log_to_driver=False)
+    use_gpu = config.engine == "paper" and ray.cluster_resources().get("GPU", 0) > 0
+    remote = ray.remote(_run_and_report).options(
+        num_cpus=config.threads_per_run, num_gpus=1 if use_gpu else 0, max_retries=2, retry_exceptions=True,
+    )
+    results, failed = [], {}
+    try:
+        with _Display(len(todo), root, config.steps, progress) as display:
+            refs = {}
+            for key in todo:
+                refs[remote.remote(key, datasets[key.scene], config, root)] = key
+                display.started(key)
+            while refs:
+                ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.5)
+                display.poll()
+                for ref in ready:
+                    key = refs.pop(ref)
+                    try:
+                        results.append(ray.get(ref))
+                        display.finished(key, True)
+                    except Exception as error:
+                        failed[str(key)] = _describe_failure(key, error)
+                        display.finished(key, False)
+    finally:
+        if started_here:
+            ray.shutdown()
+    return results, failed
