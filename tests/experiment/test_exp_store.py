@@ -1,0 +1,64 @@
+import json
+
+import pytest
+
+from nerfaug.experiment.config import ExperimentConfig, preset
+from nerfaug.experiment.store import (
+    IncompatibleResults, RunKey, check_sweep, clear_incomplete, fingerprint, read_result, write_result,
+)
+from nerfaug.experiment.sweep import plan_runs, sweep_record
+
+
+def complete_result(fp="abc", psnr=20.0):
+    return {"scene": "lego", "method": "ours", "trial": 0, "seed": 0, "fingerprint": fp,
+            "metrics": {"psnr": psnr, "ssim": 0.8, "lpips": None}, "timing": {"total": 1.0}}
+
+
+def test_result_round_trip_and_fingerprint_check(tmp_path):
+    folder = RunKey("lego", "ours", 0).folder(tmp_path)
+    write_result(folder, complete_result())
+    assert read_result(folder, "abc")["metrics"]["psnr"] == 20.0
+    assert read_result(folder, "other") is None  # made with another configuration
+
+
+@pytest.mark.parametrize("content", ['{"scene": "lego", "metr', "[]", json.dumps({"scene": "lego"}),
+                                     json.dumps({**complete_result(), "metrics": {"psnr": "NaN?"}})])
+def test_partial_or_corrupted_results_are_not_complete(tmp_path, content):
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "result.json").write_text(content)
+    assert read_result(folder, "abc") is None
+    assert clear_incomplete(folder) and not folder.exists()
+
+
+def test_write_result_refuses_incomplete_records(tmp_path):
+    with pytest.raises(ValueError, match="missing"):
+        write_result(tmp_path, {"scene": "lego"})
+
+
+def test_incompatible_sweep_is_refused_with_the_changed_settings(tmp_path):
+    first = sweep_record(preset("tiny"), ["nerfaug"])
+    check_sweep(tmp_path, first)
+    check_sweep(tmp_path, first)  # same config: fine
+    grown = sweep_record(preset("tiny").replace(trials=5, methods=("ours", "uniform", "entropy")), ["nerfaug"])
+    check_sweep(tmp_path, grown)  # more trials or methods do not change any run's numbers
+    changed = sweep_record(preset("tiny").replace(steps=999), ["nerfaug"])
+    with pytest.raises(IncompatibleResults, match=r"steps: 60 -> 999.*--force"):
+        check_sweep(tmp_path, changed)
+    (tmp_path / "runs").mkdir()
+    check_sweep(tmp_path, changed, force=True)
+    assert not (tmp_path / "runs").exists()
+    assert json.loads((tmp_path / "sweep.json").read_text())["fingerprint"] == changed["fingerprint"]
+
+
+def test_fingerprint_is_stable_and_sensitive():
+    config = ExperimentConfig()
+    assert fingerprint(config.fingerprinted()) == fingerprint(ExperimentConfig().fingerprinted())
+    assert fingerprint(config.fingerprinted()) != fingerprint(config.replace(seed=1).fingerprinted())
+
+
+def test_plan_covers_every_cell():
+    config = preset("tiny").replace(scenes=("lego", "chair"), trials=3)
+    keys = plan_runs(config)
+    assert len(keys) == 2 * 2 * 3 and len(set(keys)) == len(keys)
+    assert RunKey("chair", "uniform", 2) in keys
