@@ -161,3 +161,15 @@ def test_unknown_folder(tmp_path):
         load_dataset(tmp_path / "missing")
     with pytest.raises(DatasetError, match="no transforms_train.json"):
         load_dataset(tmp_path)
+
+
+def test_semi_transparent_pixels_round_trip(tmp_path):
+    views = make_views(n=2, size=8)
+    views.alphas = torch.linspace(0, 1, 64).reshape(8, 8).expand(2, 8, 8).clone()
+    # What a loader returns: straight colour composited over white.
+    views.images = views.images * views.alphas[..., None] + (1 - views.alphas[..., None])
+    write_blender_split(tmp_path, "train", views)
+    back = load_blender_split(tmp_path, "train")
+    assert (back.images - views.images).abs().max() < 2.5 / 255  # 8-bit quantisation only
+    assert (back.alphas - views.alphas).abs().max() < 1 / 255
+    assert (tmp_path / "transforms_train.json").stat().st_mode & 0o044  # readable by others

@@ -107,10 +107,13 @@ def load_blender(root: str | Path, splits=SPLITS, **kwargs) -> dict[str, Views]:
     return found
 
 
-def write_blender_split(root: str | Path, split: str, views: Views, image_folder: str | None = None) -> Path:
+def write_blender_split(
+    root: str | Path, split: str, views: Views, image_folder: str | None = None, background=(1.0, 1.0, 1.0)
+) -> Path:
     """Write `views` as a Blender-format split (PNG images + `transforms_{split}.json`).
 
-    Images are written with their alpha when known (RGBA), else RGB. Cameras must share one
+    Images are written with their alpha when known (RGBA, un-composited from `background`, the
+    colour they were loaded over), else RGB. Cameras must share one
     horizontal field of view with square pixels, as the format has a single `camera_angle_x`.
     Returns the JSON path.
     """
@@ -126,7 +129,8 @@ def write_blender_split(root: str | Path, split: str, views: Views, image_folder
         stem = Path(name).name or f"r_{i}"
         rel = f"./{folder}/{Path(stem).stem}"
         alpha = None if views.alphas is None else views.alphas[i]
-        write_image(root / folder / f"{Path(stem).stem}.png", views.images[i], alpha)
+        write_image(root / folder / f"{Path(stem).stem}.png", views.images[i], alpha,
+                    torch.as_tensor(background, dtype=torch.float32))
         frames.append({"file_path": rel, "transform_matrix": cameras.camera_to_world[i].tolist()})
     path = root / f"transforms_{split}.json"
     atomic_write_json(path, {"camera_angle_x": float(angles[0]), "frames": frames})

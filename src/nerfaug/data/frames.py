@@ -14,6 +14,8 @@ from torch import Tensor
 
 from nerfaug.data.errors import DatasetError
 
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
 IMAGE_SUFFIXES = ("", ".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".exr")
 
 
@@ -102,11 +104,19 @@ def read_image(path: Path, background: Tensor, downscale: int, json_path: Path, 
     return rgb.contiguous(), alpha
 
 
-def write_image(path: Path, image: Tensor, alpha: Tensor | None = None) -> None:
-    """Write an (h, w, 3) image in [0, 1] (and optional (h, w) alpha) as an 8-bit PNG, atomically."""
+def write_image(path: Path, image: Tensor, alpha: Tensor | None = None, background: Tensor | None = None) -> None:
+    """Write an (h, w, 3) image in [0, 1] (and optional (h, w) alpha) as an 8-bit PNG, atomically.
+
+    With an alpha, `image` is taken as composited over `background` (white by default), as the
+    loader returns it, and is un-composited before writing so that loading gives it back.
+    """
     array = image.detach().cpu().clamp(0, 1)
     if alpha is not None:
-        array = torch.cat([array, alpha.detach().cpu().clamp(0, 1)[..., None]], dim=-1)
+        alpha = alpha.detach().cpu().clamp(0, 1)[..., None]
+        if background is None:
+            background = torch.ones(3)
+        straight = (array - (1.0 - alpha) * background) / alpha.clamp_min(1e-6)
+        array = torch.cat([torch.where(alpha > 0, straight, torch.zeros_like(array)).clamp(0, 1), alpha], dim=-1)
     data = (array.numpy() * 255.0 + 0.5).astype(np.uint8)
     atomic_write_bytes(path, iio.imwrite("<bytes>", data, extension=".png"))
 
@@ -116,6 +126,7 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the usual permissions
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
         os.replace(tmp, path)
