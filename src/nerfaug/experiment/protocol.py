@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import platform
 import time
@@ -98,6 +99,14 @@ def engine_config(config: ExperimentConfig, scene: str):
     return engine
 
 
+@functools.lru_cache(maxsize=1)
+def cached_lpips():
+    """LPIPS loaded once per process (None, with a reason in each result, when its weights are absent)."""
+    from nerfaug.evaluation import load_lpips
+
+    return load_lpips()
+
+
 def train_with_progress(trainer, until_step: int, folder: Path) -> None:
     """Train to `until_step` in chunks, recording the step in `folder/progress.json` so a driver
     in any process (or on any Ray node sharing the folder) can show it."""
@@ -113,7 +122,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
 
     Returns the result record (also in result.json).
     """
-    from nerfaug.evaluation import evaluate_views, load_lpips
+    from nerfaug.evaluation import evaluate_views
     from nerfaug.maps import plot_hemisphere_map
     from nerfaug.nerf.trainer import Trainer
     from nerfaug.selection import select_views
@@ -152,10 +161,9 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     timing["train_after"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    lpips = load_lpips()
     evaluation = evaluate_views(
-        lambda cameras, index: trainer.model.render_image(cameras, index, background=trainer.background)["rgb"],
-        data.test, lpips=lpips, save_dir=folder / "renders", save_count=config.save_renders, progress=progress,
+        lambda cameras, index: trainer.model.render_image(cameras, index)["rgb"],
+        data.test, lpips=cached_lpips(), save_dir=folder / "renders", save_count=config.save_renders, progress=progress,
     )
     timing["evaluation"] = time.perf_counter() - start
     timing["total"] = sum(timing.values())

@@ -1,0 +1,456 @@
+"""Image-quality metrics (PSNR, SSIM, LPIPS) and the evaluation of a model's renders on test views.
+
+Images are float in [0, 1] with shape (H, W, 3), or batched (N, H, W, 3); every metric returns one
+value per image: a Tensor with shape () for a single image, (N,) for a batch.
+
+- PSNR uses a data range of 1 and is computed in float64. Identical images have PSNR = +inf; it is
+  reported as inf, never capped, so that a perfect reconstruction is visible as such (a mean over
+  views that include one is inf as well).
+- SSIM is torchmetrics' functional SSIM with data_range=1.0 (Gaussian window 11, sigma 1.5,
+  K1=0.01, K2=0.03), the same as nerfstudio's evaluation. torchmetrics pads the image by reflection
+  and averages the SSIM map over the whole image; scikit-image drops a 5-pixel border instead, so
+  the two agree exactly on the interior and differ slightly on the border.
+- LPIPS (Zhang et al. 2018) with the AlexNet backbone, implemented here in plain torch because
+  torchmetrics' LPIPS needs torchvision. It needs two files: the linear-layer weights, which ship
+  inside torchmetrics (`functional/image/lpips_models/alex.pth`), and torchvision's ImageNet
+  AlexNet weights (`alexnet-owt-7be5be79.pth`), which nerfaug never downloads. Without them LPIPS
+  is reported as unavailable with the reason, never as a number.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from nerfaug.cameras import Cameras
+from nerfaug.data.views import Views
+
+ALEXNET_FILENAME = "alexnet-owt-7be5be79.pth"
+ALEXNET_URL = f"https://download.pytorch.org/models/{ALEXNET_FILENAME}"
+ALEXNET_ENV = "NERFAUG_ALEXNET_WEIGHTS"
+
+
+def _as_batch(pred: Tensor, target: Tensor) -> tuple[Tensor, Tensor, bool]:
+    """Both images as (N, H, W, 3) tensors, and whether the inputs were single images."""
+    pred, target = torch.as_tensor(pred), torch.as_tensor(target)
+    if pred.shape != target.shape:
+        raise ValueError(
+            f"prediction and target differ in shape: {tuple(pred.shape)} vs {tuple(target.shape)}"
+        )
+    if pred.ndim not in (3, 4) or pred.shape[-1] != 3:
+        raise ValueError(
+            f"expected images with shape (H, W, 3) or (N, H, W, 3), got {tuple(pred.shape)}"
+        )
+    single = pred.ndim == 3
+    if single:
+        pred, target = pred[None], target[None]
+    return pred, target.to(pred.device), single
+
+
+def psnr(pred: Tensor, target: Tensor) -> Tensor:
+    """Peak signal-to-noise ratio in dB for images in [0, 1] (data range 1), per image.
+
+    PSNR = -10 log10(MSE), the MSE taken over all pixels and channels of one image, in float64.
+    Identical images give +inf.
+
+    Args:
+        pred, target: Tensors with shape (H, W, 3) or (N, H, W, 3).
+
+    Returns:
+        float64 Tensor with shape () for single images, (N,) for batches.
+
+    Example:
+        >>> psnr(torch.full((4, 4, 3), 0.6), torch.full((4, 4, 3), 0.5))  # MSE 0.01
+        tensor(20.0000, dtype=torch.float64)
+    """
+    pred, target, single = _as_batch(pred, target)
+    mse = (pred.double() - target.double()).square().mean(dim=(1, 2, 3))
+    value = -10.0 * torch.log10(mse)
+    return value[0] if single else value
+
+
+def ssim(pred: Tensor, target: Tensor) -> Tensor:
+    """Structural similarity, per image, as torchmetrics (and nerfstudio) compute it.
+
+    Gaussian window of size 11 with sigma 1.5, data range 1, the SSIM map averaged over the
+    channels and the whole image (reflection-padded at the border); computed in float64 for
+    float64 inputs, else in float32.
+
+    Args:
+        pred, target: Tensors with shape (H, W, 3) or (N, H, W, 3), values in [0, 1]; each side
+            at least 6 pixels (the reflection padding needs more pixels than its width).
+
+    Returns:
+        Tensor with shape () for single images, (N,) for batches.
+    """
+    from torchmetrics.functional.image import structural_similarity_index_measure
+
+    pred, target, single = _as_batch(pred, target)
+    # float64 convolutions are ~10x slower on CPU; float32 is what nerfstudio uses.
+    dtype = torch.float64 if pred.dtype == torch.float64 else torch.float32
+    value = structural_similarity_index_measure(
+        pred.to(dtype).permute(0, 3, 1, 2), target.to(dtype).permute(0, 3, 1, 2),
+        data_range=1.0, reduction="none",
+    )
+    return value[0] if single else value
+
+
+class LpipsUnavailable(RuntimeError):
+    """LPIPS cannot be computed here; the message says why and how to enable it."""
+
+
+class AlexNetFeatures(nn.Module):
+    """The convolutional part of torchvision's AlexNet, returning the five ReLU outputs LPIPS uses.
+
+    The layer indices match torchvision's `features` (convolutions at 0, 3, 6, 8, 10), so the
+    `features.*` entries of its `alexnet-owt-7be5be79.pth` load directly. The final max-pool of
+    torchvision's `features` is left out: LPIPS reads nothing after relu5 and it has no weights.
+    """
+
+    channels = (64, 192, 384, 256, 256)
+    _taps = (1, 4, 7, 9, 11)  # indices of relu1 .. relu5 in `features`
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.features = nn.Sequential(
+            nn.Conv2d(3, 64, kernel_size=11, stride=4, padding=2),
+            nn.ReLU(),
+            nn.MaxPool2d(kernel_size=3, stride=2),
+            nn.Conv2d(64, 192, kernel_size=5, padding=2),
+            nn.ReLU(),
+            nn.MaxPool2d(kernel_size=3, stride=2),
+            nn.Conv2d(192, 384, kernel_size=3, padding=1),
+            nn.ReLU(),
+            nn.Conv2d(384, 256, kernel_size=3, padding=1),
+            nn.ReLU(),
+            nn.Conv2d(256, 256, kernel_size=3, padding=1),
+            nn.ReLU(),
+        )
+
+    def forward(self, x: Tensor) -> list[Tensor]:
+        """Args: x, Tensor with shape (N, 3, H, W), ImageNet-normalised.
+        Returns: five Tensors with shapes (N, C_k, H_k, W_k), C_k = `channels[k]`."""
+        taps = []
+        for index, layer in enumerate(self.features):
+            x = layer(x)
+            if index in self._taps:
+                taps.append(x)
+        return taps
+
+
+class Lpips(nn.Module):
+    """LPIPS distance (version 0.1, AlexNet backbone, linearly calibrated), per image pair.
+
+    For each of AlexNet's five ReLU outputs: unit-normalise the feature vector of every location
+    over channels, square the difference between the two images, weight the channels with the
+    learned non-negative weights, average over locations; the distance is the sum over layers.
+    Inputs in [0, 1] are mapped to [-1, 1], then to ImageNet statistics: in [-1, 1] the ImageNet
+    mean (0.485, 0.456, 0.406) is 2 mean - 1 and its standard deviation (0.229, 0.224, 0.225) is
+    2 std, which gives LPIPS's shift and scale below.
+
+    Args:
+        alexnet_state_dict: torchvision AlexNet weights (at least the `features.*` entries).
+        lin_state_dict: LPIPS linear-layer weights, `lin{k}.model.*.weight` with shapes
+            (1, C_k, 1, 1), as in torchmetrics' or the LPIPS repository's `alex.pth`.
+    """
+
+    min_size = 31  # smaller images leave nothing for AlexNet's second max-pool
+
+    def __init__(
+        self, alexnet_state_dict: Mapping[str, Tensor], lin_state_dict: Mapping[str, Tensor]
+    ) -> None:
+        super().__init__()
+        self.backbone = AlexNetFeatures()
+        features = {k: v for k, v in alexnet_state_dict.items() if k.startswith("features.")}
+        try:
+            self.backbone.load_state_dict(features, strict=True)
+        except RuntimeError as error:
+            raise ValueError(f"not torchvision AlexNet weights: {error}") from None
+        lin = []
+        for k, channels in enumerate(AlexNetFeatures.channels):
+            keys = [key for key in lin_state_dict if key.startswith(f"lin{k}.") and "weight" in key]
+            if len(keys) != 1 or tuple(lin_state_dict[keys[0]].shape) != (1, channels, 1, 1):
+                raise ValueError(
+                    f"LPIPS linear weights: expected one lin{k}.*weight of shape "
+                    f"(1, {channels}, 1, 1)"
+                )
+            lin.append(lin_state_dict[keys[0]].reshape(1, channels, 1, 1).float())
+        self.lin = nn.ParameterList([nn.Parameter(w, requires_grad=False) for w in lin])
+        self.register_buffer("shift", torch.tensor([-0.030, -0.088, -0.188]).view(1, 3, 1, 1))
+        self.register_buffer("scale", torch.tensor([0.458, 0.448, 0.450]).view(1, 3, 1, 1))
+        self.requires_grad_(False)
+        self.eval()
+
+    def train(self, mode: bool = True) -> "Lpips":
+        """LPIPS is a fixed metric: it stays in evaluation mode."""
+        return super().train(False)
+
+    def forward(self, pred: Tensor, target: Tensor) -> Tensor:
+        """LPIPS distance per image pair.
+
+        Args:
+            pred, target: Tensors with shape (H, W, 3) or (N, H, W, 3), values in [0, 1],
+                H and W at least `min_size` (31).
+
+        Returns:
+            float32 Tensor with shape () for single images, (N,) for batches; 0 for identical
+            images, larger is more different.
+        """
+        pred, target, single = _as_batch(pred, target)
+        if min(pred.shape[1:3]) < self.min_size:
+            raise ValueError(
+                f"LPIPS (AlexNet) needs images at least {self.min_size} pixels on each side, "
+                f"got {tuple(pred.shape[1:3])}"
+            )
+        device = self.shift.device
+        feats = []
+        for image in (pred, target):
+            x = image.to(device=device, dtype=torch.float32).permute(0, 3, 1, 2) * 2.0 - 1.0
+            feats.append(self.backbone((x - self.shift) / self.scale))
+        distance = torch.zeros(pred.shape[0], device=device)
+        for f0, f1, weight in zip(*feats, self.lin):
+            f0 = f0 / (f0.norm(dim=1, keepdim=True) + 1e-10)
+            f1 = f1 / (f1.norm(dim=1, keepdim=True) + 1e-10)
+            distance = distance + ((f0 - f1).square() * weight).sum(dim=1).mean(dim=(1, 2))
+        return distance[0] if single else distance
+
+
+def default_alexnet_path() -> Path:
+    """Where torchvision keeps the AlexNet weights: `$TORCH_HOME/hub/checkpoints/` (default
+    `~/.cache/torch/hub/checkpoints/`)."""
+    return Path(torch.hub.get_dir()) / "checkpoints" / ALEXNET_FILENAME
+
+
+def lpips_linear_weights_path() -> Path:
+    """The LPIPS (AlexNet) linear-layer weights shipped inside the installed torchmetrics."""
+    return Path(str(resources.files("torchmetrics") / "functional/image/lpips_models/alex.pth"))
+
+
+def find_alexnet_weights(path: str | Path | None = None) -> Path:
+    """The AlexNet weights file to use: `path` if given, else `$NERFAUG_ALEXNET_WEIGHTS` if set,
+    else torchvision's hub cache (`default_alexnet_path()`).
+
+    Raises:
+        LpipsUnavailable: the chosen file does not exist (the message says how to provide it).
+    """
+    if path is not None:
+        candidate, origin = Path(path), "given path"
+    elif os.environ.get(ALEXNET_ENV):
+        candidate, origin = Path(os.environ[ALEXNET_ENV]), f"${ALEXNET_ENV}"
+    else:
+        candidate, origin = default_alexnet_path(), "torch hub cache"
+    if not candidate.is_file():
+        raise LpipsUnavailable(
+            f"LPIPS unavailable: AlexNet weights not found at {candidate} ({origin}); "
+            f"to enable it, download {ALEXNET_URL} yourself and put it at "
+            f"{default_alexnet_path()} or set {ALEXNET_ENV} to its path"
+        )
+    return candidate
+
+
+def _find_lpips_files(alexnet_weights: str | Path | None) -> tuple[Path, Path]:
+    """(AlexNet weights, LPIPS linear weights); raises LpipsUnavailable if either is missing."""
+    backbone = find_alexnet_weights(alexnet_weights)
+    lin = lpips_linear_weights_path()
+    if not lin.is_file():
+        raise LpipsUnavailable(
+            f"LPIPS unavailable: the LPIPS linear weights are missing from torchmetrics ({lin}); "
+            "reinstall torchmetrics"
+        )
+    return backbone, lin
+
+
+def lpips_unavailable_reason(alexnet_weights: str | Path | None = None) -> str | None:
+    """None when LPIPS can be loaded from local files, else the one-line reason and the fix."""
+    try:
+        _find_lpips_files(alexnet_weights)
+    except LpipsUnavailable as reason:
+        return str(reason)
+    return None
+
+
+def try_load_lpips(
+    alexnet_weights: str | Path | None = None, device: str | torch.device = "cpu"
+) -> tuple[Lpips | None, str]:
+    """LPIPS (AlexNet) from local files only (never downloads), and a status line.
+
+    Args:
+        alexnet_weights: torchvision's `alexnet-owt-7be5be79.pth`; None looks for it as
+            `find_alexnet_weights` does.
+        device: where the network runs.
+
+    Returns:
+        (model, "available: AlexNet weights from <path>"), or (None, "<one-line reason and fix>")
+        when a weights file is missing.
+
+    Raises:
+        ValueError: a file exists but holds something else (a broken file is not "absent").
+    """
+    try:
+        backbone_path, lin_path = _find_lpips_files(alexnet_weights)
+    except LpipsUnavailable as reason:
+        return None, str(reason)
+    alexnet = torch.load(backbone_path, map_location="cpu", weights_only=True)
+    lin = torch.load(lin_path, map_location="cpu", weights_only=True)
+    try:
+        model = Lpips(alexnet, lin).to(device)
+    except ValueError as error:
+        raise ValueError(f"{backbone_path}: {error}") from None
+    return model, f"available: AlexNet weights from {backbone_path}"
+
+
+def load_lpips(
+    alexnet_weights: str | Path | None = None,
+    device: str | torch.device = "cpu",
+    required: bool = False,
+) -> Lpips | None:
+    """`try_load_lpips` without the status: the model, or None when a weights file is missing
+    (`lpips_unavailable_reason()` says why; `evaluate_views` records it).
+
+    Raises:
+        LpipsUnavailable: a weights file is missing and `required` is True.
+        ValueError: a file exists but does not hold the expected weights.
+    """
+    model, status = try_load_lpips(alexnet_weights, device)
+    if model is None and required:
+        raise LpipsUnavailable(status)
+    return model
+
+
+@dataclass
+class EvaluationResult:
+    """Metrics of one model on a set of views.
+
+    Attributes:
+        per_view: one dict per view: index, name, psnr, ssim, lpips (None when unavailable).
+        mean: psnr, ssim, lpips averaged over the views (lpips None when unavailable; psnr inf if
+            any view reproduces its ground truth exactly).
+        lpips_status: "available: ..." or why LPIPS was not computed.
+    """
+
+    per_view: list[dict]
+    mean: dict
+    lpips_status: str
+
+    def to_dict(self) -> dict:
+        """Plain data for JSON (note an infinite PSNR is written as `Infinity`, which Python's
+        `json` reads back)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "EvaluationResult":
+        return cls(list(data["per_view"]), dict(data["mean"]), str(data["lpips_status"]))
+
+
+def _to_uint8(image: Tensor) -> np.ndarray:
+    return (image.detach().clamp(0, 1) * 255).round().to(torch.uint8).cpu().numpy()
+
+
+def _save_view(save_dir: Path, index: int, render: Tensor, target: Tensor) -> None:
+    from PIL import Image
+
+    Image.fromarray(_to_uint8(render)).save(save_dir / f"{index:04d}_render.png")
+    both = torch.cat([render, target.to(render.device)], dim=1)
+    Image.fromarray(_to_uint8(both)).save(save_dir / f"{index:04d}_render_vs_gt.png")
+
+
+def evaluate_views(
+    render_fn: Callable[[Cameras, int], Tensor | Mapping[str, Tensor]],
+    views: Views,
+    lpips: Lpips | Literal["auto"] | None = None,
+    save_dir: str | Path | None = None,
+    progress: bool = True,
+    save_count: int | None = None,
+) -> EvaluationResult:
+    """Render every view, compare with its ground truth, and average the metrics over views.
+
+    Args:
+        render_fn: `render_fn(views.cameras, index)` returns the render of view `index`, a Tensor
+            with shape (H, W, 3) in [0, 1] (or a mapping with such a Tensor under "rgb", as
+            `NerfModel.render_image` returns). Called under `torch.no_grad()`. Values are clamped
+            to [0, 1] before scoring, as they would be when saved as an image.
+        views: the test views (images may be lazy).
+        lpips: an `Lpips` model (moved to the device of the renders); "auto" to load one with
+            `try_load_lpips`; None not to compute LPIPS. Without a model, or with images under
+            31 pixels on a side, LPIPS is None and `lpips_status` says why (and, if the weights
+            are missing, how to provide them).
+        save_dir: if given, writes `NNNN_render.png` and `NNNN_render_vs_gt.png` (render left,
+            ground truth right) there, NNNN the view's index.
+        progress: show a progress bar.
+        save_count: save only the first `save_count` views (None: all).
+
+    Returns:
+        An `EvaluationResult`. The mean PSNR is the mean of the per-view PSNRs (as nerfstudio
+        reports it), not the PSNR of the mean error.
+    """
+    from rich.progress import track
+
+    if isinstance(lpips, str):
+        if lpips != "auto":
+            raise ValueError(f'lpips must be an Lpips model, "auto" or None, got {lpips!r}')
+        lpips, status = try_load_lpips()
+    elif lpips is None:
+        status = "not computed: " + (lpips_unavailable_reason() or "no LPIPS model was given")
+    else:
+        status = "available: model given by the caller"
+    size = (views.cameras.height, views.cameras.width)
+    if lpips is not None and min(size) < Lpips.min_size:
+        lpips = None
+        status = (
+            f"not computed: images of {size[0]}x{size[1]} pixels are smaller than LPIPS's "
+            f"(AlexNet's) minimum of {Lpips.min_size}"
+        )
+    if save_dir is not None:
+        save_dir = Path(save_dir)
+        save_dir.mkdir(parents=True, exist_ok=True)
+    n_saved = len(views) if save_count is None else save_count
+
+    per_view = []
+    indices = track(range(len(views)), "evaluating", disable=not progress, transient=True)
+    for index in indices:
+        with torch.no_grad():
+            render = render_fn(views.cameras, index)
+            if isinstance(render, Mapping):
+                render = render["rgb"]
+            target = views.image(index).to(render.device)
+            if render.shape != target.shape:
+                raise ValueError(
+                    f"view {index} ({views.names[index]}): render has shape {tuple(render.shape)}, "
+                    f"ground truth {tuple(target.shape)}"
+                )
+            render = render.float().clamp(0.0, 1.0)
+            target = target.float()
+            if lpips is not None:
+                lpips = lpips.to(render.device)
+            row = {
+                "index": index,
+                "name": views.names[index],
+                "psnr": float(psnr(render, target)),
+                "ssim": float(ssim(render, target)),
+                "lpips": None if lpips is None else float(lpips(render, target)),
+            }
+        per_view.append(row)
+        if save_dir is not None and index < n_saved:
+            _save_view(save_dir, index, render, target)
+
+    mean = {}
+    for metric in ("psnr", "ssim", "lpips"):
+        values = [row[metric] for row in per_view]
+        mean[metric] = None if not values or None in values else float(np.mean(values))
+    return EvaluationResult(per_view, mean, status)
+
+
+__all__ = [
+    "ALEXNET_ENV", "ALEXNET_FILENAME", "ALEXNET_URL", "AlexNetFeatures", "EvaluationResult",
+    "Lpips", "LpipsUnavailable", "default_alexnet_path", "evaluate_views", "find_alexnet_weights",
+    "load_lpips", "lpips_linear_weights_path", "lpips_unavailable_reason", "psnr", "ssim",
+    "try_load_lpips",
+]

@@ -1,0 +1,163 @@
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from nerfaug.statistics import compare, markdown_table, min_attainable_p, summarise, summary_table
+
+
+def test_summarise_by_hand():
+    s = summarise([3, 1, 4, 1, 5, 9, 2, 6, 5, 3])
+    # sorted: 1 1 2 3 3 4 5 5 6 9; linear interpolation at positions 2.25, 4.5, 6.75
+    assert s == {
+        "n": 10, "median": 3.5, "q1": 2.25, "q3": 5.0, "iqr": 2.75, "mean": 3.9, "min": 1.0,
+        "max": 9.0,
+    }
+    assert summarise([1, 2, 3, 4])["iqr"] == pytest.approx(1.5)
+    assert summarise([7.0])["iqr"] == 0.0
+
+
+def test_summarise_rejects_empty_and_nan():
+    with pytest.raises(ValueError, match="no values"):
+        summarise([])
+    with pytest.raises(ValueError, match="NaN"):
+        summarise([1.0, float("nan")])
+
+
+def test_compare_medians_iqr_and_exact_test_by_hand():
+    ours = [20.1, 19.9, 20.3, 20.0, 20.2]
+    baseline = [12.0, 12.5, 11.8, 13.0, 12.2]
+    c = compare(ours, baseline)
+    assert c["median_ours"] == pytest.approx(20.1) and c["median_baseline"] == pytest.approx(12.2)
+    assert c["median_change"] == pytest.approx((20.1 - 12.2) / 12.2)
+    assert c["iqr_ours"] == pytest.approx(0.2) and c["iqr_baseline"] == pytest.approx(0.5)
+    assert c["iqr_reduction"] == pytest.approx(0.6)
+    assert c["better"] and c["u_statistic"] == 25 and c["prob_ours_greater"] == 1.0
+    assert c["test_method"] == "exact"
+    assert c["p_value"] == pytest.approx(2 / math.comb(10, 5))  # complete separation
+    assert c["p_bonferroni"] == pytest.approx(3 * 2 / math.comb(10, 5))
+    assert c["significant"] and not c["too_small"] and c["note"] == ""
+
+
+def test_compare_matches_scipy_with_overlap():
+    ours = [1.2, 3.4, 2.2, 5.1, 4.4, 2.9]
+    baseline = [0.5, 1.9, 2.8, 0.1, 1.1]
+    expected = stats.mannwhitneyu(ours, baseline, alternative="two-sided", method="exact")
+    c = compare(ours, baseline)
+    assert c["u_statistic"] == expected.statistic
+    assert c["p_value"] == pytest.approx(expected.pvalue, rel=1e-12)
+    assert c["p_value"] < 0.05 < c["p_bonferroni"]  # significant alone, not after correction
+    assert not c["significant"]
+
+
+def test_bonferroni_multiplies_and_caps_at_one():
+    ours, baseline = [1.0, 2.0, 3.0, 4.5], [1.5, 2.5, 3.5, 4.0]
+    p = compare(ours, baseline, n_comparisons=1)["p_value"]
+    assert compare(ours, baseline, n_comparisons=1)["p_bonferroni"] == pytest.approx(p)
+    assert compare(ours, baseline, n_comparisons=2)["p_bonferroni"] == pytest.approx(min(1, 2 * p))
+    assert compare(ours, baseline, n_comparisons=3)["p_bonferroni"] == 1.0
+    with pytest.raises(ValueError):
+        compare(ours, baseline, n_comparisons=0)
+
+
+def test_lower_is_better_metrics():
+    c = compare([0.13, 0.12, 0.14], [0.30, 0.31, 0.29], higher_is_better=False)
+    assert c["better"] and c["median_change"] == pytest.approx((0.13 - 0.30) / 0.30)
+    assert not compare([0.13, 0.12, 0.14], [0.30, 0.31, 0.29])["better"]
+
+
+def test_min_attainable_p_is_complete_separation_of_the_exact_test():
+    assert min_attainable_p(2, 2) == pytest.approx(1 / 3)
+    for n1, n2 in [(3, 3), (4, 4), (5, 5), (10, 10), (3, 7)]:
+        assert min_attainable_p(n1, n2) == pytest.approx(2 / math.comb(n1 + n2, n1))
+    assert min_attainable_p(1, 1) == 1.0
+
+
+def test_too_small_samples_are_flagged_even_when_perfectly_separated():
+    c = compare([10.0, 11.0], [1.0, 2.0])
+    assert c["p_value"] == pytest.approx(1 / 3)
+    assert c["too_small"] and not c["significant"]
+    assert "0.333" in c["note"] and "Bonferroni x3" in c["note"]
+    # n = 4: 2/70 = 0.029 would pass alone but not after a correction of 3.
+    separated = ([5.0, 6.0, 7.0, 8.0], [1.0, 2.0, 3.0, 4.0])
+    assert compare(*separated)["too_small"]
+    assert not compare(*separated, n_comparisons=1)["too_small"]
+    assert compare(*separated, n_comparisons=1)["significant"]
+
+
+def test_ties_use_an_exact_permutation_test_or_the_normal_approximation():
+    ours, baseline = [1.0, 2.0, 2.0, 3.0, 5.0], [2.0, 3.0, 4.0, 4.0, 6.0]
+    c = compare(ours, baseline)
+    expected = stats.mannwhitneyu(ours, baseline, method=stats.PermutationMethod(n_resamples=np.inf))
+    assert c["test_method"].startswith("permutation")
+    assert c["p_value"] == pytest.approx(expected.pvalue)
+    big_ours, big_baseline = list(np.arange(30) // 2), list(np.arange(30) // 2 + 3)
+    c = compare(big_ours, big_baseline)
+    assert c["test_method"].startswith("asymptotic")
+    assert c["p_value"] == pytest.approx(
+        stats.mannwhitneyu(big_ours, big_baseline, method="asymptotic").pvalue
+    )
+
+
+def _records():
+    ours = {"lego": [20.1, 19.9, 20.3, 20.0, 20.2], "chair": [25.0, 24.0, 26.0]}
+    uniform = {"lego": [12.0, 12.5, 11.8, 13.0, 12.2], "chair": [23.0, 22.0, 27.0]}
+    records = []
+    for method, by_scene in (("ours", ours), ("uniform", uniform)):
+        for scene, values in by_scene.items():
+            for trial, value in enumerate(values):
+                records.append({"scene": scene, "method": method, "trial": trial, "psnr": value,
+                                "lpips": None})
+    records.append({"scene": "lego", "method": "extra", "trial": 0, "psnr": 15.0})
+    records.append({"scene": "lego", "method": "fisherrf", "trial": 0, "psnr": None})
+    return records, ours, uniform
+
+
+def test_summary_table_rows_and_comparisons():
+    records, ours, uniform = _records()
+    rows = summary_table(records, "psnr", ours="ours", baselines=["fisherrf", "uniform"])
+    assert [(r["scene"], r["method"], r["role"]) for r in rows] == [
+        ("lego", "ours", "ours"), ("lego", "fisherrf", "baseline"), ("lego", "uniform", "baseline"),
+        ("lego", "extra", "other"), ("chair", "ours", "ours"), ("chair", "uniform", "baseline"),
+    ]
+    lego_ours, lego_fisher, lego_uniform, lego_extra, _, chair_uniform = rows
+    assert lego_ours["median"] == pytest.approx(20.1) and lego_ours["iqr"] == pytest.approx(0.2)
+    assert lego_ours["p_value"] is None and lego_extra["p_value"] is None
+    assert lego_fisher["n"] == 0 and lego_fisher["n_missing"] == 1 and lego_fisher["median"] is None
+    assert lego_fisher["p_value"] is None
+    expected = compare(ours["lego"], uniform["lego"], n_comparisons=2)
+    for key in ("median_change", "iqr_reduction", "p_value", "p_bonferroni", "significant"):
+        assert lego_uniform[key] == expected[key]
+    assert chair_uniform["p_bonferroni"] == compare(ours["chair"], uniform["chair"], 2)["p_bonferroni"]
+    assert chair_uniform["too_small"]
+
+
+def test_summary_table_counts_missing_values_and_checks_input():
+    records, _, _ = _records()
+    rows = summary_table(records, "lpips", ours="ours", baselines=["uniform"])
+    assert all(r["n"] == 0 and r["median"] is None for r in rows if r["method"] != "extra")
+    assert rows[0]["n_missing"] == 5
+    with pytest.raises(ValueError, match="trial"):
+        summary_table(records + [records[0]], "psnr", "ours", ["uniform"])
+    with pytest.raises(ValueError, match="higher_is_better"):
+        summary_table(records, "depth_error", "ours", ["uniform"])
+    assert summary_table(records, "depth_error", "ours", ["uniform"], higher_is_better=False)
+
+
+def test_markdown_table():
+    rows = [
+        {"method": "ours", "median": 20.07, "p": None, "significant": True},
+        {"method": "a|b", "median": 12.384, "p": 0.00012, "significant": False},
+    ]
+    table = markdown_table(rows, ["method", ("median", "PSNR", ".2f"), ("p", "p (Bonf.)"), "significant"])
+    assert table == (
+        "| method | PSNR | p (Bonf.) | significant |\n"
+        "|---|---|---|---|\n"
+        "| ours | 20.07 | - | yes |\n"
+        "| a\\|b | 12.38 | 0.00012 | no |\n"
+    )
+    # rows may also be sequences, with column indices as keys
+    assert markdown_table([["ours", 1.5]], [(0, "method"), (1, "x", ".1f")]) == (
+        "| method | x |\n|---|---|\n| ours | 1.5 |\n"
+    )
