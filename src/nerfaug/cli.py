@@ -125,9 +125,13 @@ def report(results: Positional[Path]) -> None:
     Args:
         results: the folder `nerfaug run --out` wrote.
     """
-    from nerfaug.report import write_report
+    from nerfaug.report import ReportError, write_report
 
-    for path in write_report(results):
+    try:
+        paths = write_report(results)
+    except ReportError as error:
+        raise SystemExit(f"nerfaug report: {error}")
+    for path in paths:
         print(path)
 
 

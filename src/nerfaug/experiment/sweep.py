@@ -22,6 +22,7 @@ from typing import Literal
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+from nerfaug.data.frames import atomic_write_json
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import prepare_scene, run_trial
 from nerfaug.experiment.store import RunKey, check_sweep, clear_incomplete, fingerprint, read_result
@@ -173,7 +174,7 @@ def _execute_local(todo, datasets, config, root, workers, address, progress):
                     results.append(_run_in_process(key, datasets[key.scene], config, root, display))
                     display.finished(key, True)
                 except Exception as error:  # one failed run must not end the sweep
-                    failed[str(key)] = _describe_failure(key, error)
+                    failed[str(key)] = _describe_failure(key, error, root)
                     display.finished(key, False)
             return results, failed
         # Spawned workers: each run sets its own thread count; fork would inherit torch's pools.
@@ -192,7 +193,7 @@ def _execute_local(todo, datasets, config, root, workers, address, progress):
                         results.append(future.result())
                         display.finished(key, True)
                     except Exception as error:
-                        failed[str(key)] = _describe_failure(key, error)
+                        failed[str(key)] = _describe_failure(key, error, root)
                         display.finished(key, False)
     return results, failed
 
@@ -208,9 +209,15 @@ def _run_in_process(key, dataset_dir, config, root, display: _Display) -> dict:
         protocol.on_progress = None
 
 
-def _describe_failure(key: RunKey, error: BaseException) -> str:
+def _describe_failure(key: RunKey, error: BaseException, root: Path) -> str:
+    """Print why a run failed and keep the reason in its folder (the report shows it)."""
     text = "".join(traceback.format_exception_only(type(error), error)).strip()
     console.print(f"[red]run {key} failed: {text}")
+    folder = key.folder(root)
+    if folder.exists():
+        atomic_write_json(folder / "error.json", {
+            "error": text, "traceback": "".join(traceback.format_exception(error)),
+        })
     return text
 
 
@@ -246,7 +253,7 @@ def _execute_ray(todo, datasets, config, root, workers, address, progress):
                         results.append(ray.get(ref))
                         display.finished(key, True)
                     except Exception as error:
-                        failed[str(key)] = _describe_failure(key, error)
+                        failed[str(key)] = _describe_failure(key, error, root)
                         display.finished(key, False)
     finally:
         if started_here:

@@ -1,0 +1,227 @@
+"""The report of a results folder, built from a fake folder with the exact layout protocol.py writes
+and known numbers: medians, exclusion of invalid runs, LPIPS n/a, a self-contained HTML page."""
+
+import json
+import re
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from nerfaug.data.frames import atomic_write_json
+from nerfaug.experiment.config import preset
+from nerfaug.experiment.store import RunKey, write_result
+from nerfaug.experiment.sweep import sweep_record
+from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses, sample_uniform_poses
+from nerfaug.report import ReportError, collect_results, history_series, write_report
+
+METHODS = ("ours", "uniform", "entropy")
+# PSNR per (scene, method): three trials each. Hand-computed (numpy linear quartiles):
+#   lego ours [20, 21, 23]: median 21, q1 20.5, q3 22, IQR 1.5.
+#   lego uniform [12, 15, 14]: median 14, IQR 1.5. lego entropy [16, 19, 17.5]: median 17.5, IQR 1.5.
+#   chair ours [25.5, 24, 26]: median 25.5, q1 24.75, q3 25.75, IQR 1.0.
+PSNR = {
+    ("lego", "ours"): [20.0, 21.0, 23.0], ("lego", "uniform"): [12.0, 15.0, 14.0],
+    ("lego", "entropy"): [16.0, 19.0, 17.5],
+    ("chair", "ours"): [25.5, 24.0, 26.0], ("chair", "uniform"): [18.0, 19.5, 21.0],
+    ("chair", "entropy"): [22.0, 22.5, 23.5],
+}
+SSIM = {"ours": [0.84, 0.83, 0.86], "uniform": [0.70, 0.72, 0.71], "entropy": [0.80, 0.79, 0.81]}
+LPIPS = {"ours": [0.13, 0.14, 0.12], "uniform": [0.31, 0.30, 0.29], "entropy": [0.16, 0.18, 0.17]}
+LPIPS_MISSING = "LPIPS unavailable: AlexNet weights not found at /nowhere/alexnet.pth"
+
+
+def config():
+    return preset("tiny").replace(scenes=("lego", "chair"), methods=METHODS, trials=3)
+
+
+def write_run(root, record, scene, method, trial, psnr, lpips_available=True, generator=None):
+    """One run folder as `protocol.run_trial` writes it; result.json last."""
+    folder = RunKey(scene, method, trial).folder(root)
+    candidates = sample_uniform_poses(12, torch.Generator().manual_seed(len(scene)))  # the scene's pool
+    initial = half_hemisphere_poses(3)
+    chosen = [int(i) for i in torch.randperm(12, generator=generator)[:2]]
+    scores = torch.rand(12, generator=generator)
+    azimuth, polar, _ = angles_from_pose(candidates)
+    atomic_write_json(folder / "selection.json", {
+        "method": method, "indices": chosen, "scores": scores.tolist(), "components": {},
+        "chosen_names": [f"r_{i}" for i in chosen], "chosen_poses": candidates[chosen].tolist(),
+        "candidate_poses": candidates.tolist(), "candidate_azimuth": azimuth.tolist(),
+        "candidate_polar": polar.tolist(), "train_poses": initial.tolist(),
+    })
+    renders = folder / "renders"
+    renders.mkdir(parents=True)
+    shade = 40 * trial + 10 * len(method)
+    render = np.full((8, 8, 3), shade, dtype=np.uint8)
+    iio.imwrite(renders / "0000_render.png", render)
+    iio.imwrite(renders / "0000_render_vs_gt.png", np.concatenate([render, np.full_like(render, 200)], axis=1))
+    ssim = SSIM.get(method, SSIM["ours"])[trial % 3]
+    lpips = LPIPS.get(method, LPIPS["ours"])[trial % 3] if lpips_available else None
+    atomic_write_json(folder / "metrics.json", {
+        "per_view": [{"index": 0, "name": "r_0", "psnr": psnr, "ssim": ssim, "lpips": lpips}],
+        "mean": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
+        "lpips_status": "available: test" if lpips_available else LPIPS_MISSING,
+    })
+    atomic_write_json(folder / "history.json", [
+        {"step": step, "loss": 1.0 / step, "psnr": psnr * step / 60} for step in range(1, 61)
+    ])
+    atomic_write_json(folder / "config.json", {"experiment": record["config"], "engine": {}})
+    write_result(folder, {
+        "scene": scene, "method": method, "trial": trial, "seed": trial,
+        "fingerprint": record["fingerprint"], "metrics": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
+        "lpips_status": "available: test" if lpips_available else LPIPS_MISSING, "chosen": chosen,
+        "timing": {"setup": 1.0, "train_before": 2.0, "selection": 3.0 + trial, "oracle": 0.1,
+                   "train_after": 30.0, "evaluation": 4.0, "total": 40.1 + trial},
+        "host": "testhost", "torch": torch.__version__,
+    })
+    return folder
+
+
+def make_results(root, corrupt=True):
+    """2 scenes x 3 methods x 3 trials with the known numbers (no LPIPS on chair); with `corrupt`,
+    also a truncated result.json (PSNR 99.99) and a result of another configuration (PSNR 77.77)."""
+    record = sweep_record(config(), ["nerfaug", "run", "--preset", "tiny"])
+    atomic_write_json(root / "sweep.json", record)
+    generator = torch.Generator().manual_seed(0)
+    for (scene, method), values in PSNR.items():
+        for trial, psnr in enumerate(values):
+            write_run(root, record, scene, method, trial, psnr, lpips_available=scene == "lego", generator=generator)
+    if corrupt:
+        truncated = write_run(root, record, "lego", "ours", 3, 99.99, generator=generator) / "result.json"
+        truncated.write_text(truncated.read_text()[:60])
+        other = {**record, "fingerprint": "0123456789abcdef"}
+        write_run(root, other, "lego", "uniform", 4, 77.77, generator=generator)
+    return root
+
+
+def table_rows(markdown: str, heading: str) -> dict[str, list[str]]:
+    """The first table after `heading`, as method -> cells."""
+    section = markdown.split(heading, 1)[1]
+    lines = [line for line in section.split("\n\n", 2)[1].splitlines() if line.startswith("|")]
+    return {cells[0]: cells for cells in ([c.strip() for c in line.strip("|").split("|")] for line in lines[2:])}
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    root = make_results(tmp_path_factory.mktemp("results"))
+    paths = write_report(root)
+    return root, paths, (root / "report.md").read_text(), (root / "report.html").read_text()
+
+
+def test_files_are_written(report):
+    root, paths, _, _ = report
+    assert paths[:2] == [root / "report.md", root / "report.html"]
+    names = {p.name for p in paths[2:]}
+    for scene in ("lego", "chair"):
+        assert {f"fig4_boxplots_{scene}.png", f"fig1_uncertainty_{scene}.png", f"fig3_renders_{scene}.png"} <= names
+    assert "training_curves.png" in names
+    for path in paths:
+        assert path.is_file() and path.stat().st_size > 0
+    for path in paths[2:]:
+        assert iio.imread(path).ndim == 3  # a real PNG
+
+
+def strip_bold(cell: str) -> str:
+    return cell.replace("**", "")
+
+
+def test_medians_and_iqrs_match_hand_computed_values(report):
+    _, _, markdown, _ = report
+    lego = table_rows(markdown, "## Scene: lego")
+    # method, n, PSNR median, PSNR IQR, SSIM median, SSIM IQR, LPIPS median, LPIPS IQR
+    assert [strip_bold(c) for c in lego["ours"][1:4]] == ["3", "21.00", "1.50"]
+    assert [strip_bold(c) for c in lego["uniform"][1:4]] == ["3", "14.00", "1.50"]
+    assert [strip_bold(c) for c in lego["entropy"][1:4]] == ["3", "17.50", "1.50"]
+    assert strip_bold(lego["ours"][4]) == "0.8400"  # SSIM median of [0.84, 0.83, 0.86]
+    assert strip_bold(lego["ours"][6]) == "0.1300"  # LPIPS median of [0.13, 0.14, 0.12]
+    chair = table_rows(markdown, "## Scene: chair")
+    assert [strip_bold(c) for c in chair["ours"][1:4]] == ["3", "25.50", "1.00"]
+    # the paper's phrasing: (21 - 14) / 14 = +50.0 % median PSNR
+    assert "+50.0% median PSNR" in markdown
+
+
+def test_invalid_runs_are_listed_and_left_out(report):
+    root, _, markdown, html = report
+    not_aggregated = markdown.split("## Runs not aggregated", 1)[1]
+    assert "runs/lego/ours/trial_003" in not_aggregated and "truncated" in not_aggregated
+    assert "runs/lego/uniform/trial_004" in not_aggregated and "another configuration" in not_aggregated
+    for text in (markdown, html):
+        assert "99.99" not in text and "77.77" not in text
+    results = collect_results(root)
+    assert len(results.runs) == 18
+    assert {r.trial for r in results.runs} == {0, 1, 2}
+
+
+def test_lpips_unavailable_is_shown_as_na(report):
+    _, _, markdown, _ = report
+    chair = table_rows(markdown, "## Scene: chair")
+    assert chair["ours"][6] == "n/a" and chair["uniform"][6] == "n/a"
+    assert LPIPS_MISSING in markdown.split("## Scene: chair", 1)[1]
+
+
+def test_comparison_reports_bonferroni_and_small_n(report):
+    _, _, markdown, _ = report
+    assert "Bonferroni x2" in markdown  # two baselines
+    # 3 vs 3 trials: the smallest two-sided p is 0.1, so nothing can be significant.
+    assert "n too small" in markdown and "**yes**" not in markdown
+
+
+def test_html_is_self_contained(report):
+    _, _, _, html = report
+    assert 'src="http' not in html and "href=" not in html and "<link" not in html and "<script" not in html
+    sources = re.findall(r'<img [^>]*src="([^"]*)"', html)
+    assert len(sources) >= 7  # 2 box plots, 2 maps, 2 render grids, the training curves
+    assert all(s.startswith("data:image/png;base64,") for s in sources)
+    assert "<style>" in html
+
+
+def test_header_names_what_was_run(report):
+    _, _, markdown, _ = report
+    assert "nerfaug run --preset tiny" in markdown
+    assert "scenes: lego, chair" in markdown and "engine preset: test" in markdown
+    assert "testhost" in markdown
+
+
+def test_table_ii_appears_only_with_its_methods(tmp_path):
+    record = sweep_record(config().replace(scenes=("lego",), methods=("ours", "ours-nbv"), trials=2), ["nerfaug"])
+    atomic_write_json(tmp_path / "sweep.json", record)
+    generator = torch.Generator().manual_seed(1)
+    for method, values in (("ours", [20.0, 22.0]), ("ours-nbv", [13.0, 15.0])):
+        for trial, psnr in enumerate(values):
+            write_run(tmp_path, record, "lego", method, trial, psnr, generator=generator)
+    write_report(tmp_path)
+    markdown = (tmp_path / "report.md").read_text()
+    assert "NBV vs sampling (Table II)" in markdown and "Table I)" not in markdown
+    assert "ours vs ours-nbv" in markdown and "+50.0% median PSNR" in markdown  # 21 vs 14
+
+
+def test_missing_planned_runs_and_no_valid_runs(tmp_path):
+    atomic_write_json(tmp_path / "sweep.json", sweep_record(config(), ["nerfaug"]))
+    paths = write_report(tmp_path)
+    markdown = (tmp_path / "report.md").read_text()
+    assert "never run: 18" in markdown and "lego/ours/trial 0" in markdown
+    assert paths == [tmp_path / "report.md", tmp_path / "report.html"]
+
+
+def test_not_a_results_folder(tmp_path):
+    with pytest.raises(ReportError, match="sweep.json"):
+        write_report(tmp_path)
+
+
+@pytest.mark.parametrize("history", [
+    [{"step": s, "loss": 1.0, "psnr": float(s)} for s in (1, 2, 3)],
+    {"step": [1, 2, 3], "psnr": [1.0, 2.0, 3.0]},
+])
+def test_history_series_reads_both_layouts(history):
+    key, steps, values = history_series(history)
+    assert key == "psnr" and steps.tolist() == [1, 2, 3] and values.tolist() == [1.0, 2.0, 3.0]
+
+
+def test_failed_run_shows_its_recorded_error(tmp_path):
+    from nerfaug.report import why_not_valid
+
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "error.json").write_text('{"error": "TrainingDiverged: loss is nan at step 12"}')
+    assert why_not_valid(folder, "abc") == "failed: TrainingDiverged: loss is nan at step 12"
