@@ -6,7 +6,7 @@ import pytest
 import torch
 
 os.environ.setdefault("MPLBACKEND", "Agg")
-torch.set_num_threads(2)
+torch.set_num_threads(1)  # CI has 2 cores; tests also run beside other processes
 
 
 @pytest.fixture

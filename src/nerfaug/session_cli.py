@@ -1,4 +1,225 @@
-"""CLI commands of the active-capture loop (train, propose, add, export); filled in by the
-session module."""
+"""CLI commands of the active-capture loop (`nerfaug.session`): train, propose, add, export, and
+render-proposals (a simulated capture with Blender).
 
-COMMANDS: dict = {}
+    nerfaug train DATA --out RUN --steps 1000      start a session on the views you have
+    nerfaug propose RUN --n 6 --out poses.json     where to capture next (+ poses.png, the map)
+    nerfaug add RUN --images DIR --poses poses.json --steps 1000
+    nerfaug train RUN --steps 1000                 train an existing session further
+    nerfaug export RUN --format nerfstudio --out DIR
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
+
+from nerfaug.session import SESSION_FILE
+
+RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
+
+
+def _open(run: Path, device: str):
+    from nerfaug.session import CaptureSession
+
+    return CaptureSession.open(run, device=device, progress=True)
+
+
+def train(
+    path: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="DATA|RUN")],
+    out: Path | None = None,
+    steps: int = 1000,
+    preset: Literal["cpu", "paper", "test"] = "cpu",
+    seed: int = 0,
+    split: str = "train",
+    downscale: int = 1,
+    centre: tuple[float, float, float] | None = None,
+    radius: float | None = None,
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0),
+    estimate_up: bool = False,
+    device: str = "cpu",
+) -> None:
+    """Start an active-capture session on a dataset and train it, or train an existing session further.
+
+    `nerfaug train DATA --out RUN` copies the dataset's views into RUN/dataset, builds the NeRF and
+    trains it; `nerfaug train RUN` (a folder holding session.json) trains `--steps` more.
+
+    Args:
+        path: a Blender (transforms_{split}.json) or nerfstudio (transforms.json) dataset folder,
+            or an existing run folder.
+        out: the run folder to create (needed when PATH is a dataset).
+        steps: training steps to run now.
+        preset: NeRF engine preset (new sessions only).
+        seed: seeds the model, its training and every proposal (new sessions only).
+        split: the Blender split holding the captured views ("initial" for built-in scenes).
+        downscale: train on images shrunk by this integer factor.
+        centre: the hemisphere's centre, world space; default: the point the cameras look at.
+        radius: the hemisphere's radius; default: the cameras' mean distance to the centre.
+        up: the hemisphere's pole direction, world space (the world is z-up by default).
+        estimate_up: take the pole from the cameras' mean up axis instead of --up.
+        device: torch device (cpu, cuda, ...).
+    """
+    from nerfaug.session import CaptureSession
+
+    if (path / SESSION_FILE).exists():
+        if out is not None:
+            raise SystemExit(f"{path} is already a session folder; drop --out to train it further")
+        session = _open(path, device)
+    else:
+        if out is None:
+            raise SystemExit(f"{path} is a dataset: give the run folder to create with --out RUN")
+        session = CaptureSession.create(
+            path, out, preset=preset, seed=seed, split=split, centre=centre, radius=radius,
+            up="estimate" if estimate_up else up, downscale=downscale, device=device, progress=True,
+        )
+        h = session.hemisphere
+        print(f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
+              f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}")
+    last = session.train(steps)
+    session.save()
+    psnr = f", training PSNR {last['psnr']:.2f} dB" if "psnr" in last else ""
+    print(f"{session.run_dir}: step {session.step}{psnr}")
+
+
+def propose(
+    run: RunFolder,
+    n: int = 6,
+    method: str = "ours",
+    out: Path = Path("poses.json"),
+    candidates: Path | None = None,
+    n_candidates: int = 500,
+    seed: int | None = None,
+    entropy_resolution: int = 40,
+    device: str = "cpu",
+) -> None:
+    """Propose the next views to capture and write their poses as a Blender-style JSON.
+
+    The JSON ({camera_angle_x, w, h, fl_x, fl_y, cx, cy, frames: [{file_path, transform_matrix,
+    azimuth, polar, score}]}) holds world-frame OpenGL camera-to-world poses, ready for a robot or
+    Blender; the hemisphere map of every candidate's score is written beside it (same name, .png).
+    Name each captured image after its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`.
+
+    Args:
+        run: the session's run folder.
+        n: views to propose.
+        method: the selection method (`nerfaug methods`); "ours" is the paper's.
+        out: the poses JSON to write.
+        candidates: a transforms JSON of reachable poses (e.g. a robot's workspace) to choose
+            from instead of the hemisphere.
+        n_candidates: hemisphere candidates to score.
+        seed: seed this proposal explicitly (default: from the session seed and the proposal number,
+            so the same session state always proposes the same views).
+        entropy_resolution: width in pixels of the renders each candidate's entropy is taken over.
+        device: torch device.
+    """
+    from nerfaug.selection import SelectionConfig
+
+    session = _open(run, device)
+    proposal = session.propose(n, method, candidates=candidates, n_candidates=n_candidates, seed=seed,
+                               config=SelectionConfig(entropy_resolution=entropy_resolution))
+    path = proposal.write(out)
+    session.save()
+    print(f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path}, map "
+          f"{path.with_suffix('.png')}")
+    for name, a, p in zip(proposal.names, proposal.azimuth.tolist(), proposal.polar.tolist()):
+        print(f"  {name}: azimuth {a * 57.29578:6.1f} deg, polar {p * 57.29578:5.1f} deg")
+
+
+def add(
+    run: RunFolder,
+    images: Path,
+    poses: Path,
+    steps: int = 1000,
+    device: str = "cpu",
+) -> None:
+    """Add captured images at the poses of a poses JSON, then train on.
+
+    Each frame of the JSON is matched to the image in --images whose file name (without
+    extension) is the frame's file_path stem. Everything is checked before anything is written:
+    on an error the dataset is left as it was.
+
+    Args:
+        run: the session's run folder.
+        images: folder holding the captured images (PNG, JPEG, ...).
+        poses: the poses JSON (as `nerfaug propose` writes it, or your robot's actual poses in
+            the same format).
+        steps: training steps to run after adding (0: add only).
+        device: torch device.
+    """
+    session = _open(run, device)
+    names = session.add_views(images, poses)
+    print(f"added {len(names)} views ({', '.join(names)}); the dataset now has "
+          f"{len(session.trainer.train_views)} views")
+    if steps:
+        last = session.train(steps)
+        print(f"step {session.step}, training PSNR {last['psnr']:.2f} dB")
+    session.save()
+
+
+def export(
+    run: RunFolder,
+    out: Path,
+    format: Literal["nerfstudio", "blender"] = "nerfstudio",
+) -> None:
+    """Write the session's grown dataset for other tools.
+
+    nerfstudio: transforms.json + images/ (opens in nerfstudio, `ns-train nerfacto --data OUT`,
+    and instant-ngp). blender: transforms_train.json + train/*.png (NeRF-synthetic), with the
+    source dataset's val/test splits when it has them.
+
+    Args:
+        run: the session's run folder.
+        out: the folder to write.
+        format: nerfstudio or blender.
+    """
+    from nerfaug.session import CaptureSession
+
+    session = CaptureSession.open(run, load_model=False)  # exporting reads only the dataset folder
+    path = session.export(out, format)
+    print(f"exported {len(session.cameras)} views to {path}")
+
+
+def render_proposals(
+    run: RunFolder,
+    poses: Path,
+    scene: str,
+    out: Path,
+    samples: int = 16,
+    seed: int = 0,
+    threads: int = 2,
+) -> None:
+    """Capture proposed poses in simulation: render them with Blender, one PNG per frame named
+    after its file_path stem, ready for `nerfaug add RUN --images OUT --poses POSES`.
+
+    Args:
+        run: the session's run folder (for the camera's intrinsics and image size).
+        poses: the poses JSON `nerfaug propose` wrote.
+        scene: a built-in scene (lego, chair, materials) or a .blend file.
+        out: folder to write the renders to.
+        samples: Cycles samples per pixel.
+        seed: Cycles noise seed.
+        threads: CPU threads for Cycles.
+    """
+    import json
+
+    from nerfaug.scenes.render import render_poses
+    from nerfaug.session import read_poses
+
+    state = json.loads((run / SESSION_FILE).read_text())
+    k = state["intrinsics"]
+    if abs(k["fx"] - k["fy"]) > 1e-3 * k["fx"]:
+        raise SystemExit("Blender renders square pixels; this session's camera has fx != fy")
+    matrices, names = read_poses(poses)
+    paths = [out / f"{name}.png" for name in names]
+    render_poses(scene, matrices, paths, k["width"], k["height"], k["camera_angle_x"], samples, seed, threads)
+    print(f"rendered {len(paths)} views to {out}")
+
+
+COMMANDS: dict = {
+    "train": train,
+    "propose": propose,
+    "add": add,
+    "export": export,
+    "render-proposals": render_proposals,
+}

@@ -179,7 +179,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     })
     plot_hemisphere_map(
         data.pool.cameras.camera_to_world, selection.scores, data.initial.cameras.camera_to_world,
-        data.pool.cameras.camera_to_world[chosen], folder / "uncertainty.png", title=f"{key.scene}: {key.method}",
+        data.pool.cameras.camera_to_world[chosen], path=folder / "uncertainty.png", title=f"{key.scene}: {key.method}",
     )
     atomic_write_json(folder / "metrics.json", evaluation.to_dict())
     atomic_write_json(folder / "history.json", trainer.history)
