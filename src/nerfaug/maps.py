@@ -1,0 +1,212 @@
+"""Maps of candidate scores over the hemisphere seen from above, like the paper's Fig. 1.
+
+The upper hemisphere is drawn as a disk with the pole at the centre and the horizon at the rim,
+azimuth measured counter-clockwise from +x (right). The default projection is Lambert's
+equal-area one (radius = sin(polar / 2) / sin(pi / 4)), so candidates drawn uniformly in area
+look evenly spread; "equidistant" makes the radius proportional to the polar angle instead.
+Scores at the scattered candidates are interpolated linearly (Delaunay triangles) onto a grid,
+with the nearest candidate's value outside their convex hull; bright means uncertain (high
+score). Training views are drawn as triangles, chosen views as stars.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.tri import LinearTriInterpolator, Triangulation
+from scipy.spatial import cKDTree
+
+from nerfaug.hemisphere import angles_from_pose
+
+PROJECTIONS = ("equal-area", "equidistant")
+_GRID = 200
+_CMAP = "inferno"
+
+
+def _disk_radius(polar, projection: str):
+    """Distance from the disk's centre of a polar angle (radians); 1 at the horizon."""
+    if projection == "equal-area":
+        return np.sin(np.asarray(polar) / 2) / math.sin(math.pi / 4)
+    return np.asarray(polar) / (math.pi / 2)
+
+
+def _as_poses(poses) -> torch.Tensor:
+    poses = poses if torch.is_tensor(poses) else torch.as_tensor(np.asarray(poses))
+    return poses.detach().cpu().reshape(-1, 4, 4).double()
+
+
+def hemisphere_xy(camera_to_world, projection: str = "equal-area", centre=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Disk coordinates of camera positions (unit disk = the upper hemisphere).
+
+    Args:
+        camera_to_world: array or Tensor with shape (n, 4, 4).
+        projection: "equal-area" or "equidistant".
+        centre: the hemisphere's centre, world space.
+
+    Returns:
+        Array with shape (n, 2); views below the horizon land outside the unit disk.
+    """
+    if projection not in PROJECTIONS:
+        raise ValueError(f"unknown projection {projection!r}; valid: {', '.join(PROJECTIONS)}")
+    poses = _as_poses(camera_to_world)
+    if poses.shape[0] == 0:
+        return np.zeros((0, 2))
+    azimuth, polar, _ = angles_from_pose(poses, centre)
+    azimuth, polar = azimuth.double().numpy(), polar.double().numpy()
+    radius = _disk_radius(polar, projection)
+    return np.stack([radius * np.cos(azimuth), radius * np.sin(azimuth)], axis=-1)
+
+
+def _interpolate(xy: np.ndarray, values: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
+    """Scattered values onto the grid: linear inside the points' triangulation, nearest outside."""
+    if xy.shape[0] == 0 or np.ptp(values) == 0:
+        return np.full_like(gx, values.mean() if values.size else 0.0)
+    _, nearest = cKDTree(xy).query(np.stack([gx.ravel(), gy.ravel()], axis=-1))
+    grid = values[nearest].reshape(gx.shape)
+    if len(np.unique(xy, axis=0)) < 3:
+        return grid
+    try:
+        # matplotlib's triangulation rather than scipy's griddata: the same linear interpolation,
+        # without griddata's seconds-long first call on a busy multi-threaded machine.
+        linear = LinearTriInterpolator(Triangulation(xy[:, 0], xy[:, 1]), values)(gx, gy)
+    except (ValueError, RuntimeError):  # all points on a line: no triangles
+        return grid
+    return np.where(np.ma.getmaskarray(linear), grid, linear.filled(0.0))
+
+
+def _draw(ax: Axes, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre, vmin=None, vmax=None):
+    xy = hemisphere_xy(candidate_c2w, projection, centre)
+    values = np.asarray(torch.as_tensor(scores).detach().cpu().double().reshape(-1))
+    if values.shape[0] != xy.shape[0]:
+        raise ValueError(f"{xy.shape[0]} candidate poses but {values.shape[0]} scores")
+    axis = np.linspace(-1.0, 1.0, _GRID)
+    gx, gy = np.meshgrid(axis, axis)
+    grid = _interpolate(xy, values, gx, gy)
+    grid = np.ma.masked_where(gx**2 + gy**2 > 1.0, grid)
+    image = ax.imshow(
+        grid, origin="lower", extent=(-1, 1, -1, 1), cmap=_CMAP, interpolation="bilinear",
+        vmin=vmin, vmax=vmax,
+    )
+    ax.scatter(xy[:, 0], xy[:, 1], s=1.5, c="white", alpha=0.25, linewidths=0)
+
+    theta = np.linspace(0, 2 * math.pi, 200)
+    for polar_deg in (30, 60, 90):
+        r = _disk_radius(np.radians(polar_deg), projection)
+        ax.plot(r * np.cos(theta), r * np.sin(theta), color="0.6", lw=0.6 if polar_deg < 90 else 1.0)
+        if polar_deg < 90:  # polar-angle rings; the rim (90 degrees) is the horizon
+            ax.text(r * math.cos(math.radians(112)), r * math.sin(math.radians(112)), f"{polar_deg}°",
+                    color="0.8", fontsize=6, ha="center", va="bottom")
+    for az_deg in range(0, 360, 90):
+        a = math.radians(az_deg)
+        ax.plot([0, math.cos(a)], [0, math.sin(a)], color="0.6", lw=0.4)
+        ax.text(1.09 * math.cos(a), 1.09 * math.sin(a), f"{az_deg}°", ha="center", va="center", fontsize=7)
+
+    train = hemisphere_xy(train_c2w, projection, centre)
+    ax.scatter(train[:, 0], train[:, 1], marker="^", s=70, c="#29b6f6", edgecolors="black",
+               linewidths=0.8, label="training views", zorder=3)
+    if chosen_c2w is not None:
+        chosen = hemisphere_xy(chosen_c2w, projection, centre)
+        ax.scatter(chosen[:, 0], chosen[:, 1], marker="*", s=160, c="#00e676", edgecolors="black",
+                   linewidths=0.8, label="chosen views", zorder=4)
+    ax.set_xlim(-1.18, 1.18)
+    ax.set_ylim(-1.18, 1.18)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    return image
+
+
+def plot_hemisphere_map(
+    candidate_c2w,
+    scores,
+    train_c2w,
+    chosen_c2w=None,
+    path: str | Path | None = None,
+    title: str | None = None,
+    label: str = "uncertainty",
+    projection: str = "equal-area",
+    centre=(0.0, 0.0, 0.0),
+) -> Path:
+    """Draw the scores over the hemisphere seen from above and save it as a PNG.
+
+    Args:
+        candidate_c2w: Tensor or array with shape (n_candidates, 4, 4), where the scores live.
+        scores: Tensor or array with shape (n_candidates,); bright = high.
+        train_c2w: Tensor or array with shape (n_training, 4, 4), drawn as triangles.
+        chosen_c2w: Tensor or array with shape (n_chosen, 4, 4), drawn as stars; None for none.
+        path: PNG file to write (folders are created); required.
+        title: title above the map.
+        label: the colourbar's label.
+        projection: "equal-area" (default) or "equidistant".
+        centre: the hemisphere's centre, world space.
+
+    Returns:
+        The path written.
+    """
+    if path is None:
+        raise ValueError("plot_hemisphere_map needs the path of the PNG to write")
+    # A bare Figure renders with Agg and touches no pyplot state (no global backend, no leaks).
+    fig = Figure(figsize=(5.2, 4.6))
+    ax = fig.subplots()
+    image = _draw(ax, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre)
+    fig.colorbar(image, ax=ax, fraction=0.046, pad=0.02, label=label)
+    ax.legend(loc="lower left", bbox_to_anchor=(-0.05, -0.08), fontsize=7, frameon=False)
+    if title:
+        ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_method_maps(
+    maps: dict,
+    candidate_c2w,
+    train_c2w,
+    path: str | Path,
+    title: str | None = None,
+    projection: str = "equal-area",
+    centre=(0.0, 0.0, 0.0),
+) -> Path:
+    """One hemisphere map per method, side by side, and save them as a PNG.
+
+    Each panel's scores are min-max normalised for display (methods score on different scales),
+    so colours compare where a method is uncertain, not how much.
+
+    Args:
+        maps: method name -> (scores (n_candidates,), chosen_c2w (n_chosen, 4, 4) or None).
+        candidate_c2w: Tensor or array with shape (n_candidates, 4, 4), shared by all methods.
+        train_c2w: Tensor or array with shape (n_training, 4, 4).
+        path: PNG file to write.
+        title: a title over all panels.
+        projection, centre: as in `plot_hemisphere_map`.
+
+    Returns:
+        The path written.
+    """
+    if not maps:
+        raise ValueError("no methods to draw")
+    n = len(maps)
+    fig = Figure(figsize=(3.3 * n + 0.9, 3.8))
+    axes = fig.subplots(1, n, squeeze=False)
+    image = None
+    for ax, (name, (scores, chosen)) in zip(axes[0], maps.items()):
+        values = torch.as_tensor(np.asarray(scores) if not torch.is_tensor(scores) else scores).double()
+        span = values.max() - values.min()
+        shown = (values - values.min()) / span if span > 0 else torch.full_like(values, 0.5)
+        image = _draw(ax, candidate_c2w, shown, train_c2w, chosen, projection, centre, vmin=0.0, vmax=1.0)
+        ax.set_title(name, fontsize=10)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.colorbar(image, ax=list(axes[0]), fraction=0.02, pad=0.01, label="score (min-max per panel)")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, format="png", dpi=130, bbox_inches="tight")
+    return path

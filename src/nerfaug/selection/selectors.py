@@ -1,0 +1,215 @@
+"""Selectors: how k views are chosen from candidates, given their scores or their poses.
+
+- `select_uniform`: k distinct candidates uniformly at random (the "Uniform" baseline).
+- `select_top_k`: the k highest scores, next-best-view style ("NBV").
+- `rejection_sample`: the paper's sampler (Sec. III-C): draw a candidate uniformly, accept it with
+  probability w / M, never draw an accepted candidate again; or the authors' code's variant.
+- `greedy_farthest`: "maximally apart", each pick the candidate farthest (geodesic angle) from
+  the training views and the views picked so far.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import torch
+from torch import Tensor
+
+from nerfaug.uncertainty.so3 import min_geodesic_angle
+
+SAMPLERS = ("paper", "authors")
+# The authors' code accepts candidate i when w_i > AUTHORS_THRESHOLD * nu, nu ~ U[0.05, 1].
+AUTHORS_THRESHOLD = 15.0
+AUTHORS_NU_RANGE = (0.05, 1.0)
+MAX_DRAWS = 1_000_000
+# Random numbers are drawn in blocks (same stream for a seed, far fewer calls).
+_BLOCK = 1024
+
+
+def _check_k(n_candidates: int, k: int) -> None:
+    if not 0 <= k <= n_candidates:
+        raise ValueError(f"cannot choose {k} views out of {n_candidates} candidates")
+
+
+def select_uniform(n_candidates: int, k: int, generator: torch.Generator | None = None) -> Tensor:
+    """k distinct candidate indices uniformly at random. Shape (k,)."""
+    _check_k(n_candidates, k)
+    return torch.randperm(n_candidates, generator=generator)[:k]
+
+
+def select_top_k(scores: Tensor, k: int) -> Tensor:
+    """Indices of the k highest scores, best first; ties go to the lower index. Shape (k,)."""
+    _check_k(scores.shape[0], k)
+    return torch.argsort(scores.detach().cpu(), descending=True, stable=True)[:k]
+
+
+def _check_scores(scores: Tensor) -> Tensor:
+    scores = scores.detach().cpu().double().reshape(-1)
+    if not torch.isfinite(scores).all():
+        raise ValueError("scores must be finite to sample from them")
+    if (scores < 0).any():
+        raise ValueError(
+            f"scores are an unnormalised density and must be >= 0; the smallest is {scores.min():.6g}"
+        )
+    return scores
+
+
+def _require_acceptable(accept_prob: Tensor, k: int, why: str) -> None:
+    acceptable = int((accept_prob > 0).sum())
+    if acceptable < k:
+        raise ValueError(
+            f"rejection sampling cannot choose {k} distinct views: only {acceptable} of "
+            f"{accept_prob.numel()} candidates can ever be accepted ({why})"
+        )
+
+
+def rejection_sample(
+    scores: Tensor,
+    k: int,
+    generator: torch.Generator | None = None,
+    scale_m: float | None = None,
+    max_draws: int = MAX_DRAWS,
+    variant: str = "paper",
+    threshold: float = AUTHORS_THRESHOLD,
+) -> Tensor:
+    """Choose k distinct candidates with the paper's rejection sampler.
+
+    "paper" (default): repeat until k are accepted: draw a candidate uniformly among those not yet
+    accepted, draw u ~ U[0, 1), accept it if u < w / M (the paper writes u <= w / M; the two
+    differ on a probability-zero event, and "<" never accepts a zero score). For k = 1 the chosen
+    index has probability w_i / sum_j w_j; for k > 1 each draw is from the density restricted to
+    the candidates not chosen yet.
+
+    M defaults to max(w), the smallest valid scale (fewest rejections). A given M below max(w)
+    makes w / M exceed 1 for some candidates: a warning names the smallest valid M and those
+    acceptance probabilities are clipped to 1 (the result then no longer follows the scores).
+
+    "authors": the authors' code: go through the candidates in order (again from the start while
+    fewer than k are accepted), skip accepted ones, draw nu ~ U[0.05, 1] and accept if
+    w > threshold * nu (threshold 15). Their scores are in [0, 1] with max 1; other scores are
+    divided by their max first. Only candidates with w > 0.75 can then be accepted, each with
+    probability (w / 15 - 0.05) / 0.95 per visit. Their code also skips some low elevations;
+    that rule is not specified and is not reproduced.
+
+    Args:
+        scores: Tensor with shape (n_candidates,), w >= 0 (an unnormalised density).
+        k: number of views to choose.
+        generator: random source; the same seed gives the same choice.
+        scale_m: M; None for max(w). Ignored by "authors".
+        max_draws: give up (RuntimeError) after this many proposals.
+        variant: "paper" or "authors".
+        threshold: the authors' factor 15 ("authors" only).
+
+    Returns:
+        Tensor with shape (k,), candidate indices in the order accepted.
+
+    Raises:
+        ValueError: fewer than k candidates can ever be accepted (e.g. all scores 0), or bad input.
+        RuntimeError: `max_draws` proposals were not enough.
+    """
+    if variant not in SAMPLERS:
+        raise ValueError(f"unknown sampler variant {variant!r}; valid: {', '.join(SAMPLERS)}")
+    w = _check_scores(scores)
+    _check_k(w.numel(), k)
+    if variant == "authors":
+        return _authors_sample(w, k, generator, max_draws, threshold)
+
+    peak = float(w.max()) if w.numel() else 0.0
+    if scale_m is None:
+        scale_m = peak
+    elif scale_m <= 0:
+        raise ValueError(f"the scale M must be positive, got {scale_m}")
+    elif peak > scale_m:
+        warnings.warn(
+            f"rejection sampling scale M={scale_m:.6g} is below the largest score {peak:.6g}: "
+            f"w / M exceeds 1 for {int((w > scale_m).sum())} candidates and is clipped to 1, so "
+            f"the samples do not follow the scores; a valid M is any M >= {peak:.6g}",
+            stacklevel=2,
+        )
+    accept_prob = (w / scale_m).clamp(max=1.0) if scale_m > 0 else torch.zeros_like(w)
+    _require_acceptable(accept_prob, k, "a candidate with score 0 is never accepted")
+
+    probs = accept_prob.tolist()
+    remaining = list(range(w.numel()))
+    chosen: list[int] = []
+    draws = 0
+    while len(chosen) < k:
+        picks = torch.rand(_BLOCK, generator=generator, dtype=torch.float64)
+        us = torch.rand(_BLOCK, generator=generator, dtype=torch.float64)
+        for pick, u in zip(picks.tolist(), us.tolist()):
+            if draws >= max_draws:
+                raise RuntimeError(
+                    f"rejection sampling gave up after {max_draws} draws with {len(chosen)} of {k} "
+                    f"views accepted; the remaining candidates' mean acceptance probability is "
+                    f"{float(accept_prob[remaining].mean()):.3g} (lower M or raise max_draws)"
+                )
+            draws += 1
+            candidate = remaining[min(int(pick * len(remaining)), len(remaining) - 1)]
+            if u < probs[candidate]:
+                chosen.append(candidate)
+                remaining.remove(candidate)
+                if len(chosen) == k:
+                    break
+    return torch.tensor(chosen, dtype=torch.long)
+
+
+def _authors_sample(w: Tensor, k: int, generator, max_draws: int, threshold: float) -> Tensor:
+    low, high = AUTHORS_NU_RANGE
+    peak = float(w.max())
+    if peak > 0:  # their rule assumes scores in [0, 1] with max 1 (as their normalisation gives)
+        w = w / peak
+    accept_prob = ((w / threshold - low) / (high - low)).clamp(0.0, 1.0)
+    _require_acceptable(
+        accept_prob, k, f"the authors' rule accepts only w > {threshold} * {low} = {threshold * low:.6g}"
+    )
+    n = w.numel()
+    scores = w.tolist()
+    accepted = [False] * n
+    chosen: list[int] = []
+    draws = 0
+    while len(chosen) < k:
+        nus = (low + (high - low) * torch.rand(n, generator=generator, dtype=torch.float64)).tolist()
+        for i in range(n):
+            if accepted[i]:
+                continue
+            if draws >= max_draws:
+                raise RuntimeError(
+                    f"the authors' sampler gave up after {max_draws} draws with {len(chosen)} of {k} accepted"
+                )
+            draws += 1
+            if scores[i] > threshold * nus[i]:
+                accepted[i] = True
+                chosen.append(i)
+                if len(chosen) == k:
+                    break
+    return torch.tensor(chosen, dtype=torch.long)
+
+
+def greedy_farthest(candidate_rotations: Tensor, training_rotations: Tensor, k: int) -> Tensor:
+    """"Maximally apart": k times, pick the candidate whose smallest geodesic angle to the training
+    views and the views already picked is largest.
+
+    Args:
+        candidate_rotations: Tensor with shape (n_candidates, 3, 3).
+        training_rotations: Tensor with shape (n_training, 3, 3); with none, the first pick is
+            candidate 0.
+        k: number of views.
+
+    Returns:
+        Tensor with shape (k,), in the order picked.
+    """
+    n = candidate_rotations.shape[0]
+    _check_k(n, k)
+    nearest = torch.full((n,), math.inf, dtype=candidate_rotations.dtype)
+    if training_rotations.shape[0] > 0:
+        nearest = min_geodesic_angle(candidate_rotations.cpu(), training_rotations.cpu())
+    chosen: list[int] = []
+    for _ in range(k):
+        gap = nearest.clone()
+        gap[chosen] = -math.inf
+        best = int(torch.argmax(gap))
+        chosen.append(best)
+        to_best = min_geodesic_angle(candidate_rotations.cpu(), candidate_rotations[best : best + 1].cpu())
+        nearest = torch.minimum(nearest, to_best)
+    return torch.tensor(chosen, dtype=torch.long)

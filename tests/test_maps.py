@@ -1,0 +1,68 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from nerfaug.hemisphere import fibonacci_angles, half_hemisphere_poses, pose_from_angles
+from nerfaug.maps import hemisphere_xy, plot_hemisphere_map, plot_method_maps
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def candidates():
+    azimuth, polar = fibonacci_angles(200)
+    return pose_from_angles(azimuth, polar), azimuth, polar
+
+
+def test_projection_puts_the_pole_at_the_centre_and_the_horizon_on_the_rim():
+    poses = pose_from_angles(
+        torch.tensor([0.0, 0.0, math.pi / 2, 1.0]), torch.tensor([0.0, math.pi / 2, math.pi / 2, math.pi / 3])
+    )
+    for projection in ("equal-area", "equidistant"):
+        xy = hemisphere_xy(poses, projection)
+        assert np.allclose(xy[0], 0.0, atol=1e-6)
+        assert np.allclose(xy[1], [1.0, 0.0], atol=1e-6)  # azimuth 0 to the right
+        assert np.allclose(xy[2], [0.0, 1.0], atol=1e-6)  # azimuth pi/2 up
+    assert np.linalg.norm(hemisphere_xy(poses, "equidistant")[3]) == pytest.approx(2 / 3, abs=1e-6)
+    with pytest.raises(ValueError, match="equal-area"):
+        hemisphere_xy(poses, "mercator")
+
+
+def test_hemisphere_map_writes_a_png(tmp_path):
+    poses, azimuth, _ = candidates()
+    scores = torch.cos(azimuth) + 1.0
+    train = half_hemisphere_poses(6)
+    path = plot_hemisphere_map(poses, scores, train, poses[:3], tmp_path / "sub" / "map.png", title="t")
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    numpy_path = plot_hemisphere_map(poses.numpy(), scores.numpy(), train.numpy(), path=tmp_path / "np.png")
+    assert numpy_path.stat().st_size > 1000
+
+
+def test_hemisphere_map_checks_its_inputs(tmp_path):
+    poses, _, _ = candidates()
+    with pytest.raises(ValueError, match="200 candidate poses but 3 scores"):
+        plot_hemisphere_map(poses, torch.ones(3), half_hemisphere_poses(6), path=tmp_path / "bad.png")
+    with pytest.raises(ValueError, match="path"):
+        plot_hemisphere_map(poses, torch.ones(200), half_hemisphere_poses(6))
+
+
+def test_method_maps_write_one_png_with_a_panel_per_method(tmp_path):
+    poses, azimuth, polar = candidates()
+    maps = {
+        "ours": (torch.cos(azimuth) + 1.0, poses[:6]),
+        "uniform": (torch.ones(200), None),  # constant scores still draw
+        "entropy": (polar.numpy(), poses[10:16].numpy()),
+    }
+    path = plot_method_maps(maps, poses, half_hemisphere_poses(6), tmp_path / "maps.png", title="lego")
+    assert path.read_bytes()[:8] == PNG_MAGIC
+    with pytest.raises(ValueError, match="no methods"):
+        plot_method_maps({}, poses, half_hemisphere_poses(6), tmp_path / "none.png")
+
+
+def test_degenerate_candidate_sets_still_draw(tmp_path):
+    pole = pose_from_angles(torch.tensor([0.0, 1.0, 2.0]), torch.zeros(3))  # one point on the map
+    line = pose_from_angles(torch.zeros(3), torch.tensor([0.2, 0.5, 0.9]))  # collinear points
+    for i, poses in enumerate((pole, line, line[:1])):
+        path = plot_hemisphere_map(poses, torch.rand(len(poses)), half_hemisphere_poses(6), path=tmp_path / f"{i}.png")
+        assert path.read_bytes()[:8] == PNG_MAGIC
