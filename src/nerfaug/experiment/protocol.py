@@ -92,11 +92,9 @@ def load_scene_data(folder: Path, config: ExperimentConfig) -> SceneData:
 def engine_config(config: ExperimentConfig, scene: str):
     from nerfaug.nerf.config import NerfConfig
 
-    engine = NerfConfig.preset(config.engine)
     name = Path(scene).name
-    if name in config.field_lr:
-        engine = engine.replace(field_lr=config.field_lr[name])
-    return engine
+    overrides = {"field_lr": config.field_lr[name]} if name in config.field_lr else {}
+    return NerfConfig.preset(config.engine, **overrides)
 
 
 @functools.lru_cache(maxsize=1)
