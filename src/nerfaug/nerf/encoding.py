@@ -1,0 +1,164 @@
+"""Encodings of positions and directions: multiresolution hash grid, K-planes tri-planes, and
+real spherical harmonics.
+
+Positions enter every position encoding normalised to the unit cube [0, 1]^3.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+# Instant-NGP's spatial hash primes (the first is 1 so that x alone is not scrambled).
+HASH_PRIMES = (1, 2654435761, 805459861)
+
+# The 8 corners of a unit cell, shape (8, 3), x varying fastest.
+_CORNERS = torch.tensor([[(i >> 0) & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)])
+
+
+def hash_resolutions(num_levels: int, base_resolution: int, max_resolution: int) -> list[int]:
+    """Grid resolution of each level, growing geometrically from `base` to `max` (Instant-NGP).
+
+    Example:
+        >>> hash_resolutions(3, 16, 64)
+        [16, 32, 64]
+    """
+    if num_levels == 1:
+        return [base_resolution]
+    growth = math.exp((math.log(max_resolution) - math.log(base_resolution)) / (num_levels - 1))
+    return [int(math.floor(base_resolution * growth**level + 1e-6)) for level in range(num_levels)]
+
+
+def hash_grid_indices(corners: Tensor, resolutions: Tensor, table_size: int) -> Tensor:
+    """Row of each grid vertex in its level's table.
+
+    A level whose (resolution + 1)^3 vertices fit in the table is indexed densely (no
+    collisions); finer levels use Instant-NGP's XOR-of-primes hash. The low bits of a product
+    do not depend on wrap-around, so int64 arithmetic gives the same rows as Instant-NGP's uint32.
+
+    Args:
+        corners: Tensor with shape (..., 3), integer vertex coordinates in [0, resolution].
+        resolutions: integer Tensor broadcastable to shape (...), each vertex's level resolution.
+        table_size: entries per level, a power of two.
+
+    Returns:
+        Tensor with shape (...), integer in [0, table_size).
+    """
+    side = resolutions + 1
+    dense = corners[..., 0] + side * (corners[..., 1] + side * corners[..., 2])
+    hashed = (corners[..., 0] * HASH_PRIMES[0]) ^ (corners[..., 1] * HASH_PRIMES[1]) ^ (corners[..., 2] * HASH_PRIMES[2])
+    hashed = hashed & (table_size - 1)
+    return torch.where(side**3 <= table_size, dense, hashed)
+
+
+class HashEncoding(nn.Module):
+    """Multiresolution hash encoding (Mueller et al. 2022), all levels in one vectorised pass.
+
+    Output feature of a point: for each level, the trilinear interpolation of the features
+    stored at the 8 vertices of its grid cell, concatenated over levels.
+    """
+
+    def __init__(
+        self, num_levels: int = 16, features_per_level: int = 2, log2_table_size: int = 19,
+        base_resolution: int = 16, max_resolution: int = 2048, init_scale: float = 1e-4,
+    ):
+        super().__init__()
+        self.num_levels, self.features_per_level = num_levels, features_per_level
+        self.table_size = 2**log2_table_size
+        resolutions = hash_resolutions(num_levels, base_resolution, max_resolution)
+        self.register_buffer("resolutions", torch.tensor(resolutions), persistent=False)
+        self.register_buffer("level_offsets", torch.arange(num_levels) * self.table_size, persistent=False)
+        self.register_buffer("corners", _CORNERS.clone(), persistent=False)
+        # Small uniform init as Instant-NGP: the field starts almost constant.
+        self.table = nn.Parameter(
+            torch.empty(num_levels * self.table_size, features_per_level).uniform_(-init_scale, init_scale)
+        )
+
+    @property
+    def output_dim(self) -> int:
+        return self.num_levels * self.features_per_level
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Args: x: Tensor with shape (n, 3) in [0, 1]. Returns: Tensor with shape (n, output_dim)."""
+        scaled = x[:, None, :] * self.resolutions[:, None].to(x.dtype)  # (n, L, 3)
+        floor = scaled.floor()
+        frac = scaled - floor
+        vertex = floor.long()[:, :, None, :] + self.corners  # (n, L, 8, 3)
+        # x == 1 lands on vertex res + 1; clamping keeps it on the last cell's far face.
+        vertex = torch.minimum(vertex, self.resolutions[:, None, None])
+        rows = hash_grid_indices(vertex, self.resolutions[:, None], self.table_size)
+        rows = rows + self.level_offsets[:, None]  # (n, L, 8)
+        features = self.table[rows]  # (n, L, 8, F)
+        frac = frac[:, :, None, :]
+        weights = torch.where(self.corners.bool(), frac, 1.0 - frac).prod(dim=-1)  # (n, L, 8)
+        return (features * weights[..., None]).sum(dim=2).reshape(x.shape[0], -1)
+
+
+class KPlanesEncoding(nn.Module):
+    """Factorised grid (K-planes, Fridovich-Keil et al. 2023, static case): at each scale, three
+    feature planes (xy, xz, yz) sampled bilinearly and multiplied elementwise.
+
+    Bilinear lookups in 2-D planes are one `grid_sample` call per scale, an order of magnitude
+    faster on a CPU than gathering 8 vertices from 16 hash levels.
+    """
+
+    def __init__(self, resolutions: tuple[int, ...] = (64, 256), features: int = 8):
+        super().__init__()
+        self.features = features
+        # K-planes' init: positive planes so the product starts away from zero in every channel.
+        self.planes = nn.ParameterList(
+            [nn.Parameter(torch.empty(3, features, r, r).uniform_(0.1, 0.5)) for r in resolutions]
+        )
+
+    @property
+    def output_dim(self) -> int:
+        return self.features * len(self.planes)
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Args: x: Tensor with shape (n, 3) in [0, 1]. Returns: Tensor with shape (n, output_dim)."""
+        coords = 2.0 * x - 1.0  # grid_sample's [-1, 1]; its (u, v) index (width, height)
+        grid = torch.stack([coords[:, [0, 1]], coords[:, [0, 2]], coords[:, [1, 2]]])[:, :, None, :]
+        outputs = []
+        for planes in self.planes:
+            sampled = F.grid_sample(planes, grid, mode="bilinear", align_corners=True)  # (3, C, n, 1)
+            # unbind and explicit products: indexing and prod() have much slower backwards.
+            xy, xz, yz = sampled[..., 0].unbind(0)
+            outputs.append((xy * xz * yz).T)
+        return torch.cat(outputs, dim=-1)
+
+
+def spherical_harmonics(directions: Tensor, levels: int = 4) -> Tensor:
+    """Real spherical harmonics basis Y_lm evaluated at unit directions, l < levels.
+
+    Args:
+        directions: Tensor with shape (n, 3), unit length.
+        levels: 1 to 4; the output has levels**2 components.
+
+    Returns:
+        Tensor with shape (n, levels**2), orthonormal on the sphere
+        (the integral of Y_i Y_j over the sphere is delta_ij).
+    """
+    if not 1 <= levels <= 4:
+        raise ValueError(f"levels must be 1 to 4, got {levels}")
+    x, y, z = directions.unbind(-1)
+    terms = [torch.full_like(x, 0.28209479177387814)]
+    if levels > 1:
+        terms += [0.4886025119029199 * y, 0.4886025119029199 * z, 0.4886025119029199 * x]
+    if levels > 2:
+        xx, yy, zz = x * x, y * y, z * z
+        terms += [
+            1.0925484305920792 * x * y, 1.0925484305920792 * y * z,
+            0.9461746957575601 * zz - 0.31539156525251999, 1.0925484305920792 * x * z,
+            0.5462742152960396 * (xx - yy),
+        ]
+    if levels > 3:
+        terms += [
+            0.5900435899266435 * y * (3 * xx - yy), 2.890611442640554 * x * y * z,
+            0.4570457994644658 * y * (5 * zz - 1), 0.3731763325901154 * z * (5 * zz - 3),
+            0.4570457994644658 * x * (5 * zz - 1), 1.445305721320277 * z * (xx - yy),
+            0.5900435899266435 * x * (xx - 3 * yy),
+        ]
+    return torch.stack(terms, dim=-1)

@@ -1,0 +1,129 @@
+"""Radiance fields: density and view-dependent colour at points (nerfacto-style, without
+per-image appearance embeddings), and the density-only fields of the proposal sampler.
+
+Fields take positions normalised to the unit cube [0, 1]^3 (the scene box mapped onto it);
+the model does that mapping.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor, nn
+
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.encoding import HashEncoding, KPlanesEncoding, spherical_harmonics
+
+
+class _TruncExp(torch.autograd.Function):
+    """exp whose gradient is clamped at exp(15), so one large pre-activation cannot blow up
+    the step (Instant-NGP / nerfacto)."""
+
+    @staticmethod
+    def forward(ctx, x: Tensor) -> Tensor:
+        ctx.save_for_backward(x)
+        return torch.exp(x)
+
+    @staticmethod
+    def backward(ctx, grad: Tensor) -> Tensor:
+        (x,) = ctx.saved_tensors
+        return grad * torch.exp(x.clamp(max=15.0))
+
+
+def trunc_exp(x: Tensor) -> Tensor:
+    """exp(x) with the gradient of exp(min(x, 15)). Any shape."""
+    return _TruncExp.apply(x)
+
+
+def density_activation(raw: Tensor, kind: str, average_init_density: float) -> Tensor:
+    """Density >= 0 from a raw network output, equal to `average_init_density` at raw = 0.
+
+    Args:
+        raw: Tensor of any shape.
+        kind: "trunc_exp" (nerfacto: average_init_density * exp(raw)) or "softplus"
+            (softplus shifted so that softplus(0 + shift) = average_init_density).
+    """
+    if kind == "trunc_exp":
+        return average_init_density * trunc_exp(raw)
+    if kind == "softplus":
+        return nn.functional.softplus(raw + math.log(math.expm1(average_init_density)))
+    raise ValueError(f"density_activation must be 'trunc_exp' or 'softplus', got {kind!r}")
+
+
+def mlp(in_dim: int, hidden_dim: int, out_dim: int, hidden_layers: int) -> nn.Sequential:
+    """A ReLU MLP with `hidden_layers` hidden layers of width `hidden_dim` and a linear output."""
+    layers: list[nn.Module] = []
+    width = in_dim
+    for _ in range(hidden_layers):
+        layers += [nn.Linear(width, hidden_dim), nn.ReLU()]
+        width = hidden_dim
+    layers.append(nn.Linear(width, out_dim))
+    return nn.Sequential(*layers)
+
+
+def position_encoding(config: NerfConfig) -> nn.Module:
+    """The position encoding `config.encoding` names."""
+    if config.encoding == "hash":
+        return HashEncoding(
+            config.hash_levels, config.hash_features_per_level, config.hash_log2_table_size,
+            config.hash_base_resolution, config.hash_max_resolution,
+        )
+    return KPlanesEncoding(config.plane_resolutions, config.plane_features)
+
+
+class NerfField(nn.Module):
+    """Density from position; colour from a geometry feature and the viewing direction.
+
+    position -> encoding -> density MLP -> (density, geometry feature)
+    (SH(direction), geometry feature) -> colour MLP -> sigmoid -> rgb
+    """
+
+    def __init__(self, config: NerfConfig):
+        super().__init__()
+        self.density_kind, self.average_init_density = config.density_activation, config.average_init_density
+        self.sh_levels, self.geo_feat_dim = config.sh_levels, config.geo_feat_dim
+        self.encoding = position_encoding(config)
+        self.density_mlp = mlp(self.encoding.output_dim, config.hidden_dim, 1 + config.geo_feat_dim, 1)
+        self.color_mlp = mlp(
+            config.sh_levels**2 + config.geo_feat_dim, config.color_hidden_dim, 3, config.color_layers
+        )
+        # Zero bias on the density output: a fresh field then has about the configured density.
+        with torch.no_grad():
+            self.density_mlp[-1].bias.zero_()
+
+    def density(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        """Args: x: Tensor with shape (n, 3) in [0, 1]^3.
+
+        Returns:
+            density: Tensor with shape (n,), >= 0, per world unit.
+            geometry: Tensor with shape (n, geo_feat_dim), input to `color`.
+        """
+        raw, geometry = self.density_mlp(self.encoding(x)).split([1, self.geo_feat_dim], dim=-1)
+        return density_activation(raw[:, 0], self.density_kind, self.average_init_density), geometry
+
+    def color(self, geometry: Tensor, directions: Tensor) -> Tensor:
+        """Args: geometry (n, geo_feat_dim) from `density`; directions (n, 3) unit.
+
+        Returns: Tensor with shape (n, 3) in [0, 1].
+        """
+        features = torch.cat([spherical_harmonics(directions, self.sh_levels), geometry], dim=-1)
+        return torch.sigmoid(self.color_mlp(features))
+
+
+class DensityField(nn.Module):
+    """A small hash-grid density network, one per proposal level (nerfacto's HashMLPDensityField)."""
+
+    def __init__(self, config: NerfConfig, max_resolution: int):
+        super().__init__()
+        self.density_kind, self.average_init_density = config.density_activation, config.average_init_density
+        self.encoding = HashEncoding(
+            config.proposal_hash_levels, 2, config.proposal_log2_table_size, 16, max_resolution,
+        )
+        self.mlp = mlp(self.encoding.output_dim, config.proposal_hidden_dim, 1, 1)
+        with torch.no_grad():
+            self.mlp[-1].bias.zero_()
+
+    def forward(self, x: Tensor) -> Tensor:
+        """Args: x: Tensor with shape (n, 3) in [0, 1]^3. Returns: density, shape (n,)."""
+        return density_activation(self.mlp(self.encoding(x))[:, 0], self.density_kind, self.average_init_density)

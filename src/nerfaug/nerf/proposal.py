@@ -1,0 +1,82 @@
+"""Losses and schedule of nerfacto's proposal sampler (mip-NeRF 360): the histogram
+(interlevel) loss that makes proposal weights bound the final ones, the distortion loss, and the
+annealing of proposal weights early in training.
+
+Histograms are (edges (n_rays, n + 1), weights (n_rays, n)) along the same rays.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+_EPS = 1e-7
+
+
+def outer_measure(edges: Tensor, env_edges: Tensor, env_weights: Tensor) -> Tensor:
+    """For each interval of `edges`, the total envelope weight over the envelope bins that
+    overlap it (an upper bound on the mass any consistent histogram can put there).
+
+    Args:
+        edges: Tensor with shape (n_rays, n + 1).
+        env_edges: Tensor with shape (n_rays, m + 1).
+        env_weights: Tensor with shape (n_rays, m).
+
+    Returns:
+        Tensor with shape (n_rays, n).
+    """
+    cumulative = torch.cat([torch.zeros_like(env_weights[:, :1]), torch.cumsum(env_weights, dim=-1)], dim=-1)
+    starts, ends = edges[:, :-1].contiguous(), edges[:, 1:].contiguous()
+    m = env_weights.shape[-1]
+    low = (torch.searchsorted(env_edges[:, :-1].contiguous(), starts, side="right") - 1).clamp(0, m - 1)
+    high = torch.searchsorted(env_edges[:, 1:].contiguous(), ends, side="right").clamp(0, m - 1)
+    return cumulative[:, 1:].gather(-1, high) - cumulative[:, :-1].gather(-1, low)
+
+
+def interlevel_loss(
+    edges: Tensor, weights: Tensor, proposal_edges: list[Tensor], proposal_weights: list[Tensor]
+) -> Tensor:
+    """mip-NeRF 360's proposal loss: penalise final weights not covered by each proposal's
+    outer measure. Gradients reach only the proposal weights.
+
+    Args:
+        edges, weights: the final histogram, (n_rays, n + 1) and (n_rays, n).
+        proposal_edges, proposal_weights: one histogram per proposal level.
+
+    Returns:
+        scalar Tensor, summed over levels, mean over rays and samples.
+    """
+    edges, weights = edges.detach(), weights.detach()
+    loss = weights.new_zeros(())
+    for p_edges, p_weights in zip(proposal_edges, proposal_weights):
+        bound = outer_measure(edges, p_edges, p_weights)
+        loss = loss + ((weights - bound).clamp(min=0) ** 2 / (weights + _EPS)).mean()
+    return loss
+
+
+def distortion_loss(edges: Tensor, weights: Tensor) -> Tensor:
+    """mip-NeRF 360's distortion loss, which pulls each ray's weight into one compact interval.
+
+    L = sum_ij w_i w_j |m_i - m_j| + 1/3 sum_i w_i^2 (t_{i+1} - t_i), with t normalised to
+    [0, 1] per ray so that the loss does not depend on the scene's scale.
+
+    Args:
+        edges: Tensor with shape (n_rays, n + 1).
+        weights: Tensor with shape (n_rays, n).
+
+    Returns:
+        scalar Tensor, mean over rays.
+    """
+    span = (edges[:, -1:] - edges[:, :1]).clamp_min(_EPS)
+    t = (edges - edges[:, :1]) / span
+    mids = 0.5 * (t[:, 1:] + t[:, :-1])
+    widths = t[:, 1:] - t[:, :-1]
+    pairwise = (weights[:, :, None] * weights[:, None, :] * (mids[:, :, None] - mids[:, None, :]).abs()).sum((1, 2))
+    return (pairwise + (weights**2 * widths).sum(-1) / 3.0).mean()
+
+
+def proposal_anneal(step: int, anneal_steps: int, slope: float) -> float:
+    """Exponent applied to proposal weights before resampling: 0 (uniform) at step 0, rising to
+    1 at `anneal_steps` along nerfacto's biased curve slope * f / ((slope - 1) f + 1)."""
+    fraction = min(max(step / max(anneal_steps, 1), 0.0), 1.0)
+    return slope * fraction / ((slope - 1.0) * fraction + 1.0)

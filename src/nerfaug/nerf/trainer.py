@@ -1,0 +1,245 @@
+"""`Trainer`: fits a `NerfModel` to a growing set of views, one call to add views mid-run, and
+checkpoints from which training resumes bit-identically on the CPU.
+
+Every random number the trainer uses (pixels, sample jitter, occupancy-grid probes, random
+backgrounds) comes from one `torch.Generator` it owns and checkpoints. Parameter initialisation
+draws from the global RNG inside `fork_rng`, seeded from that generator, so the caller's global
+RNG state is left as it was.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import torch
+from torch import Tensor
+
+from nerfaug.cameras import Cameras, generate_rays
+from nerfaug.data.views import Views
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.model import NerfModel
+
+CHECKPOINT_FORMAT = 1
+
+
+class TrainingDiverged(RuntimeError):
+    """The loss became NaN or infinite; the model still holds the last good step's state."""
+
+    def __init__(self, step: int, loss: float, checkpoint: Path | None = None):
+        self.step, self.loss, self.checkpoint = step, loss, checkpoint
+        message = f"training diverged at step {step}: loss = {loss}"
+        message += f"; last good checkpoint kept at {checkpoint}" if checkpoint else "; no checkpoint was configured"
+        super().__init__(message)
+
+
+def exponential_lr(initial: float, final: float, step: int, decay_steps: int) -> float:
+    """Learning rate decaying exponentially from `initial` (step 0) to `final` (step
+    `decay_steps`), constant after (nerfstudio's ExponentialDecayScheduler without warm-up)."""
+    fraction = min(max(step / max(decay_steps, 1), 0.0), 1.0)
+    return math.exp(math.log(initial) * (1.0 - fraction) + math.log(final) * fraction)
+
+
+def psnr_from_mse(mse: float) -> float:
+    """PSNR in dB of images in [0, 1] with mean squared error `mse`."""
+    return -10.0 * math.log10(max(mse, 1e-10))
+
+
+class Trainer:
+    """Trains a NeRF on `views` and lets views be added at any step.
+
+    Attributes:
+        model: the `NerfModel` being trained.
+        step: completed training steps.
+        train_views: the current training views (materialised).
+        history: one dict per completed step: {"step", "loss", "psnr"} (psnr of the batch's rgb).
+        generator: the trainer's only source of randomness.
+    """
+
+    def __init__(
+        self, views: Views, config: NerfConfig, seed: int = 0, device="cpu",
+        background=(1.0, 1.0, 1.0), progress: bool = True,
+    ):
+        self.config, self.seed, self.device = config, seed, torch.device(device)
+        self.background = tuple(float(c) for c in background)
+        self.progress = progress
+        self.generator = torch.Generator().manual_seed(seed)
+        self._checkpoint_path: Path | None = None
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(int(torch.randint(2**62, (1,), generator=self.generator)))
+            self.model = NerfModel(config, self.background).to(self.device)
+        groups = self.model.param_groups()
+        initial = {"field": config.field_lr, "field_mlp": config.field_lr * config.field_mlp_lr_scale}
+        self.optimizer = torch.optim.Adam(
+            [{"params": params, "lr": initial.get(name, config.lr), "name": name} for name, params in groups.items()],
+            eps=config.adam_eps, fused=True,  # one kernel per step: much faster on a CPU too
+        )
+        self._initial_lrs = [group["lr"] for group in self.optimizer.param_groups]
+        self.step = 0
+        self.history: list[dict] = []
+        self._set_views(views.materialised())
+
+    def _set_views(self, views: Views) -> None:
+        """Hold `views` on the device as flat pixel arrays for uniform sampling."""
+        self.train_views = views
+        self._cameras: Cameras = views.cameras.to(self.device)
+        self._pixels: Tensor = views.images.reshape(-1, 3).to(self.device)
+        self._alphas: Tensor | None = None if views.alphas is None else views.alphas.reshape(-1).to(self.device)
+
+    def add_views(self, views: Views) -> None:
+        """Train on `views` too, from the next step on. The model, the optimiser state and the
+        step count are untouched. The new views must have the training views' image size."""
+        views = views.materialised()
+        current = self.train_views.cameras
+        if (views.cameras.width, views.cameras.height) != (current.width, current.height):
+            raise ValueError(
+                f"added views are {views.cameras.width}x{views.cameras.height}, the training views "
+                f"{current.width}x{current.height}; resize them first"
+            )
+        merged = Views.cat([self.train_views, views])
+        if (self.train_views.alphas is None) != (views.alphas is None):
+            merged.alphas = None  # mixed sources: fall back to the composited images only
+        self._set_views(merged)
+
+    def sample_batch(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """A batch of rays drawn uniformly over all pixels of all training views.
+
+        Returns:
+            origins, directions (B, 3), target colours (B, 3), and the background to render
+            them over: (3,), (B, 3) (random backgrounds) or None (the model's last-sample colour).
+        """
+        cameras = self._cameras
+        per_view = cameras.width * cameras.height
+        index = torch.randint(self._pixels.shape[0], (self.config.batch_size,), generator=self.generator)
+        view, pixel = index // per_view, index % per_view
+        origins, directions = generate_rays(cameras, view, pixel % cameras.width, pixel // cameras.width)
+        index = index.to(self.device)
+        target = self._pixels[index]
+        background = None if self.config.background_mode == "last_sample" else self.model.background
+        if self.config.random_background and self._alphas is not None:
+            # Swap the stored background behind each pixel for a random colour the model must
+            # learn to see through, so empty space cannot hide in the background colour.
+            background = torch.rand((index.shape[0], 3), generator=self.generator).to(self.device)
+            transparency = 1.0 - self._alphas[index, None]
+            target = target + transparency * (background - self.model.background)
+        return origins, directions, target, background
+
+    def _set_learning_rates(self) -> None:
+        for group, initial in zip(self.optimizer.param_groups, self._initial_lrs):
+            group["lr"] = exponential_lr(initial, self.config.lr_final, self.step, self.config.lr_decay_steps)
+
+    def train_step(self) -> dict:
+        """Run one step. Returns its history entry. Raises TrainingDiverged on a NaN/inf loss
+        (before any parameter is updated)."""
+        self.model.train()
+        self.model.before_step(self.step, self.generator)
+        origins, directions, target, background = self.sample_batch()
+        output = self.model(origins, directions, background, generator=self.generator)
+        mse = torch.nn.functional.mse_loss(output.rgb, target)
+        loss = mse + self.model.auxiliary_loss(output)
+        loss_value = float(loss.detach())
+        if not math.isfinite(loss_value):
+            kept = self._checkpoint_path if self._checkpoint_path is not None and self._checkpoint_path.exists() else None
+            raise TrainingDiverged(self.step, loss_value, kept)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self._set_learning_rates()
+        self.optimizer.step()
+        self.step += 1
+        entry = {"step": self.step, "loss": loss_value, "psnr": psnr_from_mse(float(mse.detach()))}
+        self.history.append(entry)
+        return entry
+
+    def train(self, until_step: int, checkpoint: str | Path | None = None, checkpoint_every: int = 1000) -> None:
+        """Train until `self.step == until_step`.
+
+        Args:
+            until_step: the step to stop at (nothing happens if already there).
+            checkpoint: if given, save here every `checkpoint_every` steps and at the end; on
+                divergence this file keeps the last good state.
+
+        Raises:
+            TrainingDiverged: naming the step, the loss and the kept checkpoint.
+        """
+        self._checkpoint_path = Path(checkpoint) if checkpoint is not None else None
+        if until_step < self.step:
+            raise ValueError(f"already at step {self.step}, cannot train until step {until_step}")
+        start = self.step
+        progress = _progress_bar(self.progress)
+        with progress:
+            task = progress.add_task("training", total=until_step - start, loss=float("nan"), psnr=float("nan"))
+            while self.step < until_step:
+                entry = self.train_step()
+                if self._checkpoint_path is not None and self.step % checkpoint_every == 0:
+                    self.save_checkpoint(self._checkpoint_path)
+                if self.step % 10 == 0 or self.step == until_step:
+                    progress.update(task, completed=self.step - start, loss=entry["loss"], psnr=entry["psnr"])
+        if self._checkpoint_path is not None:
+            self.save_checkpoint(self._checkpoint_path)
+
+    def state_dict(self) -> dict:
+        """Everything needed to resume: config, model (with occupancy grid), optimiser, step,
+        history, RNG state and the training views."""
+        views = self.train_views
+        cameras = views.cameras
+        return {
+            "format": CHECKPOINT_FORMAT,
+            "config": self.config.to_dict(),
+            "seed": self.seed,
+            "background": list(self.background),
+            "step": self.step,
+            "history": self.history,
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "generator": self.generator.get_state(),
+            "views": {
+                "camera_to_world": cameras.camera_to_world, "fx": cameras.fx, "fy": cameras.fy,
+                "cx": cameras.cx, "cy": cameras.cy, "width": cameras.width, "height": cameras.height,
+                "images": views.images, "alphas": views.alphas, "names": list(views.names),
+            },
+        }
+
+    def save_checkpoint(self, path: str | Path) -> Path:
+        """Write the whole training state to `path` atomically (a reader sees the old file or
+        the new one, never a partial one). Returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                torch.save(self.state_dict(), handle)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+    @classmethod
+    def load_checkpoint(cls, path: str | Path, device="cpu", progress: bool = True) -> "Trainer":
+        """A trainer restored from `save_checkpoint`; training continues exactly as it would have."""
+        state = torch.load(path, map_location="cpu", weights_only=True)
+        if state.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"{path}: unsupported checkpoint format {state.get('format')!r}")
+        v = state["views"]
+        cameras = Cameras(v["camera_to_world"], v["fx"], v["fy"], v["cx"], v["cy"], v["width"], v["height"])
+        views = Views(cameras, v["images"], list(v["names"]), v["alphas"])
+        trainer = cls(views, NerfConfig.from_dict(state["config"]), state["seed"], device, state["background"], progress)
+        trainer.model.load_state_dict(state["model"])
+        trainer.optimizer.load_state_dict(state["optimizer"])
+        trainer.generator.set_state(state["generator"])
+        trainer.step = state["step"]
+        trainer.history = list(state["history"])
+        return trainer
+
+
+def _progress_bar(enabled: bool):
+    """A rich progress bar showing loss and PSNR; disabled bars draw nothing."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    return Progress(
+        TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),
+        TextColumn("loss {task.fields[loss]:.4f}  psnr {task.fields[psnr]:.2f} dB"), TimeRemainingColumn(),
+        disable=not enabled, transient=False,
+    )
