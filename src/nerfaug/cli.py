@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 from typing import Annotated, Literal
@@ -66,7 +67,7 @@ def run(
     resolution: int | None = None,
     seed: int | None = None,
     backend: Literal["local", "ray"] = "local",
-    workers: int = 1,
+    workers: int | None = None,
     address: str | None = None,
     force: bool = False,
     report: bool = True,
@@ -89,7 +90,8 @@ def run(
         resolution: image size of built-in scenes (or the width user data is downscaled to).
         seed: base seed.
         backend: local (this machine) or ray (one task per run; --address joins a cluster).
-        workers: concurrent runs with the local backend (each uses threads_per_run threads).
+        workers: concurrent runs (local backend) or Ray CPUs to start (local Ray); default: one
+            run per core.
         address: Ray cluster address; omitted starts a local Ray instance.
         force: discard existing results in --out and redo every run.
         report: write report.md / report.html at the end.
@@ -105,6 +107,8 @@ def run(
     elif scenes is not None:
         changes["scenes"] = scenes
     config = config.replace(**changes)
+    if workers is None:
+        workers = max(1, (os.cpu_count() or 1) // config.threads_per_run)
     outcome = run_sweep(config, out, backend=backend, workers=workers, address=address, force=force,
                         command=["nerfaug", *sys.argv[1:]])
     if report:

@@ -32,7 +32,8 @@ def test_hashed_rows_are_in_the_table_and_coarse_levels_are_dense(generator):
     assert dense_rows.unique().numel() == 729
     # Level 1 uses Instant-NGP's hash (uint32 products, XOR, low bits).
     c = corners[0, 1].tolist()
-    expected = ((c[0] * HASH_PRIMES[0]) % 2**32 ^ (c[1] * HASH_PRIMES[1]) % 2**32 ^ (c[2] * HASH_PRIMES[2]) % 2**32) % table_size
+    products = [(c[k] * HASH_PRIMES[k]) % 2**32 for k in range(3)]
+    expected = (products[0] ^ products[1] ^ products[2]) % table_size
     assert rows[0, 1].item() == expected
 
 
@@ -58,7 +59,9 @@ def _naive_hash_encoding(encoding: HashEncoding, x: torch.Tensor) -> torch.Tenso
 
 def test_hash_encoding_matches_a_per_level_reference_and_passes_gradients(generator):
     torch.manual_seed(0)
-    encoding = HashEncoding(num_levels=4, features_per_level=2, log2_table_size=10, base_resolution=4, max_resolution=64)
+    encoding = HashEncoding(
+        num_levels=4, features_per_level=2, log2_table_size=10, base_resolution=4, max_resolution=64
+    )
     with torch.no_grad():
         encoding.table.normal_()
     x = torch.rand(257, 3, generator=generator)

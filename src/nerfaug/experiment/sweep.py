@@ -127,6 +127,7 @@ class _Display:
         )
         self.overall = self.progress.add_task("runs", total=total)
         self.running: dict[RunKey, int] = {}
+        self.queued: list[RunKey] = []
         self.done = self.failed = 0
 
     def __enter__(self):
@@ -140,7 +141,13 @@ class _Display:
         self.running[key] = self.progress.add_task(f"  {key}", total=self.steps)
         self._describe()
 
+    def queue(self, key: RunKey) -> None:
+        """A run handed to another process: shown as running once it reports progress."""
+        self.queued.append(key)
+
     def finished(self, key: RunKey, ok: bool) -> None:
+        if key in self.queued:
+            self.queued.remove(key)
         task = self.running.pop(key, None)
         if task is not None:
             self.progress.remove_task(task)
@@ -150,6 +157,9 @@ class _Display:
         self._describe()
 
     def poll(self) -> None:
+        for key in [k for k in self.queued if (k.folder(self.root) / PROGRESS_FILE).exists()]:
+            self.queued.remove(key)
+            self.started(key)
         for key, task in self.running.items():
             try:
                 step = json.loads((key.folder(self.root) / PROGRESS_FILE).read_text())["step"]
@@ -183,7 +193,7 @@ def _execute_local(todo, datasets, config, root, workers, address, progress):
             pending = {}
             for key in todo:
                 pending[pool.submit(_run_and_report, key, datasets[key.scene], config, root)] = key
-                display.started(key)
+                display.queue(key)
             while pending:
                 done, _ = futures.wait(pending, timeout=0.5, return_when=futures.FIRST_COMPLETED)
                 display.poll()
@@ -243,7 +253,7 @@ def _execute_ray(todo, datasets, config, root, workers, address, progress):
             refs = {}
             for key in todo:
                 refs[remote.remote(key, datasets[key.scene], config, root)] = key
-                display.started(key)
+                display.queue(key)
             while refs:
                 ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.5)
                 display.poll()

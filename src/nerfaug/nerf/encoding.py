@@ -15,9 +15,6 @@ from torch import Tensor, nn
 # Instant-NGP's spatial hash primes (the first is 1 so that x alone is not scrambled).
 HASH_PRIMES = (1, 2654435761, 805459861)
 
-# The 8 corners of a unit cell, shape (8, 3), x varying fastest.
-_CORNERS = torch.tensor([[(i >> 0) & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)])
-
 
 def hash_resolutions(num_levels: int, base_resolution: int, max_resolution: int) -> list[int]:
     """Grid resolution of each level, growing geometrically from `base` to `max` (Instant-NGP).
@@ -49,7 +46,8 @@ def hash_grid_indices(corners: Tensor, resolutions: Tensor, table_size: int) -> 
     """
     side = resolutions + 1
     dense = corners[..., 0] + side * (corners[..., 1] + side * corners[..., 2])
-    hashed = (corners[..., 0] * HASH_PRIMES[0]) ^ (corners[..., 1] * HASH_PRIMES[1]) ^ (corners[..., 2] * HASH_PRIMES[2])
+    x, y, z = corners.unbind(-1)
+    hashed = (x * HASH_PRIMES[0]) ^ (y * HASH_PRIMES[1]) ^ (z * HASH_PRIMES[2])
     hashed = hashed & (table_size - 1)
     return torch.where(side**3 <= table_size, dense, hashed)
 
@@ -58,7 +56,10 @@ class HashEncoding(nn.Module):
     """Multiresolution hash encoding (Mueller et al. 2022), all levels in one vectorised pass.
 
     Output feature of a point: for each level, the trilinear interpolation of the features
-    stored at the 8 vertices of its grid cell, concatenated over levels.
+    stored at the 8 vertices of its grid cell, concatenated over levels. Rows are those of
+    `hash_grid_indices`, computed per axis in int32 and combined over the 2 x 2 x 2 corners by
+    broadcasting: the low bits of a product and of an XOR depend only on the operands' low bits,
+    so masking each factor keeps every intermediate below 2^31.
     """
 
     def __init__(
@@ -66,12 +67,25 @@ class HashEncoding(nn.Module):
         base_resolution: int = 16, max_resolution: int = 2048, init_scale: float = 1e-4,
     ):
         super().__init__()
+        if (max_resolution + 1) * 2**log2_table_size >= 2**31:
+            raise ValueError(
+                f"max_resolution {max_resolution} with a 2^{log2_table_size} table overflows int32 hashing"
+            )
         self.num_levels, self.features_per_level = num_levels, features_per_level
         self.table_size = 2**log2_table_size
-        resolutions = hash_resolutions(num_levels, base_resolution, max_resolution)
-        self.register_buffer("resolutions", torch.tensor(resolutions), persistent=False)
-        self.register_buffer("level_offsets", torch.arange(num_levels) * self.table_size, persistent=False)
-        self.register_buffer("corners", _CORNERS.clone(), persistent=False)
+        resolutions = torch.tensor(hash_resolutions(num_levels, base_resolution, max_resolution))
+        side = resolutions + 1
+        dense = side**3 <= self.table_size
+        # Per level and axis, the factor a vertex coordinate is multiplied by: row-major strides
+        # for dense levels (summed), masked primes for hashed ones (XOR-ed).
+        strides = torch.stack([torch.ones_like(side), side, side * side], dim=-1)
+        primes = torch.tensor(HASH_PRIMES) & (self.table_size - 1)
+        factors = torch.where(dense[:, None], strides, primes)
+        self.register_buffer("resolutions", resolutions.to(torch.int32), persistent=False)
+        self.register_buffer("dense", dense, persistent=False)
+        self.register_buffer("factors", factors.to(torch.int32), persistent=False)
+        offsets = (torch.arange(num_levels) * self.table_size).to(torch.int32)
+        self.register_buffer("level_offsets", offsets, persistent=False)
         # Small uniform init as Instant-NGP: the field starts almost constant.
         self.table = nn.Parameter(
             torch.empty(num_levels * self.table_size, features_per_level).uniform_(-init_scale, init_scale)
@@ -83,18 +97,28 @@ class HashEncoding(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         """Args: x: Tensor with shape (n, 3) in [0, 1]. Returns: Tensor with shape (n, output_dim)."""
-        scaled = x[:, None, :] * self.resolutions[:, None].to(x.dtype)  # (n, L, 3)
+        n, levels = x.shape[0], self.num_levels
+        # Level-major layout (L, n, ...): the gather and, above all, the backward's scatter then
+        # stay inside one level's table at a time, which is cache-friendly (2-3x faster on CPU).
+        scaled = x[None, :, :] * self.resolutions[:, None, None].to(x.dtype)  # (L, n, 3)
         floor = scaled.floor()
         frac = scaled - floor
-        vertex = floor.long()[:, :, None, :] + self.corners  # (n, L, 8, 3)
+        low = floor.to(torch.int32)
         # x == 1 lands on vertex res + 1; clamping keeps it on the last cell's far face.
-        vertex = torch.minimum(vertex, self.resolutions[:, None, None])
-        rows = hash_grid_indices(vertex, self.resolutions[:, None], self.table_size)
-        rows = rows + self.level_offsets[:, None]  # (n, L, 8)
-        features = self.table[rows]  # (n, L, 8, F)
-        frac = frac[:, :, None, :]
-        weights = torch.where(self.corners.bool(), frac, 1.0 - frac).prod(dim=-1)  # (n, L, 8)
-        return (features * weights[..., None]).sum(dim=2).reshape(x.shape[0], -1)
+        high = torch.minimum(low + 1, self.resolutions[:, None, None])
+        terms = torch.stack([low, high], dim=-1) * self.factors[:, None, :, None]  # (L, n, 3, 2)
+        tx, ty, tz = terms[:, :, 0, :, None, None], terms[:, :, 1, None, :, None], terms[:, :, 2, None, None, :]
+        mask = self.table_size - 1
+        hashed = ((tx & mask) ^ (ty & mask) ^ (tz & mask)) & mask
+        rows = torch.where(self.dense[:, None, None, None, None], tx + ty + tz, hashed)  # (L, n, 2, 2, 2)
+        rows = (rows + self.level_offsets[:, None, None, None, None]).reshape(-1).long()  # (L * n * 8,)
+        # index_select with int64 rows: its backward (index_add) is the fastest scatter into the
+        # table here; with int32 rows it falls back to a 3x slower single-threaded path on CPU.
+        features = torch.index_select(self.table, 0, rows).reshape(levels, n, 8, self.features_per_level)
+        w = torch.stack([1.0 - frac, frac], dim=-1)  # (L, n, 3, 2)
+        weights = w[:, :, 0, :, None, None] * w[:, :, 1, None, :, None] * w[:, :, 2, None, None, :]
+        weights = weights.reshape(levels, n, 8, 1)
+        return (features * weights).sum(dim=2).transpose(0, 1).reshape(n, -1)
 
 
 class KPlanesEncoding(nn.Module):

@@ -88,7 +88,8 @@ class NerfModel(nn.Module):
             step_size = 2.0 * math.sqrt(3.0) * self.config.box_half_size / self.config.num_samples
             self.occupancy.update(step, self.density, step_size, generator)
         else:
-            self.anneal.fill_(proposal_anneal(step, self.config.proposal_anneal_steps, self.config.proposal_anneal_slope))
+            config = self.config
+            self.anneal.fill_(proposal_anneal(step, config.proposal_anneal_steps, config.proposal_anneal_slope))
 
     def forward(
         self, origins: Tensor, directions: Tensor, background: Tensor | None = None,
@@ -115,19 +116,22 @@ class NerfModel(nn.Module):
             edges = stratified_edges(t_min, t_max, config.proposal_samples[0], jitter, generator)
             proposal_edges, proposal_weights = [], []
             targets = list(config.proposal_samples[1:]) + [config.num_samples]
-            for proposal, n_next in zip(self.proposals, targets):
-                weights = self._proposal_weights(proposal, origins, directions, edges)
-                proposal_edges.append(edges)
-                proposal_weights.append(weights)
-                edges = sample_pdf(edges, weights.detach() ** self.anneal, n_next, jitter, generator)
+            # Samples are placed without gradient, so outside training (e.g. a Fisher
+            # information pass in eval mode) the proposal networks need no graph.
+            with torch.set_grad_enabled(torch.is_grad_enabled() and self.training):
+                for proposal, n_next in zip(self.proposals, targets):
+                    weights = self._proposal_weights(proposal, origins, directions, edges)
+                    proposal_edges.append(edges)
+                    proposal_weights.append(weights)
+                    edges = sample_pdf(edges, weights.detach() ** self.anneal, n_next, jitter, generator)
             extras = {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
         else:
             edges = stratified_edges(t_min, t_max, config.num_samples, jitter, generator)
         t_starts, t_ends = edges[:, :-1], edges[:, 1:]
         weights, rgbs = self._shade(origins, directions, t_starts, t_ends)
-        if background is None:
-            background = self._last_sample_colour(origins, directions, t_ends[:, -1]) if config.background_mode == "last_sample" else self.background
-        background = background.to(weights)
+        if background is None and config.background_mode == "last_sample":
+            background = self._last_sample_colour(origins, directions, t_ends[:, -1])
+        background = (self.background if background is None else background).to(weights)
         rgb, accumulation, depth = composite(weights, rgbs, t_starts, t_ends, background)
         return RenderOutput(rgb, accumulation, depth, weights, t_starts, t_ends, extras)
 
@@ -182,7 +186,9 @@ class NerfModel(nn.Module):
             )
         return loss
 
-    def _chunks(self, origins: Tensor, directions: Tensor, background: Tensor | None, chunk: int | None) -> Iterator[RenderOutput]:
+    def _chunks(
+        self, origins: Tensor, directions: Tensor, background: Tensor | None, chunk: int | None
+    ) -> Iterator[RenderOutput]:
         """Render rays chunk by chunk in eval mode without gradients (restoring the mode after)."""
         device = self.background.device
         chunk = chunk or self.config.render_chunk

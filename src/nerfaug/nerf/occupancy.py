@@ -7,6 +7,11 @@ above a threshold. During warm-up every cell counts as occupied and the field is
 (unlike nerfacc, which probes every cell all along: on a CPU that costs as much as training);
 the first update, at the end of warm-up, probes every cell, later ones a random fraction of the
 cells plus all occupied ones.
+
+A cell is culled only once the field's density there has dropped, which takes rays that saw
+through it; space hidden from every training view keeps its initial density and stays
+occupied, so views added mid-run need no new warm-up (measured: one cost 30% more time for no
+gain in PSNR).
 """
 
 from __future__ import annotations

@@ -141,7 +141,8 @@ class Trainer:
         loss = mse + self.model.auxiliary_loss(output)
         loss_value = float(loss.detach())
         if not math.isfinite(loss_value):
-            kept = self._checkpoint_path if self._checkpoint_path is not None and self._checkpoint_path.exists() else None
+            path = self._checkpoint_path
+            kept = path if path is not None and path.exists() else None
             raise TrainingDiverged(self.step, loss_value, kept)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -225,7 +226,8 @@ class Trainer:
         v = state["views"]
         cameras = Cameras(v["camera_to_world"], v["fx"], v["fy"], v["cx"], v["cy"], v["width"], v["height"])
         views = Views(cameras, v["images"], list(v["names"]), v["alphas"])
-        trainer = cls(views, NerfConfig.from_dict(state["config"]), state["seed"], device, state["background"], progress)
+        config = NerfConfig.from_dict(state["config"])
+        trainer = cls(views, config, state["seed"], device, state["background"], progress)
         trainer.model.load_state_dict(state["model"])
         trainer.optimizer.load_state_dict(state["optimizer"])
         trainer.generator.set_state(state["generator"])
