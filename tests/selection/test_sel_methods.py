@@ -19,14 +19,6 @@ EXPECTED = {
 
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """The models here are tiny: one thread beats two, whose synchronisation dominates each of
-    the many small backward passes (badly so on a busy machine)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 class BlobNerf(nn.Module):
     """A fuzzy blob whose density falls off from a point off-centre, plus a tiny MLP tint, with

@@ -14,14 +14,6 @@ from nerfaug.uncertainty.fisher import (
 
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """The models here are tiny: one thread beats two, whose synchronisation dominates each of
-    the many small backward passes (badly so on a busy machine)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 class TinyNerf(nn.Module):
     """A 2-layer MLP field with fixed stratified samples in [2, 6]: about 70 parameters."""
