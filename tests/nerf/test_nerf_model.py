@@ -122,3 +122,12 @@ def test_proposal_losses_reach_the_proposal_networks(generator):
     (out.rgb.sum() + loss).backward()
     for proposal in model.proposals:
         assert proposal.encoding.table.grad is not None and proposal.encoding.table.grad.abs().sum() > 0
+
+
+def test_weights_only_rendering_equals_the_full_rendering(model, generator):
+    origins, directions = rays_at_origin(300, generator)
+    model.train()  # render_weights_only must switch to eval itself, and restore the mode
+    full = model.render_rays(origins, directions, chunk=128).weights
+    only = model.render_weights_only(origins, directions, chunk=128)
+    assert model.training
+    assert torch.equal(only, full)

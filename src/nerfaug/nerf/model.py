@@ -109,6 +109,20 @@ class NerfModel(nn.Module):
             histograms (sampler "proposal") for `auxiliary_loss`.
         """
         config = self.config
+        t_starts, t_ends, extras = self._intervals(origins, directions, generator)
+        weights, rgbs = self._shade(origins, directions, t_starts, t_ends)
+        if background is None and config.background_mode == "last_sample":
+            background = self._last_sample_colour(origins, directions, t_ends[:, -1])
+        background = (self.background if background is None else background).to(weights)
+        rgb, accumulation, depth = composite(weights, rgbs, t_starts, t_ends, background)
+        return RenderOutput(rgb, accumulation, depth, weights, t_starts, t_ends, extras)
+
+    def _intervals(
+        self, origins: Tensor, directions: Tensor, generator: torch.Generator | None
+    ) -> tuple[Tensor, Tensor, dict]:
+        """The final samples' intervals t_starts, t_ends (n_rays, n_samples) and the proposal
+        sampler's extras; jittered in training mode only."""
+        config = self.config
         jitter = self.training
         t_min, t_max = ray_box_span(origins, directions, config.box_half_size, config.near, config.far)
         extras: dict = {}
@@ -127,13 +141,29 @@ class NerfModel(nn.Module):
             extras = {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
         else:
             edges = stratified_edges(t_min, t_max, config.num_samples, jitter, generator)
-        t_starts, t_ends = edges[:, :-1], edges[:, 1:]
-        weights, rgbs = self._shade(origins, directions, t_starts, t_ends)
-        if background is None and config.background_mode == "last_sample":
-            background = self._last_sample_colour(origins, directions, t_ends[:, -1])
-        background = (self.background if background is None else background).to(weights)
-        rgb, accumulation, depth = composite(weights, rgbs, t_starts, t_ends, background)
-        return RenderOutput(rgb, accumulation, depth, weights, t_starts, t_ends, extras)
+        return edges[:, :-1], edges[:, 1:], extras
+
+    def render_weights_only(self, origins: Tensor, directions: Tensor, chunk: int | None = None) -> Tensor:
+        """Volume-rendering weights (n_rays, n_samples) in eval mode without gradients.
+
+        The same weights as `render_rays(...).weights`, without the colour network: the entropy
+        term needs the weights alone, and scoring hundreds of candidate views is dominated by it.
+        """
+        chunk = chunk or self.config.render_chunk
+        device = self.background.device
+        was_training = self.training
+        self.eval()
+        try:
+            with torch.no_grad():
+                parts = []
+                for start in range(0, origins.shape[0], chunk):
+                    o, d = origins[start:start + chunk].to(device), directions[start:start + chunk].to(device)
+                    t_starts, t_ends, _ = self._intervals(o, d, None)
+                    sigma, _, _ = self._densities(o, d, t_starts, t_ends)
+                    parts.append(render_weights(sigma, t_ends - t_starts)[0])
+        finally:
+            self.train(was_training)
+        return torch.cat(parts)
 
     def _last_sample_colour(self, origins: Tensor, directions: Tensor, t_far: Tensor) -> Tensor:
         """The field's colour at the far end of each ray, nerfacto's "last_sample" background.
@@ -148,14 +178,11 @@ class NerfModel(nn.Module):
         sigma = proposal(self._unit(points.reshape(-1, 3))).reshape(mids.shape)
         return render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
 
-    def _shade(self, origins: Tensor, directions: Tensor, t_starts: Tensor, t_ends: Tensor) -> tuple[Tensor, Tensor]:
-        """Weights (n_rays, n) and colours (n_rays, n, 3) of the final samples.
-
-        The field sees only samples that may matter: inside a non-empty interval, in an occupied
-        cell (occupancy sampler), and, for colour, with transmittance above
-        `config.transmittance_eps`. The rest keep density 0 and colour 0, gathered out of and
-        scattered back into the dense (n_rays, n) layout.
-        """
+    def _densities(
+        self, origins: Tensor, directions: Tensor, t_starts: Tensor, t_ends: Tensor
+    ) -> tuple[Tensor, Tensor, Tensor]:
+        """Densities (n_rays, n) of the samples that may matter (non-empty interval, occupied cell),
+        0 elsewhere; also the flat indices of those samples and their geometry features."""
         n_rays, n = t_starts.shape
         mids = 0.5 * (t_starts + t_ends)
         points = (origins[:, None, :] + directions[:, None, :] * mids[..., None]).reshape(-1, 3)
@@ -165,6 +192,18 @@ class NerfModel(nn.Module):
         index = live.nonzero().squeeze(-1)
         density, geometry = self.field.density(self._unit(points[index]))
         sigma = density.new_zeros(n_rays * n).index_put((index,), density).reshape(n_rays, n)
+        return sigma, index, geometry
+
+    def _shade(self, origins: Tensor, directions: Tensor, t_starts: Tensor, t_ends: Tensor) -> tuple[Tensor, Tensor]:
+        """Weights (n_rays, n) and colours (n_rays, n, 3) of the final samples.
+
+        The field sees only samples that may matter: inside a non-empty interval, in an occupied
+        cell (occupancy sampler), and, for colour, with transmittance above
+        `config.transmittance_eps`. The rest keep density 0 and colour 0, gathered out of and
+        scattered back into the dense (n_rays, n) layout.
+        """
+        n_rays, n = t_starts.shape
+        sigma, index, geometry = self._densities(origins, directions, t_starts, t_ends)
         weights, transmittance = render_weights(sigma, t_ends - t_starts)
         visible = transmittance.detach().reshape(-1)[index] > self.config.transmittance_eps
         colour_index = index[visible]
