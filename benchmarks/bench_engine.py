@@ -118,7 +118,8 @@ def run_trial(train_views: Views, test_views: Views, config: NerfConfig, checkpo
         psnr = mean_psnr(trainer, test_views)
         render_seconds = time.perf_counter() - start
         curve.append({"step": step, "train_seconds": train_seconds, "psnr": psnr, "render_seconds": render_seconds})
-        print(f"  step {step:5d}  train {train_seconds:6.1f} s  test PSNR {psnr:5.2f} dB  render {render_seconds:5.1f} s", flush=True)
+        print(f"  step {step:5d}  train {train_seconds:6.1f} s  test PSNR {psnr:5.2f} dB  "
+              f"render {render_seconds:5.1f} s", flush=True)
     best = max(point["psnr"] for point in curve)
     plateau = next(point for point in curve if point["psnr"] >= best - 0.5)
     return {
@@ -235,7 +236,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--no-ceiling", action="store_true", help="skip the all-pool-views trial")
     parser.add_argument("--no-compare", action="store_true", help="skip the encoding/preset ratios")
-    parser.add_argument("--compare-steps", type=int, default=3)
+    parser.add_argument("--compare-steps", type=int, default=2, help="timed steps per preset")
     parser.add_argument("--out", type=Path, default=Path("results/bench_engine.json"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
