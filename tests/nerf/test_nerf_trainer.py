@@ -144,14 +144,12 @@ def test_field_and_proposal_groups_get_their_own_learning_rates(views):
     config = NerfConfig.preset(
         "test", encoding="hash", sampler="proposal", hash_levels=2, hash_log2_table_size=8,
         proposal_samples=(8,), proposal_max_resolutions=(32,), proposal_hash_levels=2,
-        proposal_log2_table_size=8, field_lr=2e-3, lr=1e-2, field_mlp_lr_scale=0.5,
+        proposal_log2_table_size=8, field_lr=2e-3, lr=1e-2,
     )
     trainer = Trainer(views, config, progress=False)
     trainer.train(2)
     lrs = {g["name"]: g["lr"] for g in trainer.optimizer.param_groups}
     assert lrs["field"] == pytest.approx(exponential_lr(2e-3, 1e-4, 1, config.lr_decay_steps))
-    mlp_lr = exponential_lr(2e-3 * config.field_mlp_lr_scale, 1e-4, 1, config.lr_decay_steps)
-    assert lrs["field_mlp"] == pytest.approx(mlp_lr)
     assert lrs["proposal"] == pytest.approx(exponential_lr(1e-2, 1e-4, 1, config.lr_decay_steps))
 
 

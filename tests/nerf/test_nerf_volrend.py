@@ -50,6 +50,16 @@ def test_weights_sum_to_accumulation_and_transmittance_decreases(generator):
     assert (transmittance[:, 1:] <= transmittance[:, :-1] + 1e-7).all()
 
 
+def test_deep_samples_have_zero_transmittance_not_subnormal_floats():
+    sigmas = torch.full((1, 60), 2.0)  # optical depth grows by 2 per sample, past 80 and 104
+    weights, transmittance = render_weights(sigmas, torch.ones(1, 60))
+    tiny = torch.finfo(torch.float32).tiny
+    for values in (weights, transmittance):
+        assert ((values == 0) | (values >= tiny)).all()
+    assert transmittance[0, -1] == 0 and transmittance[0, 40] == pytest.approx(math.exp(-80.0))
+    assert weights.sum().item() == pytest.approx(1.0)
+
+
 def test_ray_box_span_clips_to_the_box_and_near_far():
     origins = torch.tensor([[0.0, 0.0, 4.0], [0.0, 0.0, 4.0], [5.0, 5.0, 4.0], [0.0, 0.0, 1.0]])
     directions = torch.tensor([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])

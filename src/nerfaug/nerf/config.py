@@ -47,16 +47,16 @@ class NerfConfig:
     Optimisation:
         batch_size: rays per step, drawn uniformly from all pixels of all training views.
         field_lr: initial learning rate of the NeRF field (paper: 0.002 for chair/materials).
-        field_mlp_lr_scale: the field's MLPs learn at field_lr times this (1 in nerfacto). Below
-            1 it keeps the colour MLP from saturating its sigmoid for good in the first steps,
-            while the field is still a faint fog and every object pixel asks for "darker".
         lr: initial learning rate of every other parameter group (the proposal networks).
         lr_final, lr_decay_steps: each group decays exponentially to `lr_final` at this step.
         adam_eps: Adam's epsilon.
         background_mode: what rays that pass through see when no background is passed:
             "fixed" (the trainer's background colour) or "last_sample" (the field's colour at
-            the far end of the ray, nerfacto's default; it lets a faint young field explain
-            bright pixels without pushing its colours to black).
+            the far end of the ray, nerfacto's default). "last_sample" lets a faint young field
+            explain white pixels without pushing its colours to black, but with few views it
+            also explains them view by view: measured on a 100x100 lego-like scene with 12
+            views, a reduced paper preset after 400 steps had PSNR 26.4 dB on the training
+            views and 13.8 dB on test views with "last_sample", 20.7 / 19.8 dB with "fixed".
         random_background: composite training pixels that have an alpha channel over a random
             colour each step (nerfacto's trick against floaters on transparent data).
         render_chunk: rays per chunk when rendering without gradients.
@@ -103,7 +103,6 @@ class NerfConfig:
 
     batch_size: int = 4096
     field_lr: float = 1e-2
-    field_mlp_lr_scale: float = 1.0
     lr: float = 1e-2
     lr_final: float = 1e-4
     lr_decay_steps: int = 200_000
@@ -134,8 +133,13 @@ class NerfConfig:
         - "paper": nerfacto's defaults as the paper ran them (16-level hash grid, 2 features per
           level, 2^19 entries, proposal sampling 256/96/48, 4096 rays, lr 1e-2 -> 1e-4 over 200k
           steps, Adam eps 1e-15, average initial density 0.01). Meant for a GPU.
+          The background is nerfacto's "last_sample" (see `background_mode`).
         - "cpu": a K-planes field with an occupancy grid, sized so that 2000 steps on 12 views of
-          100x100 train in well under a minute on two CPU cores.
+          100x100 train in about 30-40 s on two CPU cores (measured ~15-20 ms per step). It
+          starts as an opaque fog (average density 1, nerfstudio's default) and has a one-layer
+          colour MLP: starting from density 0.01 with two colour layers, the colour MLP's
+          sigmoid saturated at 0 within 20 steps (while the faint field asked every object pixel
+          for "darker") and never recovered.
         - "test": tiny, for unit tests.
         """
         if name not in PRESETS:

@@ -71,9 +71,11 @@ class Trainer:
             torch.manual_seed(int(torch.randint(2**62, (1,), generator=self.generator)))
             self.model = NerfModel(config, self.background).to(self.device)
         groups = self.model.param_groups()
-        initial = {"field": config.field_lr, "field_mlp": config.field_lr * config.field_mlp_lr_scale}
         self.optimizer = torch.optim.Adam(
-            [{"params": params, "lr": initial.get(name, config.lr), "name": name} for name, params in groups.items()],
+            [
+                {"params": params, "lr": config.field_lr if name == "field" else config.lr, "name": name}
+                for name, params in groups.items()
+            ],
             eps=config.adam_eps, fused=True,  # one kernel per step: much faster on a CPU too
         )
         self._initial_lrs = [group["lr"] for group in self.optimizer.param_groups]

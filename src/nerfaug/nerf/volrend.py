@@ -52,6 +52,9 @@ class RenderOutput:
         }, extras=None)
 
 
+_MAX_OPTICAL_DEPTH = 80.0
+
+
 def render_weights(sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
     """Volume-rendering weights and transmittance from densities.
 
@@ -71,8 +74,12 @@ def render_weights(sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
     optical = sigmas * deltas
     # Exclusive cumulative sum in log space: stable where products of (1 - alpha) underflow.
     accumulated = torch.cumsum(optical, dim=-1)
-    transmittance = torch.exp(-torch.cat([torch.zeros_like(accumulated[..., :1]), accumulated[..., :-1]], dim=-1))
-    alphas = 1.0 - torch.exp(-optical)
+    exclusive = torch.cat([torch.zeros_like(accumulated[..., :1]), accumulated[..., :-1]], dim=-1)
+    # exp(-x) for x in (87, 104) is a subnormal float, which is slow on x86 CPUs; beyond
+    # _MAX_OPTICAL_DEPTH the transmittance is 0 exactly (and exp(-80) = 2e-35 is already nothing).
+    opaque = exclusive > _MAX_OPTICAL_DEPTH
+    transmittance = torch.exp(-exclusive.clamp(max=_MAX_OPTICAL_DEPTH)).masked_fill(opaque, 0.0)
+    alphas = 1.0 - torch.exp(-optical.clamp(max=_MAX_OPTICAL_DEPTH))
     return transmittance * alphas, transmittance
 
 
