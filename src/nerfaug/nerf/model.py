@@ -201,10 +201,11 @@ class NerfModel(nn.Module):
             )
         return loss
 
-    def _chunks(
-        self, origins: Tensor, directions: Tensor, background: Tensor | None, chunk: int | None
-    ) -> Iterator[RenderOutput]:
-        """Render rays chunk by chunk in eval mode without gradients (restoring the mode after)."""
+    def _eval_slices(
+        self, origins: Tensor, directions: Tensor, chunk: int | None
+    ) -> Iterator[tuple[int, int, Tensor, Tensor]]:
+        """(start, stop, origins, directions) of consecutive ray chunks on the model's device, in
+        eval mode without gradients (the mode is restored after)."""
         device = self.background.device
         chunk = chunk or self.config.render_chunk
         was_training = self.training
@@ -213,13 +214,19 @@ class NerfModel(nn.Module):
             with torch.no_grad():
                 for start in range(0, origins.shape[0], chunk):
                     stop = start + chunk
-                    bg = background
-                    if bg is not None and bg.ndim == 2:
-                        bg = bg[start:stop]
-                    yield self(origins[start:stop].to(device), directions[start:stop].to(device),
-                               None if bg is None else bg.to(device))
+                    yield start, stop, origins[start:stop].to(device), directions[start:stop].to(device)
         finally:
             self.train(was_training)
+
+    def _chunks(
+        self, origins: Tensor, directions: Tensor, background: Tensor | None, chunk: int | None
+    ) -> Iterator[RenderOutput]:
+        """Render rays chunk by chunk in eval mode without gradients."""
+        for start, stop, o, d in self._eval_slices(origins, directions, chunk):
+            bg = background
+            if bg is not None and bg.ndim == 2:
+                bg = bg[start:stop]
+            yield self(o, d, None if bg is None else bg.to(o.device))
 
     def render_rays(
         self, origins: Tensor, directions: Tensor, background: Tensor | None = None, chunk: int | None = None
@@ -246,19 +253,10 @@ class NerfModel(nn.Module):
         Returns:
             Tensor with shape (n_rays, num_samples), equal to `render_rays(...).weights`.
         """
-        device = self.background.device
-        chunk = chunk or self.config.render_chunk
-        was_training = self.training
-        self.eval()
-        try:
-            with torch.no_grad():
-                parts = []
-                for start in range(0, origins.shape[0], chunk):
-                    o, d = origins[start:start + chunk].to(device), directions[start:start + chunk].to(device)
-                    edges, _ = self._sample(o, d, None)
-                    parts.append(self._densities(o, d, edges[:, :-1], edges[:, 1:])[0])
-        finally:
-            self.train(was_training)
+        parts = []
+        for _, _, o, d in self._eval_slices(origins, directions, chunk):
+            edges, _ = self._sample(o, d, None)
+            parts.append(self._densities(o, d, edges[:, :-1], edges[:, 1:])[0])
         return torch.cat(parts)
 
     def render_image(self, cameras: Cameras, index: int, background: Tensor | None = None) -> dict[str, Tensor]:
