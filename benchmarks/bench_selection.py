@@ -29,6 +29,7 @@ from pathlib import Path
 
 import torch
 
+from nerfaug.device import configure_process
 from nerfaug.cameras import Cameras, generate_rays
 from nerfaug.data.views import Views
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses
@@ -106,7 +107,7 @@ def main() -> None:
     parser.add_argument("--methods", nargs="*", default=list(METHODS), help="methods timed end to end")
     parser.add_argument("--out", type=Path, default=Path("/tmp/nerfaug_bench_selection"))
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)
+    configure_process(threads=args.threads)
 
     checkpoint = args.out / f"model_{args.preset}_{args.resolution}px_{args.steps}steps.pt"
     train_seconds, trainer = timed(lambda: trained(args.steps, args.resolution, args.preset, checkpoint))

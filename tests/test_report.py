@@ -1,7 +1,6 @@
 """The report of a results folder, built from a fake folder with the exact layout protocol.py writes
 and known numbers: medians, exclusion of invalid runs, LPIPS n/a, a self-contained HTML page."""
 
-import json
 import re
 
 import imageio.v3 as iio
@@ -9,11 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-from nerfaug.data.frames import atomic_write_json
 from nerfaug.experiment.config import preset
+from nerfaug.experiment.runfolder import (
+    FILES, read_selection, write_config, write_error, write_history, write_metrics, write_progress, write_selection,
+)
 from nerfaug.experiment.store import RunKey, write_result
 from nerfaug.experiment.sweep import sweep_record
 from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses, sample_uniform_poses
+from nerfaug.jsonio import atomic_write_json
 from nerfaug.report import ReportError, collect_results, history_series, write_report
 
 METHODS = ("ours", "uniform", "entropy")
@@ -37,20 +39,16 @@ def config():
 
 
 def write_run(root, record, scene, method, trial, psnr, lpips_available=True, generator=None):
-    """One run folder as `protocol.run_trial` writes it; result.json last."""
+    """One run folder as `protocol.run_trial` writes it, through the same run-folder contract;
+    result.json last."""
     folder = RunKey(scene, method, trial).folder(root)
     candidates = sample_uniform_poses(12, torch.Generator().manual_seed(len(scene)))  # the scene's pool
     initial = half_hemisphere_poses(3)
     chosen = [int(i) for i in torch.randperm(12, generator=generator)[:2]]
     scores = torch.rand(12, generator=generator)
-    azimuth, polar, _ = angles_from_pose(candidates)
-    atomic_write_json(folder / "selection.json", {
-        "method": method, "indices": chosen, "scores": scores.tolist(), "components": {},
-        "chosen_names": [f"r_{i}" for i in chosen], "chosen_poses": candidates[chosen].tolist(),
-        "candidate_poses": candidates.tolist(), "candidate_azimuth": azimuth.tolist(),
-        "candidate_polar": polar.tolist(), "train_poses": initial.tolist(),
-    })
-    renders = folder / "renders"
+    selection = {"method": method, "indices": chosen, "scores": scores.tolist(), "components": {}}
+    write_selection(folder, selection, [f"r_{i}" for i in chosen], candidates, initial)
+    renders = folder / FILES.renders
     renders.mkdir(parents=True)
     shade = 40 * trial + 10 * len(method)
     render = np.full((8, 8, 3), shade, dtype=np.uint8)
@@ -58,15 +56,13 @@ def write_run(root, record, scene, method, trial, psnr, lpips_available=True, ge
     iio.imwrite(renders / "0000_render_vs_gt.png", np.concatenate([render, np.full_like(render, 200)], axis=1))
     ssim = SSIM.get(method, SSIM["ours"])[trial % 3]
     lpips = LPIPS.get(method, LPIPS["ours"])[trial % 3] if lpips_available else None
-    atomic_write_json(folder / "metrics.json", {
+    write_metrics(folder, {
         "per_view": [{"index": 0, "name": "r_0", "psnr": psnr, "ssim": ssim, "lpips": lpips}],
         "mean": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
         "lpips_status": "available: test" if lpips_available else LPIPS_MISSING,
     })
-    atomic_write_json(folder / "history.json", [
-        {"step": step, "loss": 1.0 / step, "psnr": psnr * step / 60} for step in range(1, 61)
-    ])
-    atomic_write_json(folder / "config.json", {"experiment": record["config"], "engine": {}})
+    write_history(folder, [{"step": step, "loss": 1.0 / step, "psnr": psnr * step / 60} for step in range(1, 61)])
+    write_config(folder, record["config"], {})
     write_result(folder, {
         "scene": scene, "method": method, "trial": trial, "seed": trial,
         "fingerprint": record["fingerprint"], "metrics": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
@@ -222,6 +218,27 @@ def test_failed_run_shows_its_recorded_error(tmp_path):
     from nerfaug.report import why_not_valid
 
     folder = tmp_path / "run"
-    folder.mkdir()
-    (folder / "error.json").write_text('{"error": "TrainingDiverged: loss is nan at step 12"}')
+    write_error(folder, "TrainingDiverged: loss is nan at step 12")
     assert why_not_valid(folder, "abc") == "failed: TrainingDiverged: loss is nan at step 12"
+
+
+def test_interrupted_run_shows_its_last_progress(tmp_path):
+    from nerfaug.report import why_not_valid
+
+    write_progress(tmp_path, 150)
+    assert why_not_valid(tmp_path, "abc") == "no result.json (interrupted, failed or still running, last progress at step 150)"
+
+
+def test_selection_round_trips_through_the_contract(tmp_path):
+    candidates = sample_uniform_poses(5, torch.Generator().manual_seed(3))
+    initial = half_hemisphere_poses(2)
+    write_selection(tmp_path, {"method": "ours", "indices": [4, 1], "scores": [0.1, 0.2, 0.3, 0.4, 0.5]},
+                    ["r_4", "r_1"], candidates, initial)
+    record = read_selection(tmp_path)
+    assert record.method == "ours" and record.indices == [4, 1]
+    assert np.allclose(record.chosen_poses, candidates[[4, 1]].numpy(), atol=1e-6)
+    assert np.allclose(record.train_poses, initial.numpy(), atol=1e-6)
+    azimuth, _, _ = angles_from_pose(candidates)
+    assert np.allclose(record.raw["candidate_azimuth"], azimuth.numpy())
+    (tmp_path / FILES.selection).write_text('{"scores": [1, 2]}')  # lacks the poses: not drawable
+    assert read_selection(tmp_path) is None

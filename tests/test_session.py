@@ -1,4 +1,4 @@
-"""Active capture (`nerfaug.session`, `nerfaug.session_cli`) on a tiny analytic scene: a shaded
+"""Active capture (`nerfaug.capture`, `nerfaug.session_cli`) on a tiny analytic scene: a shaded
 sphere, off the origin and at a non-Blender scale, seen by 8 cameras of 16x16 pixels on one half
 of its hemisphere. No Blender needed except for the one test marked `blender`."""
 
@@ -16,7 +16,7 @@ from nerfaug.cameras import Cameras, image_rays
 from nerfaug.data import DatasetError, Views, load_blender_split, load_dataset, load_nerfstudio, write_blender_split
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, pose_from_angles, sample_uniform_poses
 from nerfaug.selection import SelectionConfig
-from nerfaug.session import (
+from nerfaug.capture import (
     CaptureSession, Hemisphere, estimate_centre, estimate_hemisphere, read_poses,
 )
 
@@ -286,7 +286,7 @@ def test_nerfstudio_source_with_its_own_intrinsics(tmp_path):
 
 # ---- the CLI -----------------------------------------------------------------------------------
 
-def test_cli_train_propose_add_export(dataset, tmp_path):
+def test_cli_train_propose_add_export(dataset, tmp_path, capsys):
     from nerfaug.cli import main
 
     run, poses_json, captures = tmp_path / "run", tmp_path / "poses.json", tmp_path / "captures"
@@ -294,7 +294,7 @@ def test_cli_train_propose_add_export(dataset, tmp_path):
     main(["train", str(run), "--steps", "1"])
     assert json.loads((run / "session.json").read_text())["step"] == 3
     main(["propose", str(run), "--n", "2", "--method", "ours", "--out", str(poses_json),
-          "--n-candidates", "30", "--entropy-resolution", "6"])
+          "--n-candidates", "30", "--selection.entropy-resolution", "6"])
     assert poses_json.with_suffix(".png").exists()
     poses, names = read_poses(poses_json)
     captures.mkdir()
@@ -314,8 +314,11 @@ def test_cli_train_propose_add_export(dataset, tmp_path):
     meta = json.loads((tmp_path / "ns" / "transforms.json").read_text())
     assert meta["camera_model"] == "OPENCV" and meta["frames"][-1]["file_path"] == f"images/{names[-1]}.png"
 
-    with pytest.raises(DatasetError, match="already has a frame"):
+    # Adding the same captures again is bad input: one line naming the clash, exit 2.
+    with pytest.raises(SystemExit) as refused:
         main(["add", str(run), "--images", str(captures), "--poses", str(poses_json), "--steps", "0"])
+    assert refused.value.code == 2
+    assert "already has a frame" in capsys.readouterr().err
 
 
 # ---- a real render ----------------------------------------------------------------------------

@@ -2,9 +2,14 @@ import math
 
 import numpy as np
 import pytest
+import torch
 from scipy import stats
 
-from nerfaug.statistics import compare, markdown_table, min_attainable_p, summarise, summary_table
+from nerfaug.hemisphere import half_hemisphere_poses, pose_from_angles
+from nerfaug.statistics import (
+    bootstrap_median_difference, compare, markdown_table, mean_pairwise_angle, min_attainable_p, seen_half_start,
+    summarise, summary_table, unseen_half_share, view_coverage,
+)
 
 
 def test_summarise_by_hand():
@@ -161,3 +166,68 @@ def test_markdown_table():
     assert markdown_table([["ours", 1.5]], [(0, "method"), (1, "x", ".1f")]) == (
         "| method | x |\n|---|---|\n| ours | 1.5 |\n"
     )
+
+
+# ---- bootstrap CI of a difference of medians ---------------------------------------------------
+
+def test_bootstrap_ci_equals_a_direct_percentile_computation():
+    x = np.array([20.1, 21.4, 19.8, 22.0, 20.9, 21.1])
+    y = np.array([18.0, 19.2, 18.7, 20.5, 17.9])
+    found = bootstrap_median_difference(x, y, confidence=0.9, n_resamples=2000, seed=7)
+    # The same resamples drawn by hand: each sample resampled on its own, x first, one batch.
+    rng = np.random.default_rng(7)
+    rx = x[rng.integers(0, x.size, (2000, x.size))]
+    ry = y[rng.integers(0, y.size, (2000, y.size))]
+    differences = np.median(rx, axis=1) - np.median(ry, axis=1)
+    low, high = np.percentile(differences, [5.0, 95.0])
+    assert found["difference"] == pytest.approx(np.median(x) - np.median(y))
+    assert found["low"] == pytest.approx(low, abs=1e-12) and found["high"] == pytest.approx(high, abs=1e-12)
+    assert found["low"] <= found["difference"] <= found["high"]
+
+
+def test_bootstrap_ci_is_seeded_and_degenerate_cases_are_exact():
+    x, y = [3.0, 1.0, 2.0, 5.0, 4.0], [1.0, 0.0, 2.0, 0.5, 1.5]
+    assert bootstrap_median_difference(x, y, seed=3) == bootstrap_median_difference(x, y, seed=3)
+    constant = bootstrap_median_difference([2.0] * 5, [0.5] * 5)
+    assert (constant["low"], constant["difference"], constant["high"]) == (1.5, 1.5, 1.5)
+    single = bootstrap_median_difference([2.0], [1.0, 3.0])
+    assert single["difference"] == 0.0 and math.isnan(single["low"]) and math.isnan(single["high"])
+
+
+# ---- coverage of the chosen views --------------------------------------------------------------
+
+def test_seen_half_is_centred_on_the_initial_views():
+    # Initial views at azimuth 90..180 degrees: their mean direction is 135, the seen half 45..225.
+    assert seen_half_start(np.radians([90.0, 180.0])) == pytest.approx(math.radians(45.0))
+    assert math.isnan(seen_half_start(np.radians([0.0, 90.0, 180.0, 270.0])))  # surrounding views
+
+
+@pytest.mark.parametrize(("chosen_deg", "share"), [
+    ([0.0, 10.0, 350.0], 1.0),            # all opposite the initial views at 180
+    ([180.0, 150.0, 210.0], 0.0),         # all beside them
+    ([0.0, 180.0, 60.0, 300.0], 0.75),    # 0, 60 and 300 lie within 90 of 0: unseen
+])
+def test_unseen_half_share_analytic(chosen_deg, share):
+    initial = np.radians([170.0, 180.0, 190.0])  # mean direction 180: the unseen half is centred on 0
+    assert unseen_half_share(np.radians(chosen_deg), initial) == pytest.approx(share)
+
+
+def test_mean_pairwise_angle_analytic():
+    axes = np.eye(3)  # three orthogonal directions: every pair 90 degrees apart
+    assert mean_pairwise_angle(axes) == pytest.approx(90.0)
+    assert mean_pairwise_angle([[1, 0, 0], [-2, 0, 0]]) == pytest.approx(180.0)  # length is ignored
+    assert mean_pairwise_angle([[0, 0, 1], [0, 0, 3], [1, 0, 0]]) == pytest.approx((0 + 90 + 90) / 3)
+    assert math.isnan(mean_pairwise_angle([[1, 0, 0]]))
+
+
+def test_view_coverage_of_poses():
+    initial = half_hemisphere_poses(6)  # azimuth in [90, 270) degrees: the seen half is centred on 180
+    opposite = pose_from_angles(torch.tensor(np.radians([0.0, 20.0])), torch.tensor(np.radians([60.0, 60.0])))
+    coverage = view_coverage(opposite, initial)
+    assert coverage["unseen_share"] == 1.0
+    # Two cameras at polar 60 degrees, 20 degrees apart in azimuth: the angle between their
+    # directions is arccos(sin^2 60 cos 20 + cos^2 60).
+    expected = math.degrees(math.acos(math.sin(math.radians(60)) ** 2 * math.cos(math.radians(20))
+                                      + math.cos(math.radians(60)) ** 2))
+    assert coverage["spread_deg"] == pytest.approx(expected, abs=1e-4)
+    assert view_coverage(initial, initial)["unseen_share"] == 0.0

@@ -3,6 +3,7 @@
     nerfaug scene render lego --out data/lego      render a built-in scene as a Blender dataset
     nerfaug run --preset quick --out results/quick  the paper's experiment, then its report
     nerfaug report results/quick                    (re)write report.md and report.html
+    nerfaug study --out results/study               which method wins where (issue 9's study)
     nerfaug methods                                 list the view-selection methods
     nerfaug train DATA --out RUN                    active capture: train on what you have,
     nerfaug propose RUN --n 6 --out poses.json      ask where to look next,
@@ -19,7 +20,18 @@ from typing import Annotated, Literal
 
 import tyro
 
+from nerfaug.selection.methods import SelectionConfig
+
 Positional = tyro.conf.Positional
+# The defaults `--selection.*` options start from (read-only use: never mutated).
+DEFAULT_SELECTION = SelectionConfig()
+
+
+def selection_changes(given: SelectionConfig) -> dict:
+    """The fields of `given` that differ from `SelectionConfig()`'s defaults: what a user set on
+    the command line, to apply over a preset's selection settings."""
+    default = SelectionConfig().to_dict()
+    return {k: getattr(given, k) for k, v in given.to_dict().items() if v != default[k]}
 
 
 def scene_render(
@@ -71,6 +83,8 @@ def run(
     address: str | None = None,
     force: bool = False,
     report: bool = True,
+    device: Literal["auto", "cpu", "cuda"] = "auto",
+    selection: SelectionConfig = DEFAULT_SELECTION,
 ) -> None:
     """Run the paper's experiment (scenes x methods x trials), then write its report.
 
@@ -93,24 +107,47 @@ def run(
         workers: concurrent runs (local backend) or Ray CPUs to start (local Ray); default: one
             run per core.
         address: Ray cluster address; omitted starts a local Ray instance.
-        force: discard existing results in --out and redo every run.
+        force: move the runs already in --out aside (into OUT/superseded/, nothing is deleted) and
+            redo every run; needed when OUT's sweep.json is missing or its settings differ.
         report: write report.md / report.html at the end.
+        device: where runs train, select and evaluate: auto (cuda when this machine has a GPU,
+            else cpu), cpu or cuda. Part of the results' fingerprint (the numbers differ).
+        selection: options of the selection methods (every one is part of the results'
+            fingerprint); those set here replace the preset's, and a method's own settings (e.g.
+            ours-authors') apply over them.
     """
+    from dataclasses import replace
+
+    from nerfaug.device import resolve_device
     from nerfaug.experiment.config import preset as make_preset
     from nerfaug.experiment.sweep import run_sweep
 
     config = make_preset(preset)
     changes = {k: v for k, v in dict(methods=methods, trials=trials, steps=steps, engine=engine,
                                       resolution=resolution, seed=seed).items() if v is not None}
-    if data is not None:
-        changes["scenes"] = (str(data),)
+    if data is not None:  # a path, never taken for a built-in scene of the same name
+        changes["scenes"] = (str(data) if data.is_absolute() else os.path.join(".", data),)
     elif scenes is not None:
         changes["scenes"] = scenes
+    # auto is decided here, once, so every run (and the fingerprint) sees the same device.
+    try:
+        changes["device"] = resolve_device(device).type
+    except ValueError as error:
+        raise SystemExit(f"nerfaug run: --device: {error}") from None
+    changes["selection"] = replace(config.selection, **selection_changes(selection))
     config = config.replace(**changes)
     if workers is None:
-        workers = max(1, (os.cpu_count() or 1) // config.threads_per_run)
-    outcome = run_sweep(config, out, backend=backend, workers=workers, address=address, force=force,
-                        command=["nerfaug", *sys.argv[1:]])
+        # One run per core on a CPU; on a GPU one run at a time (each holds its own CUDA context).
+        workers = 1 if config.device == "cuda" else max(1, (os.cpu_count() or 1) // config.threads_per_run)
+    try:
+        outcome = run_sweep(config, out, backend=backend, workers=workers, address=address, force=force,
+                            command=["nerfaug", *sys.argv[1:]])
+    except KeyboardInterrupt:
+        from nerfaug.errors import Interrupted
+        from nerfaug.experiment.store import finished_runs
+
+        raise Interrupted(f"{out}: interrupted; its {len(finished_runs(out))} finished run(s) are kept; re-run the "
+                          "same command to resume") from None
     if report:
         from nerfaug.report import write_report
 
@@ -145,13 +182,65 @@ def methods() -> None:
 
     width = max(len(name) for name in METHODS)
     for name, spec in METHODS.items():
-        print(f"{name:<{width}}  {spec.description}")
+        settings = ", ".join(f"{k}={v}" for k, v in spec.settings.items())
+        print(f"{name:<{width}}  {spec.description}" + (f" [settings: {settings}]" if settings else ""))
+
+
+def exit_code(error: BaseException) -> int:
+    """2 for bad input (a value, file or folder the user gave), 1 for a failure of the work."""
+    from nerfaug.errors import NerfaugError
+
+    if isinstance(error, NerfaugError):
+        return error.exit_code
+    bad_path = (FileNotFoundError, NotADirectoryError, IsADirectoryError, FileExistsError, PermissionError)
+    return 2 if isinstance(error, (ValueError, *bad_path)) else 1
+
+
+def one_line(error: BaseException) -> str:
+    """The error as one line: its message (the project's errors name file, field and value)."""
+    from nerfaug.errors import NerfaugError
+
+    text = " ".join(str(error).split())
+    expected = (NerfaugError, ValueError, OSError)
+    if not isinstance(error, expected):
+        text = f"internal error ({type(error).__name__}: {text}); run again with --debug for the traceback"
+    return text or type(error).__name__
 
 
 def main(argv: list[str] | None = None) -> None:
+    """The `nerfaug` command. Errors end as one line on stderr (exit 2: bad input, 1: failure,
+    130: Ctrl-C); `--debug` or NERFAUG_DEBUG=1 shows the traceback instead."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or os.environ.get("NERFAUG_DEBUG", "") not in ("", "0")
+    argv = [arg for arg in argv if arg != "--debug"]
+    try:
+        from nerfaug.device import configure_process
+
+        configure_process()
+        _dispatch(argv)
+    except SystemExit as done:
+        if isinstance(done.code, str):  # a command's own refusal: one line, bad input
+            print(f"nerfaug: {' '.join(done.code.split())}", file=sys.stderr)
+            raise SystemExit(2) from None
+        raise
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print("nerfaug: interrupted; files already written are kept (finished runs, saved sessions)",
+              file=sys.stderr)
+        raise SystemExit(130) from None
+    except Exception as error:
+        if debug:
+            raise
+        print(f"nerfaug: {one_line(error)}", file=sys.stderr)
+        raise SystemExit(exit_code(error)) from None
+
+
+def _dispatch(argv: list[str]) -> None:
+    from nerfaug.experiment.study import study
+
     commands = {
-        "run": run, "report": report, "methods": methods,
+        "run": run, "report": report, "methods": methods, "study": study,
     }
     from nerfaug import session_cli
 

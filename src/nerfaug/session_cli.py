@@ -1,4 +1,4 @@
-"""CLI commands of the active-capture loop (`nerfaug.session`): train, propose, add, export, and
+"""CLI commands of the active-capture loop (`nerfaug.capture`): train, propose, add, export, and
 render-proposals (a simulated capture with Blender).
 
     nerfaug train DATA --out RUN --steps 1000      start a session on the views you have
@@ -15,15 +15,116 @@ from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.session import SESSION_FILE
+from nerfaug.capture.state import SESSION_FILE, SessionState
+from nerfaug.selection.methods import SelectionConfig
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
+Device = Literal["auto", "cpu", "cuda"]
+# The defaults `--selection.*` options start from (read-only use: never mutated).
+DEFAULT_SELECTION = SelectionConfig()
+
+
+def _device(device: str) -> str:
+    """`device` resolved (auto -> cuda or cpu), or exit with one line saying why it cannot be used."""
+    from nerfaug.device import resolve_device
+
+    try:
+        return str(resolve_device(device))
+    except ValueError as error:
+        raise SystemExit(f"--device: {error}") from None
 
 
 def _open(run: Path, device: str):
-    from nerfaug.session import CaptureSession
+    from nerfaug.capture import CaptureSession
 
-    return CaptureSession.open(run, device=device, progress=True)
+    return CaptureSession.open(run, device=_device(device), progress=True)
+
+
+# `nerfaug train` and `add` save the session this often, and when Ctrl-C stops them.
+CHECKPOINT_EVERY = 500
+_CHUNK = 10  # steps between checks for Ctrl-C
+
+
+def _check_steps(steps: int) -> None:
+    if steps < 0:
+        raise ValueError(f"--steps {steps}: must be >= 0 (training steps to run)")
+
+
+def _train(session, steps: int) -> dict:
+    """Train `steps` more steps, saving every CHECKPOINT_EVERY steps and at the end. A first Ctrl-C
+    stops at the next step boundary and saves; a second stops at once, keeping the last save.
+
+    Raises:
+        Interrupted: after Ctrl-C, saying at which step the session was saved.
+    """
+    import signal
+    import sys
+
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeRemainingColumn,
+    )
+
+    from nerfaug.errors import Interrupted
+
+    asked = []
+
+    def stop(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(signum)
+        print("stopping after the current steps to save the session (Ctrl-C again: stop at once)", file=sys.stderr)
+
+    show, session.trainer.progress = session.trainer.progress, False  # one bar over the chunks
+    target, saved, last = session.step + steps, session.step, {"step": session.step}
+    previous = signal.signal(signal.SIGINT, stop)
+    bar = Progress(TextColumn("training"), BarColumn(), MofNCompleteColumn(),
+                   TextColumn("psnr {task.fields[psnr]:.2f} dB"), TimeRemainingColumn(), disable=not show)
+    try:
+        with bar:
+            task = bar.add_task("training", total=steps, psnr=float("nan"))
+            while session.step < target and not asked:
+                last = session.train(min(_CHUNK, target - session.step))
+                bar.update(task, completed=steps - (target - session.step), psnr=last.get("psnr", float("nan")))
+                if session.step - saved >= CHECKPOINT_EVERY:
+                    session.save()
+                    saved = session.step
+        session.save()
+    except KeyboardInterrupt:
+        raise Interrupted(f"{session.run_dir}: interrupted at step {session.step}; the session saved at step {saved} "
+                          f"is kept (`nerfaug train {session.run_dir}` goes on from there)") from None
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        session.trainer.progress = show
+    if asked:
+        raise Interrupted(f"{session.run_dir}: interrupted; the session is saved at step {session.step} "
+                          f"(`nerfaug train {session.run_dir}` goes on from there)")
+    return last
+
+
+def _check_poses_out(out: Path) -> None:
+    """Refuse to write a proposal over a file that is not an earlier proposal (or its map)."""
+    import json
+
+    from nerfaug.errors import FolderRefused
+
+    ours = False
+    if out.is_file():
+        try:
+            ours = isinstance(json.loads(out.read_text()).get("nerfaug", {}).get("proposal"), int)
+        except (OSError, ValueError, AttributeError):
+            ours = False
+        if not ours:
+            raise FolderRefused(f"{out}: exists and is not a poses file nerfaug wrote, so it is not overwritten; "
+                                "choose another --out")
+    if out.exists() and not out.is_file():
+        raise FolderRefused(f"{out}: not a file; give --out a .json file name")
+    if out.with_suffix(".png").exists() and not ours:
+        raise FolderRefused(f"{out.with_suffix('.png')}: exists and would be overwritten by the proposal's map; "
+                            "choose another --out")
 
 
 def train(
@@ -38,7 +139,7 @@ def train(
     radius: float | None = None,
     up: tuple[float, float, float] = (0.0, 0.0, 1.0),
     estimate_up: bool = False,
-    device: str = "cpu",
+    device: Device = "auto",
 ) -> None:
     """Start an active-capture session on a dataset and train it, or train an existing session further.
 
@@ -58,10 +159,11 @@ def train(
         radius: the hemisphere's radius; default: the cameras' mean distance to the centre.
         up: the hemisphere's pole direction, world space (the world is z-up by default).
         estimate_up: take the pole from the cameras' mean up axis instead of --up.
-        device: torch device (cpu, cuda, ...).
+        device: where the NeRF trains: auto (cuda when this machine has a GPU, else cpu), cpu, cuda.
     """
-    from nerfaug.session import CaptureSession
+    from nerfaug.capture import CaptureSession
 
+    _check_steps(steps)
     if (path / SESSION_FILE).exists():
         if out is not None:
             raise SystemExit(f"{path} is already a session folder; drop --out to train it further")
@@ -71,13 +173,12 @@ def train(
             raise SystemExit(f"{path} is a dataset: give the run folder to create with --out RUN")
         session = CaptureSession.create(
             path, out, preset=preset, seed=seed, split=split, centre=centre, radius=radius,
-            up="estimate" if estimate_up else up, downscale=downscale, device=device, progress=True,
+            up="estimate" if estimate_up else up, downscale=downscale, device=_device(device), progress=True,
         )
         h = session.hemisphere
         print(f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
               f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}")
-    last = session.train(steps)
-    session.save()
+    last = _train(session, steps)
     psnr = f", training PSNR {last['psnr']:.2f} dB" if "psnr" in last else ""
     print(f"{session.run_dir}: step {session.step}{psnr}")
 
@@ -90,8 +191,8 @@ def propose(
     candidates: Path | None = None,
     n_candidates: int = 500,
     seed: int | None = None,
-    entropy_resolution: int = 40,
-    device: str = "cpu",
+    device: Device = "auto",
+    selection: SelectionConfig = DEFAULT_SELECTION,
 ) -> None:
     """Propose the next views to capture and write their poses as a Blender-style JSON.
 
@@ -110,14 +211,19 @@ def propose(
         n_candidates: hemisphere candidates to score.
         seed: seed this proposal explicitly (default: from the session seed and the proposal number,
             so the same session state always proposes the same views).
-        entropy_resolution: width in pixels of the renders each candidate's entropy is taken over.
-        device: torch device.
+        device: where candidates are scored: auto (cuda when available, else cpu), cpu, cuda.
+        selection: options of the selection method (recorded with the proposal in session.json);
+            a method's own settings (e.g. ours-authors') apply over them.
     """
-    from nerfaug.selection import SelectionConfig
+    from nerfaug.capture.session import check_method
 
+    check_method(method)
+    if n < 1 or n_candidates < 1:
+        raise ValueError(f"--n {n} --n-candidates {n_candidates}: both must be >= 1")
+    _check_poses_out(out)
     session = _open(run, device)
     proposal = session.propose(n, method, candidates=candidates, n_candidates=n_candidates, seed=seed,
-                               config=SelectionConfig(entropy_resolution=entropy_resolution))
+                               config=selection)
     path = proposal.write(out)
     session.save()
     print(f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path}, map "
@@ -131,7 +237,7 @@ def add(
     images: Path,
     poses: Path,
     steps: int = 1000,
-    device: str = "cpu",
+    device: Device = "auto",
 ) -> None:
     """Add captured images at the poses of a poses JSON, then train on.
 
@@ -145,16 +251,16 @@ def add(
         poses: the poses JSON (as `nerfaug propose` writes it, or your robot's actual poses in
             the same format).
         steps: training steps to run after adding (0: add only).
-        device: torch device.
+        device: where the NeRF trains: auto (cuda when available, else cpu), cpu, cuda.
     """
+    _check_steps(steps)  # before anything is written: a refused call changes nothing
     session = _open(run, device)
     names = session.add_views(images, poses)
     print(f"added {len(names)} views ({', '.join(names)}); the dataset now has "
           f"{len(session.trainer.train_views)} views")
+    last = _train(session, steps)
     if steps:
-        last = session.train(steps)
         print(f"step {session.step}, training PSNR {last['psnr']:.2f} dB")
-    session.save()
 
 
 def export(
@@ -173,7 +279,7 @@ def export(
         out: the folder to write.
         format: nerfstudio or blender.
     """
-    from nerfaug.session import CaptureSession
+    from nerfaug.capture import CaptureSession
 
     session = CaptureSession.open(run, load_model=False)  # exporting reads only the dataset folder
     path = session.export(out, format)
@@ -201,18 +307,15 @@ def render_proposals(
         seed: Cycles noise seed.
         threads: CPU threads for Cycles.
     """
-    import json
-
+    from nerfaug.capture import read_poses
     from nerfaug.scenes.render import render_poses
-    from nerfaug.session import read_poses
 
-    state = json.loads((run / SESSION_FILE).read_text())
-    k = state["intrinsics"]
-    if abs(k["fx"] - k["fy"]) > 1e-3 * k["fx"]:
+    k = SessionState.read(run).intrinsics
+    if abs(k.fx - k.fy) > 1e-3 * k.fx:
         raise SystemExit("Blender renders square pixels; this session's camera has fx != fy")
     matrices, names = read_poses(poses)
     paths = [out / f"{name}.png" for name in names]
-    render_poses(scene, matrices, paths, k["width"], k["height"], k["camera_angle_x"], samples, seed, threads)
+    render_poses(scene, matrices, paths, k.width, k.height, k.camera_angle_x, samples, seed, threads)
     print(f"rendered {len(paths)} views to {out}")
 
 

@@ -8,8 +8,14 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.data import (
-    DatasetError, Views, load_blender, load_blender_split, load_dataset, load_nerfstudio,
-    write_blender_split, write_nerfstudio,
+    DatasetError,
+    Views,
+    load_blender,
+    load_blender_split,
+    load_dataset,
+    load_nerfstudio,
+    write_blender_split,
+    write_nerfstudio,
 )
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 
@@ -152,7 +158,7 @@ def test_images_of_different_sizes(tmp_path):
 def test_image_that_is_not_rgb(tmp_path):
     valid_meta(tmp_path, n=2, size=8)
     iio.imwrite(tmp_path / "train" / "r_0.png", np.zeros((8, 8), np.uint8))  # greyscale
-    with pytest.raises(DatasetError, match=r"frames\[0\].file_path.*must be RGB or RGBA"):
+    with pytest.raises(DatasetError, match=r"frames\[0\].file_path.*must be an RGB or RGBA image"):
         load_blender_split(tmp_path, "train")
 
 
@@ -173,3 +179,128 @@ def test_semi_transparent_pixels_round_trip(tmp_path):
     assert (back.images - views.images).abs().max() < 2.5 / 255  # 8-bit quantisation only
     assert (back.alphas - views.alphas).abs().max() < 1 / 255
     assert (tmp_path / "transforms_train.json").stat().st_mode & 0o044  # readable by others
+
+
+# --- paths from a transforms file never leave the dataset folder ----------------------------
+
+@pytest.fixture
+def outside_image(tmp_path):
+    """A readable image beside (not inside) the dataset folder `tmp_path / "dataset"`."""
+    (tmp_path / "outside").mkdir()
+    iio.imwrite(tmp_path / "outside" / "secret.png", np.full((8, 8, 4), 200, np.uint8))
+    (tmp_path / "dataset").mkdir()
+    return tmp_path / "outside" / "secret.png"
+
+
+@pytest.mark.parametrize("how", ["dotdot", "absolute", "symlinked_file", "symlinked_folder"])
+@pytest.mark.parametrize("fmt", ["blender", "nerfstudio"])
+def test_a_file_path_leaving_the_dataset_folder_is_refused(outside_image, fmt, how):
+    root = outside_image.parent.parent / "dataset"
+    views = make_views(n=2, size=8)
+    json_path = write_blender_split(root, "train", views) if fmt == "blender" else write_nerfstudio(root, views)
+    if how == "symlinked_file":
+        (root / "link.png").symlink_to(outside_image)
+    if how == "symlinked_folder":
+        (root / "link").symlink_to(outside_image.parent, target_is_directory=True)
+    value = {"dotdot": "../outside/secret.png", "absolute": str(outside_image),
+             "symlinked_file": "link.png", "symlinked_folder": "link/secret"}[how]
+    meta = json.loads(json_path.read_text())
+    meta["frames"][1]["file_path"] = value
+    json_path.write_text(json.dumps(meta))
+    with pytest.raises(DatasetError) as info:
+        load_dataset(root, "train")
+    message = str(info.value)
+    assert message.startswith(f"{json_path}, field 'frames[1].file_path': image path leads outside the dataset folder")
+    assert f"(got {value!r})" in message and str(outside_image) in message and "\n" not in message
+
+
+def test_paths_that_stay_inside_the_folder_are_accepted(tmp_path):
+    views = make_views(n=3, size=8)
+    json_path = write_blender_split(tmp_path / "data", "train", views)
+    (tmp_path / "data" / "alias.png").symlink_to(tmp_path / "data" / "train" / "r_2.png")
+    meta = json.loads(json_path.read_text())
+    meta["frames"][0]["file_path"] = str(tmp_path / "data" / "train" / "r_0.png")  # absolute, inside
+    meta["frames"][1]["file_path"] = "../data/train/r_1"  # leaves and comes back
+    meta["frames"][2]["file_path"] = "alias"  # a symlink to a file inside
+    json_path.write_text(json.dumps(meta))
+    back = load_blender_split(tmp_path / "data", "train")
+    assert torch.equal(back.images, views.images)
+
+
+@pytest.mark.parametrize("value", [17, None, "", "   ", ["a"], "train/r\x000"])
+def test_a_file_path_that_is_not_a_path_string_is_refused(tmp_path, value):
+    meta = valid_meta(tmp_path)
+    meta["frames"][0]["file_path"] = value
+    write_json(tmp_path, meta)
+    with pytest.raises(DatasetError, match=r"frames\[0\].file_path': file_path must be a non-empty path string"):
+        load_blender_split(tmp_path, "train")
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("camera_angle_x", True, "camera_angle_x must be a number"),
+    ("camera_angle_x", 10**400, "camera_angle_x must be a number"),
+    ("camera_angle_x", 1e-300, "camera_angle_x must be a number"),
+])
+def test_camera_angle_must_be_a_usable_number(tmp_path, key, value, message):
+    meta = valid_meta(tmp_path)
+    meta[key] = value
+    write_json(tmp_path, meta)
+    with pytest.raises(DatasetError, match=message):
+        load_blender_split(tmp_path, "train")
+
+
+@pytest.mark.parametrize("matrix, message", [
+    ([["1", "0", "0", "0"], ["0", "1", "0", "0"], ["0", "0", "1", "0"], ["0", "0", "0", "1"]], "4 rows of 4 numbers"),
+    (np.eye(4, dtype=bool).tolist(), "4 rows of 4 numbers"),
+    ([[1, 0, 0, 10**400], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "4 rows of 4 numbers"),
+    ([[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "beyond float32 range"),
+    ([[1, 0, 0], [0, 1, 0, 0]], "4 rows of 4 numbers"),
+])
+def test_matrix_entries_must_be_numbers_float32_can_hold(tmp_path, matrix, message):
+    meta = valid_meta(tmp_path)
+    meta["frames"][0]["transform_matrix"] = matrix
+    write_json(tmp_path, meta)
+    with pytest.raises(DatasetError, match=rf"frames\[0\].transform_matrix.*{message}"):
+        load_blender_split(tmp_path, "train")
+
+
+def test_nerfstudio_frames_may_mix_a_field_of_view_and_focal_lengths(tmp_path):
+    views = make_views(n=2, size=8)
+    write_nerfstudio(tmp_path, views)
+    meta = json.loads((tmp_path / "transforms.json").read_text())
+    for key in ("fl_x", "fl_y", "cx", "cy"):
+        del meta["frames"][1][key]
+    meta["frames"][1]["camera_angle_x"] = 0.9
+    (tmp_path / "transforms.json").write_text(json.dumps(meta))
+    cams = load_nerfstudio(tmp_path).cameras
+    assert cams.fx[0].item() == pytest.approx(views.cameras.fx[0].item(), rel=1e-6)
+    assert cams.fx[1].item() == pytest.approx(0.5 * 8 / math.tan(0.45), rel=1e-6)
+    assert cams.cx[1].item() == 4.0
+
+
+@pytest.mark.parametrize("key, value", [("w", "wide"), ("w", 0), ("fl_x", True), ("cx", float("nan")), ("h", 1e-300)])
+def test_nerfstudio_intrinsics_must_be_numbers(tmp_path, key, value):
+    write_nerfstudio(tmp_path, make_views(n=2, size=8))
+    meta = json.loads((tmp_path / "transforms.json").read_text())
+    meta["frames"][1][key] = value
+    (tmp_path / "transforms.json").write_text(json.dumps(meta))
+    with pytest.raises(DatasetError, match=rf"field 'frames\[1\].{key}'"):
+        load_nerfstudio(tmp_path)
+
+
+@pytest.mark.parametrize("data, message", [
+    (b"\x89PNG\r\n\x1a\n" + b"\x00" * 30, "cannot read image"),
+    (b"", "cannot read image"),
+])
+def test_unreadable_images_give_one_line(tmp_path, data, message):
+    valid_meta(tmp_path)
+    (tmp_path / "train" / "r_1.png").write_bytes(data)
+    with pytest.raises(DatasetError, match=rf"frames\[1\].file_path': {message}") as info:
+        load_blender_split(tmp_path, "train")
+    assert "\n" not in str(info.value)
+
+
+def test_an_image_smaller_than_the_downscale_factor_is_refused(tmp_path):
+    valid_meta(tmp_path, size=8)
+    with pytest.raises(DatasetError, match=r"smaller than the downscale factor 9.*8x8"):
+        load_blender_split(tmp_path, "train", downscale=9)

@@ -45,9 +45,12 @@ def test_incompatible_sweep_is_refused_with_the_changed_settings(tmp_path):
     changed = sweep_record(preset("tiny").replace(steps=999), ["nerfaug"])
     with pytest.raises(IncompatibleResults, match=r"steps: 60 -> 999.*--force"):
         check_sweep(tmp_path, changed)
-    (tmp_path / "runs").mkdir()
-    check_sweep(tmp_path, changed, force=True)
+    finished = RunKey("lego", "ours", 0).folder(tmp_path)
+    write_result(finished, complete_result(first["fingerprint"]))
+    moved = check_sweep(tmp_path, changed, force=True)
     assert not (tmp_path / "runs").exists()
+    # --force moves finished results aside; it deletes nothing.
+    assert read_result(moved / finished.relative_to(tmp_path), first["fingerprint"]) is not None
     assert json.loads((tmp_path / "sweep.json").read_text())["fingerprint"] == changed["fingerprint"]
 
 

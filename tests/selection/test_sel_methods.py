@@ -1,3 +1,4 @@
+import dataclasses
 import json
 import math
 
@@ -6,7 +7,7 @@ import torch
 from torch import nn
 
 from nerfaug.cameras import Cameras
-from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses
+from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, angles_from_pose, half_hemisphere_poses
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 from nerfaug.selection import (
     METHODS, Selection, SelectionConfig, candidate_scores, hemisphere_candidates, select_views,
@@ -14,7 +15,8 @@ from nerfaug.selection import (
 
 EXPECTED = {
     "ours", "ours-nbv", "uniform", "entropy", "entropy-sampling", "fisherrf", "fisherrf-sampling",
-    "distance", "distance-nbv", "furthest",
+    "distance", "distance-nbv", "furthest", "ours-authors", "entropy-authors-nbv", "distance-authors-nbv",
+    "ours-batch", "ours-batch-local", "ours-batch-sharp",
 }
 
 
@@ -140,3 +142,158 @@ def test_selection_round_trips_through_json(scene):
     assert torch.allclose(restored.scores, selection.scores)
     assert torch.allclose(restored.components["distance"], selection.components["distance"])
     json.dumps(SelectionConfig().to_dict())
+
+
+# --- The authors' code's variants, the registries and the families -------------------------
+
+def test_ours_authors_is_ours_with_the_authors_settings(scene):
+    from nerfaug.selection import AUTHORS_SETTINGS, get_method
+
+    spec = get_method("ours-authors")
+    assert (spec.estimator, spec.selector) == ("combined", "sampling")
+    assert spec.effective_config(FAST) == FAST.authors_variant()
+    config = FAST.authors_variant()
+    for name, value in AUTHORS_SETTINGS.items():
+        assert getattr(config, name) == value
+    assert (config.sampler, config.authors_threshold, config.min_polar) == ("authors", 15.0, 0.4)
+    model, train, candidates = scene
+    _, polar, _ = angles_from_pose(candidates.camera_to_world)
+    assert (polar < 0.4).any(), "the fixture should hold candidates near the pole"
+    for seed in range(4):
+        selection = select_views("ours-authors", model, train, candidates, 4, torch.Generator().manual_seed(seed), FAST)
+        assert (polar[selection.indices] >= 0.4).all()
+        assert (selection.scores[selection.indices] > 0.75).all()  # w > 15 nu, nu >= 0.05, max w = 1
+        assert selection.scores.max().item() == pytest.approx(1.0)
+
+
+def test_scoring_view_of_the_authors_code():
+    """75 degrees, central half: the crop spans 2 atan(tan(37.5 deg) / 2) = 42.0 degrees."""
+    from nerfaug.selection.estimators import scoring_cameras
+
+    cams = Cameras.from_fov(half_hemisphere_poses(3), BLENDER_CAMERA_ANGLE_X, 80, 60)
+    authors = scoring_cameras(cams, 20, 75.0, 0.5)
+    assert (authors.width, authors.height) == (20, 15)
+    expected = 2 * math.atan(0.5 * math.tan(math.radians(37.5)))
+    assert torch.allclose(authors.camera_angle_x, torch.tensor(expected), atol=1e-6)
+    assert math.degrees(expected) == pytest.approx(42.0, abs=0.05)
+    assert torch.equal(authors.camera_to_world, cams.camera_to_world)
+    own = scoring_cameras(cams, 20)
+    assert torch.allclose(own.camera_angle_x, cams.camera_angle_x, atol=1e-6)
+    half = scoring_cameras(cams, 20, None, 0.5)
+    assert torch.allclose(torch.tan(half.camera_angle_x / 2), torch.tan(cams.camera_angle_x / 2) / 2, atol=1e-6)
+
+
+def test_rotations_match_the_authors_euler_construction():
+    """The authors build rotations as Euler 'xyz' (polar, 0, azimuth + pi/2); their NBV distance
+    zeroes the candidates' polar angle. scipy is the reference."""
+    from scipy.spatial.transform import Rotation
+
+    from nerfaug.hemisphere import pose_from_angles
+    from nerfaug.selection.estimators import distance_rotations
+
+    azimuth = torch.tensor([0.3, 1.7, 4.0, 5.9])
+    polar = torch.tensor([0.2, 0.9, 1.3, 0.6])
+    poses = pose_from_angles(azimuth, polar)
+    cams = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, 8, 8)
+    euler = torch.stack([polar, torch.zeros(4), azimuth + math.pi / 2], dim=1).double().numpy()
+    reference = torch.from_numpy(Rotation.from_euler("xyz", euler).as_matrix())
+    assert torch.allclose(distance_rotations(cams, "pose"), reference, atol=1e-6)
+    euler[:, 0] = 0.0
+    reference = torch.from_numpy(Rotation.from_euler("xyz", euler).as_matrix())
+    assert torch.allclose(distance_rotations(cams, "azimuth"), reference, atol=1e-6)
+
+
+def test_authors_entropy_nbv_follows_their_code(scene):
+    """top-k of minmax(H^3) + minmax(D): H zeroed beyond 0.75 rad polar before the cube, D over
+    azimuth-only rotations without the 1/2 (which min-max removes)."""
+    from nerfaug.selection.estimators import distance_rotations, scoring_cameras
+    from nerfaug.uncertainty.entropy import mean_view_entropy, minmax_normalise
+    from nerfaug.uncertainty.so3 import so3_geodesic_sq
+
+    model, train, candidates = scene
+    selection = select_views("entropy-authors-nbv", model, train, candidates, 5, torch.Generator().manual_seed(0), FAST)
+    _, polar, _ = angles_from_pose(candidates.camera_to_world)
+    means = mean_view_entropy(model, scoring_cameras(candidates, 6, 75.0, 0.5), 6, mode="authors")
+    means[polar > 0.75] = 0.0
+    entropy = minmax_normalise(means**3)
+    rotations = distance_rotations(candidates, "azimuth")
+    no_half = so3_geodesic_sq(train.rotations.double()[None], rotations[:, None]).sum(dim=1)
+    expected = entropy + minmax_normalise(no_half).float()
+    assert torch.allclose(selection.components["entropy"], entropy, atol=1e-6)
+    assert (selection.components["entropy"][polar > 0.75] == 0).all()
+    assert torch.allclose(selection.scores / selection.scores.max(), expected / expected.max(), atol=1e-5)
+    assert selection.indices.tolist() == torch.argsort(expected, descending=True)[:5].tolist()
+
+
+def test_max_distance_baseline_depends_on_azimuth_alone(scene):
+    _, train, _ = scene
+    from nerfaug.hemisphere import pose_from_angles
+
+    azimuth = torch.tensor([1.0, 1.0, 2.5, 2.5])
+    polar = torch.tensor([0.3, 1.2, 0.5, 1.4])
+    cams = Cameras.from_fov(pose_from_angles(azimuth, polar), BLENDER_CAMERA_ANGLE_X, 8, 8)
+    selection = select_views("distance-authors-nbv", None, train, cams, 2, torch.Generator().manual_seed(0))
+    distance = selection.components["distance"]
+    assert distance[0] == pytest.approx(float(distance[1]), rel=1e-5)
+    assert distance[2] == pytest.approx(float(distance[3]), rel=1e-5)
+    assert not torch.allclose(distance[0], distance[2])
+    plain = select_views("distance-nbv", None, train, cams, 2, torch.Generator().manual_seed(0))
+    assert not torch.allclose(plain.components["distance"][0], plain.components["distance"][1])
+
+
+@pytest.mark.parametrize("method", ["uniform", "ours", "ours-nbv", "furthest", "ours-batch", "fisherrf"])
+def test_min_polar_holds_for_every_selector(scene, method):
+    model, train, candidates = scene
+    _, polar, _ = angles_from_pose(candidates.camera_to_world)
+    config = dataclasses.replace(FAST, min_polar=0.6)
+    for seed in range(3):
+        selection = select_views(method, model, train, candidates, 5, torch.Generator().manual_seed(seed), config)
+        assert (polar[selection.indices] >= 0.6).all()
+
+
+def test_a_new_method_is_one_function_and_one_line(scene, monkeypatch):
+    from nerfaug.selection import ESTIMATORS, METHODS, MethodSpec, Scoring, register_estimator
+
+    @register_estimator("test-height")
+    def height(request):  # prefer views from high up
+        return Scoring(request.candidates.positions[:, 2].clamp_min(0).cpu() + 1e-3)
+
+    try:
+        monkeypatch.setitem(METHODS, "height-nbv", MethodSpec("height-nbv", "test-height", "top-k", "highest views"))
+        _, train, candidates = scene
+        selection = select_views("height-nbv", None, train, candidates, 3, torch.Generator().manual_seed(0))
+        z = candidates.positions[:, 2]
+        assert selection.indices.tolist() == torch.argsort(z, descending=True)[:3].tolist()
+    finally:
+        ESTIMATORS.pop("test-height")
+
+
+def test_method_specs_are_checked():
+    from nerfaug.selection import MethodSpec
+
+    with pytest.raises(ValueError, match="unknown estimator"):
+        MethodSpec("x", "bayes", "top-k", "")
+    with pytest.raises(ValueError, match="needs the estimator fisher"):
+        MethodSpec("x", "combined", "greedy-fisher", "")
+    with pytest.raises(ValueError, match="needs the estimator combined or distance"):
+        MethodSpec("x", "fisher", "batch-sampling", "")
+    with pytest.raises(ValueError, match="unknown SelectionConfig settings"):
+        MethodSpec("x", "combined", "top-k", "", settings={"entropy_resolutoin": 3})
+    with pytest.raises(ValueError, match="sharpness"):
+        SelectionConfig(sharpness=1.5)
+    with pytest.raises(ValueError, match="unknown SelectionConfig fields"):
+        SelectionConfig.from_dict({"entropy_resolutoin": 3})
+    assert SelectionConfig.from_dict(json.loads(json.dumps(FAST.authors_variant().to_dict()))) == FAST.authors_variant()
+
+
+def test_families_name_registered_methods_and_experiments_share_them():
+    from nerfaug.experiment import config as experiment_config
+    from nerfaug.selection import FAMILIES, STUDY_METHODS, TABLE_I, TABLE_I_ROWS, TABLE_II, TABLE_II_ROWS, method_label
+
+    for family, names in FAMILIES.items():
+        assert names and set(names) <= set(METHODS), family
+    assert TABLE_I == tuple(m for _, m in TABLE_I_ROWS) and set(TABLE_II) == {m for _, _, m in TABLE_II_ROWS}
+    assert {"ours", "ours-authors", "uniform", "entropy", "fisherrf", "furthest"} <= set(STUDY_METHODS)
+    assert any(METHODS[m].selector == "batch-sampling" for m in STUDY_METHODS)
+    assert experiment_config.TABLE_I is TABLE_I and experiment_config.STUDY_METHODS is STUDY_METHODS
+    assert len({method_label(m) for m in METHODS}) == len(METHODS)  # labels tell methods apart

@@ -1,12 +1,54 @@
 """Datasets: images with their cameras, read from and written to NeRF-synthetic (Blender) and
-nerfstudio/instant-ngp `transforms.json` folders."""
+nerfstudio/instant-ngp `transforms.json` folders.
 
-from nerfaug.data.blender import load_blender, load_blender_split, write_blender_split
-from nerfaug.data.errors import DatasetError
-from nerfaug.data.nerfstudio import load_nerfstudio, write_nerfstudio
-from nerfaug.data.views import Views, load_dataset
+Inside the package imports go one way: errors <- views <- frames <- {blender, nerfstudio} <- formats.
+The names below are imported on first use, so that `nerfaug.data.errors` (and `nerfaug.jsonio`,
+which raises its `DatasetError`) stay free of torch and imageio.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+_HOMES = {
+    "DatasetError": "nerfaug.data.errors",
+    "Views": "nerfaug.data.views",
+    "load_blender": "nerfaug.data.blender",
+    "load_blender_split": "nerfaug.data.blender",
+    "write_blender_split": "nerfaug.data.blender",
+    "load_nerfstudio": "nerfaug.data.nerfstudio",
+    "write_nerfstudio": "nerfaug.data.nerfstudio",
+    "FORMATS": "nerfaug.data.formats",
+    "detect_format": "nerfaug.data.formats",
+    "load_dataset": "nerfaug.data.formats",
+}
+
+if TYPE_CHECKING:
+    from nerfaug.data.blender import (
+        load_blender,
+        load_blender_split,
+        write_blender_split,
+    )
+    from nerfaug.data.errors import DatasetError
+    from nerfaug.data.formats import FORMATS, detect_format, load_dataset
+    from nerfaug.data.nerfstudio import load_nerfstudio, write_nerfstudio
+    from nerfaug.data.views import Views
+
+
+def __getattr__(name: str):
+    if name not in _HOMES:
+        raise AttributeError(f"module 'nerfaug.data' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_HOMES[name]), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOMES))
+
 
 __all__ = [
-    "DatasetError", "Views", "load_blender", "load_blender_split", "load_dataset",
-    "load_nerfstudio", "write_blender_split", "write_nerfstudio",
+    "FORMATS", "DatasetError", "Views", "detect_format", "load_blender", "load_blender_split",
+    "load_dataset", "load_nerfstudio", "write_blender_split", "write_nerfstudio",
 ]

@@ -21,4 +21,5 @@ class DatasetError(ValueError):
         if value is not None:
             text = repr(value)
             message += f" (got {text[:200] + '...' if len(text) > 200 else text})"
-        super().__init__(message)
+        # One line whatever the file held: a newline in a value or path is shown escaped.
+        super().__init__(message.replace("\r", "\\r").replace("\n", "\\n"))

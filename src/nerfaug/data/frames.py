@@ -1,10 +1,14 @@
-"""Reading and checking what both transforms formats share: JSON files, 4x4 poses, RGBA images."""
+"""What both transforms formats share: checking 4x4 poses and frame entries, finding and reading
+RGBA images, and turning a list of frames into `Views` (`load_frames`).
+
+JSON reading and atomic writes live in `nerfaug.jsonio` (torch-free).
+"""
 
 from __future__ import annotations
 
-import json
+import math
 import os
-import tempfile
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -12,24 +16,14 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
+from nerfaug.data.views import Views
+from nerfaug.jsonio import atomic_write_bytes
 
-_UMASK = os.umask(0o022)
-os.umask(_UMASK)
 IMAGE_SUFFIXES = ("", ".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".exr")
-
-
-def read_json(path: Path) -> dict:
-    """The JSON object in `path`, or a DatasetError saying why not."""
-    if not path.exists():
-        raise DatasetError(path, "file not found")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise DatasetError(path, f"invalid JSON at line {error.lineno} column {error.colno}: {error.msg}")
-    if not isinstance(data, dict):
-        raise DatasetError(path, "expected a JSON object at the top level", value=type(data).__name__)
-    return data
+# Smallest field of view accepted (radians): a smaller one gives a focal length float32 cannot hold.
+MIN_ANGLE = 1e-6
 
 
 def require(data: dict, key: str, path: Path, where: str = ""):
@@ -38,16 +32,45 @@ def require(data: dict, key: str, path: Path, where: str = ""):
     return data[key]
 
 
-def check_pose(matrix, path: Path, field: str) -> Tensor:
-    """A validated rigid 4x4 camera-to-world matrix as float32 of shape (4, 4)."""
+def is_number(value) -> bool:
+    """Whether `value` is a JSON number (int or float, not a bool) with a finite float value."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
     try:
-        pose = np.asarray(matrix, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise DatasetError(path, "transform_matrix is not numeric", field=field, value=matrix)
+        return math.isfinite(float(value))
+    except OverflowError:  # an integer beyond float range
+        return False
+
+
+def check_number(value, path: Path, field: str, low: float = -math.inf, high: float = math.inf) -> float:
+    """`value` as a float, if it is a finite number with low < value < high; else a DatasetError."""
+    if not is_number(value) or not low < float(value) < high:
+        bounds = " and ".join(b for b in (f"> {low:g}" * (low > -math.inf), f"< {high:g}" * (high < math.inf)) if b)
+        raise DatasetError(path, f"must be a finite number{' ' + bounds if bounds else ''}", field=field, value=value)
+    return float(value)
+
+
+def check_pose(matrix, path: Path, field: str) -> Tensor:
+    """A validated rigid 4x4 camera-to-world matrix as float32 of shape (4, 4).
+
+    Args:
+        matrix: nested lists (as read from JSON) or an array; its entries must be numbers (no
+            strings or bools) that stay finite in float32.
+    """
+    try:
+        pose = np.asarray(matrix)
+    except (TypeError, ValueError, OverflowError):  # ragged rows and the like
+        pose = None
+    if pose is None or pose.dtype.kind not in "iuf":  # strings, bools, None, huge ints (object)
+        raise DatasetError(path, "transform_matrix must be 4 rows of 4 numbers", field=field, value=matrix)
     if pose.shape != (4, 4):
         raise DatasetError(path, f"transform_matrix must be 4x4, has shape {pose.shape}", field=field, value=matrix)
-    if not np.all(np.isfinite(pose)):
-        raise DatasetError(path, "transform_matrix has non-finite entries", field=field, value=pose.tolist())
+    pose = pose.astype(np.float64)
+    with np.errstate(over="ignore"):
+        finite = np.isfinite(pose.astype(np.float32)).all()
+    if not finite:
+        raise DatasetError(path, "transform_matrix has non-finite entries (or beyond float32 range)",
+                           field=field, value=pose.tolist())
     rotation = pose[:3, :3]
     # Blender exports are float32; 1e-3 accepts their round-off, rejects scaled or sheared matrices.
     if np.abs(rotation.T @ rotation - np.eye(3)).max() > 1e-3 or abs(np.linalg.det(rotation) - 1) > 1e-3:
@@ -60,14 +83,49 @@ def check_pose(matrix, path: Path, field: str) -> Tensor:
     return torch.from_numpy(pose).float()
 
 
+def check_file_path(value, path: Path, field: str) -> str:
+    """A frame's `file_path`: a non-empty string without NUL characters."""
+    if not isinstance(value, str) or not value.strip() or "\x00" in value:
+        raise DatasetError(path, "file_path must be a non-empty path string (relative to the dataset folder)",
+                           field=field, value=value)
+    return value
+
+
 def resolve_image(root: Path, file_path: str, json_path: Path, field: str) -> Path:
-    """The image file a frame's `file_path` names (the Blender format omits the extension)."""
-    base = (root / file_path).resolve()
-    for suffix in IMAGE_SUFFIXES:
-        candidate = base.with_name(base.name + suffix) if suffix else base
-        if candidate.is_file():
-            return candidate
+    """The image file a frame's `file_path` names (the Blender format omits the extension),
+    resolved (symlinks followed); it must lie inside `root`.
+
+    Raises:
+        DatasetError: naming `json_path`, `field` and `file_path`, when no image file exists, the
+            path cannot be used (too long, a symlink loop), or the file lies outside `root`
+            (through `..`, an absolute path or a symlink): a dataset never reads other files.
+    """
+    file_path = check_file_path(file_path, json_path, field)
+    try:
+        real_root = root.resolve(strict=True)
+        for suffix in IMAGE_SUFFIXES:
+            candidate = root / (file_path + suffix)
+            if not candidate.is_file():
+                continue
+            resolved = candidate.resolve(strict=True)
+            if not resolved.is_relative_to(real_root):
+                raise DatasetError(
+                    json_path, f"image path leads outside the dataset folder {real_root} (to {resolved})",
+                    field=field, value=file_path,
+                )
+            return resolved
+    except (OSError, RuntimeError, ValueError) as error:  # DatasetError is a ValueError: let it pass
+        if isinstance(error, DatasetError):
+            raise
+        reason = getattr(error, "strerror", None) or type(error).__name__
+        raise DatasetError(json_path, f"cannot use this image path ({reason})", field=field, value=file_path) from None
+    base = os.path.normpath(root.absolute() / file_path)  # no resolve(): a symlink loop would raise
     raise DatasetError(json_path, f"image file not found: {base}[.png]", field=field, value=file_path)
+
+
+def _first_line(error: BaseException) -> str:
+    text = str(error).strip().splitlines()
+    return (text[0] if text else type(error).__name__)[:300]
 
 
 def read_image(path: Path, background: Tensor, downscale: int, json_path: Path, field: str) -> tuple[Tensor, Tensor | None]:
@@ -78,17 +136,24 @@ def read_image(path: Path, background: Tensor, downscale: int, json_path: Path, 
         downscale: integer factor; the image is area-averaged (premultiplied) by it.
     """
     try:
-        array = iio.imread(path)
-    except Exception as error:  # imageio raises many types; all mean "cannot read"
-        raise DatasetError(json_path, f"cannot read image {path}: {error}", field=field)
-    if array.ndim == 2 or array.shape[-1] not in (3, 4):
-        raise DatasetError(json_path, f"image {path} must be RGB or RGBA", field=field, value=f"shape {array.shape}")
+        array = np.asarray(iio.imread(path))
+    except Exception as error:  # noqa: BLE001 -- imageio's plugins raise many types; all mean "cannot read"
+        raise DatasetError(json_path, f"cannot read image {path}: {_first_line(error)}", field=field) from None
+    if array.ndim != 3 or array.shape[-1] not in (3, 4):
+        raise DatasetError(json_path, f"image {path} must be an RGB or RGBA image (one frame)", field=field, value=f"shape {array.shape}")
+    if min(array.shape[:2]) < downscale:
+        raise DatasetError(json_path, f"image {path} is smaller than the downscale factor {downscale}",
+                           field=field, value=f"{array.shape[1]}x{array.shape[0]}")
     if array.dtype == np.uint8:
         image = torch.from_numpy(array.astype(np.float32) / 255.0)
     elif array.dtype == np.uint16:
         image = torch.from_numpy(array.astype(np.float32) / 65535.0)
-    else:
+    elif array.dtype.kind == "f":
+        if not np.isfinite(array).all():
+            raise DatasetError(json_path, f"image {path} has non-finite pixel values", field=field)
         image = torch.from_numpy(array.astype(np.float32)).clamp(0, 1)
+    else:
+        raise DatasetError(json_path, f"image {path} has an unsupported pixel type", field=field, value=str(array.dtype))
     alpha = image[..., 3] if image.shape[-1] == 4 else None
     rgb = image[..., :3]
     if alpha is not None:
@@ -121,19 +186,67 @@ def write_image(path: Path, image: Tensor, alpha: Tensor | None = None, backgrou
     atomic_write_bytes(path, iio.imwrite("<bytes>", data, extension=".png"))
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write `data` to `path` so that readers see the old file or the whole new one, never a part."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600 files; give the usual permissions
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+# (camera_angle_x, None) or (None, (fx, fy, cx, cy)) for frame i at a file resolution (w, h).
+IntrinsicsOf = Callable[[int, int, int], tuple[float | None, tuple[float, float, float, float] | None]]
 
 
-def atomic_write_json(path: Path, data) -> None:
-    atomic_write_bytes(path, (json.dumps(data, indent=2) + "\n").encode())
+def load_frames(
+    root: Path, json_path: Path, frames: Sequence, background, downscale: int, lazy: bool,
+    intrinsics_of: IntrinsicsOf,
+) -> Views:
+    """The views a transforms file's `frames` list describes, for either format.
+
+    Args:
+        root: the dataset folder; every `file_path` must resolve inside it.
+        json_path: the transforms file, named in every error.
+        frames: its non-empty `frames` list (objects with `file_path` and `transform_matrix`).
+        background: RGB in [0, 1] composited behind transparent pixels.
+        downscale: integer factor to shrink images (and intrinsics) by.
+        lazy: read only the first image now (for its size) and the rest on access.
+        intrinsics_of: `intrinsics_of(w, h, i)` gives (camera_angle_x, None) or
+            (None, (fx, fy, cx, cy)) for frame i at the file's full resolution.
+    """
+    background = torch.as_tensor(background, dtype=torch.float32)
+    poses, paths, names = [], [], []
+    for i, frame in enumerate(frames):
+        field = f"frames[{i}]"
+        if not isinstance(frame, dict):
+            raise DatasetError(json_path, "each frame must be an object", field=field, value=frame)
+        file_path = require(frame, "file_path", json_path, f" in {field}")
+        poses.append(check_pose(require(frame, "transform_matrix", json_path, f" in {field}"), json_path, f"{field}.transform_matrix"))
+        paths.append(resolve_image(root, file_path, json_path, f"{field}.file_path"))
+        names.append(file_path)
+
+    def load(i: int):
+        return read_image(paths[i], background, downscale, json_path, f"frames[{i}].file_path")
+
+    first, first_alpha = load(0)
+    height, width = first.shape[:2]
+    loaded = [(first, first_alpha)] + ([] if lazy else [load(i) for i in range(1, len(frames))])
+    for i, (image, _) in enumerate(loaded):
+        if image.shape[:2] != (height, width):
+            raise DatasetError(
+                json_path, f"image size differs from frames[0]'s {width}x{height}",
+                field=f"frames[{i}].file_path", value=f"{image.shape[1]}x{image.shape[0]} ({paths[i]})",
+            )
+    full_w, full_h = width * downscale, height * downscale
+    c2w = torch.stack(poses)
+    per_frame = [intrinsics_of(full_w, full_h, i) for i in range(len(frames))]
+    if per_frame[0][0] is not None:
+        cameras = Cameras.from_fov(c2w, per_frame[0][0], full_w, full_h)
+    else:
+        fx, fy, cx, cy = (torch.tensor([p[1][k] for p in per_frame]) for k in range(4))
+        cameras = Cameras(c2w, fx, fy, cx, cy, full_w, full_h)
+    cameras = cameras.resized(width, height) if downscale > 1 else cameras
+
+    if lazy:
+        def checked_load(i: int):
+            image, alpha = load(i)
+            if image.shape[:2] != (height, width):
+                raise DatasetError(json_path, f"image size differs from frames[0]'s {width}x{height}",
+                                   field=f"frames[{i}].file_path", value=f"{image.shape[1]}x{image.shape[0]}")
+            return image, alpha
+        return Views(cameras, None, names, None, loader=checked_load)
+    images = torch.stack([im for im, _ in loaded])
+    alphas = torch.stack([a for _, a in loaded]) if all(a is not None for _, a in loaded) else None
+    return Views(cameras, images, names, alphas)

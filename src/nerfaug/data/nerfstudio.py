@@ -7,10 +7,16 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from nerfaug.data.blender import _load_frames
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.frames import atomic_write_json, read_json, require, write_image
+from nerfaug.data.frames import (
+    MIN_ANGLE,
+    check_number,
+    load_frames,
+    require,
+    write_image,
+)
 from nerfaug.data.views import Views
+from nerfaug.jsonio import atomic_write_json, read_json
 
 
 def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int = 1, lazy: bool = False) -> Views:
@@ -24,28 +30,40 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
     meta = read_json(json_path)
     frames = require(meta, "frames", json_path)
     if not isinstance(frames, list) or not frames:
-        raise DatasetError(json_path, "frames must be a non-empty list", field="frames")
+        raise DatasetError(json_path, "frames must be a non-empty list", field="frames", value=frames if not isinstance(frames, list) else [])
 
     def intrinsics_of(width: int, height: int, i: int):
         frame = frames[i]
         get = lambda key: frame.get(key, meta.get(key))
+        field = lambda key: f"frames[{i}].{key}" if key in frame else key
         if get("fl_x") is None:
-            if get("camera_angle_x") is not None:
-                return float(get("camera_angle_x")), None
-            raise DatasetError(json_path, "missing intrinsics: need fl_x (and fl_y, cx, cy) or camera_angle_x",
-                               field=f"frames[{i}].fl_x")
-        fx = get("fl_x")
-        fy = get("fl_y") if get("fl_y") is not None else fx
-        w, h = get("w") or width, get("h") or height
-        # Intrinsics are given for the stored (w, h); scale to the actual file resolution.
-        sx, sy = width / float(w), height / float(h)
-        values = [fx, fy, get("cx") if get("cx") is not None else w / 2, get("cy") if get("cy") is not None else h / 2]
-        for key, value in zip(("fl_x", "fl_y", "cx", "cy"), values):
-            if not isinstance(value, (int, float)) or not math.isfinite(value) or (key.startswith("fl") and value <= 0):
-                raise DatasetError(json_path, "intrinsic must be a finite number (focal > 0)", field=f"frames[{i}].{key}", value=value)
-        return None, (values[0] * sx, values[1] * sy, values[2] * sx, values[3] * sy)
+            if get("camera_angle_x") is None:
+                raise DatasetError(json_path, "missing intrinsics: need fl_x (and fl_y, cx, cy) or camera_angle_x",
+                                   field=f"frames[{i}].fl_x")
+            angle = check_number(get("camera_angle_x"), json_path, field("camera_angle_x"), MIN_ANGLE, math.pi)
+            # As Cameras.from_fov: frames may mix a field of view with focal lengths.
+            focal = 0.5 * width / math.tan(0.5 * angle)
+            return None, (focal, focal, width / 2.0, height / 2.0)
+        # Intrinsics are given for the stored (w, h); scale them to the actual file resolution.
+        w = width if get("w") is None else check_number(get("w"), json_path, field("w"), 0)
+        h = height if get("h") is None else check_number(get("h"), json_path, field("h"), 0)
+        for key, value in (("w", w), ("h", h)):
+            if value < 1:
+                raise DatasetError(json_path, "image size must be at least 1 pixel", field=field(key), value=get(key))
+        fx = check_number(get("fl_x"), json_path, field("fl_x"), 0)
+        fy = fx if get("fl_y") is None else check_number(get("fl_y"), json_path, field("fl_y"), 0)
+        cx = w / 2 if get("cx") is None else check_number(get("cx"), json_path, field("cx"))
+        cy = h / 2 if get("cy") is None else check_number(get("cy"), json_path, field("cy"))
+        sx, sy = width / w, height / h
+        scaled = (fx * sx, fy * sy, cx * sx, cy * sy)
+        for key, value in zip(("fl_x", "fl_y", "cx", "cy"), scaled):
+            # float32 must hold it: a focal of 1e-300 pixels would become 0, one of 1e300 inf.
+            if not (1e-6 < value < 1e30 if key.startswith("fl") else abs(value) < 1e30):
+                raise DatasetError(json_path, f"intrinsic out of range once scaled to the image's {width}x{height} "
+                                   f"(w, h = {w:g}, {h:g})", field=field(key), value=get(key))
+        return None, scaled
 
-    return _load_frames(root, json_path, frames, background, downscale, lazy, intrinsics_of)
+    return load_frames(root, json_path, frames, background, downscale, lazy, intrinsics_of)
 
 
 def write_nerfstudio(root: str | Path, views: Views, image_folder: str = "images") -> Path:

@@ -3,9 +3,8 @@ exchange."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Callable
 
 import torch
 from torch import Tensor
@@ -41,7 +40,7 @@ class Views:
         assert self.loader is not None
         return self.loader(index)[0]
 
-    def materialised(self) -> "Views":
+    def materialised(self) -> Views:
         """The same views with every image in memory."""
         if self.images is not None:
             return self
@@ -52,7 +51,7 @@ class Views:
             alphas = torch.stack([a for _, a in loaded])
         return Views(self.cameras, torch.stack([im for im, _ in loaded]), list(self.names), alphas)
 
-    def subset(self, indices) -> "Views":
+    def subset(self, indices) -> Views:
         """The views at `indices` (a list of ints), in that order."""
         indices = [int(i) for i in indices]
         full = self.materialised()
@@ -62,7 +61,7 @@ class Views:
         )
 
     @staticmethod
-    def cat(parts: list["Views"]) -> "Views":
+    def cat(parts: list[Views]) -> Views:
         parts = [p.materialised() for p in parts]
         alphas = None
         if all(p.alphas is not None for p in parts):
@@ -71,22 +70,3 @@ class Views:
             Cameras.cat([p.cameras for p in parts]), torch.cat([p.images for p in parts]),
             [n for p in parts for n in p.names], alphas,
         )
-
-
-def load_dataset(root: str | Path, split: str = "train", **kwargs) -> Views:
-    """Load a split from a Blender (`transforms_{split}.json`) or nerfstudio (`transforms.json`)
-    folder, whichever `root` holds."""
-    from nerfaug.data.blender import load_blender_split
-    from nerfaug.data.errors import DatasetError
-    from nerfaug.data.nerfstudio import load_nerfstudio
-
-    root = Path(root)
-    if (root / f"transforms_{split}.json").exists():
-        return load_blender_split(root, split, **kwargs)
-    if (root / "transforms.json").exists():
-        return load_nerfstudio(root, **kwargs)
-    if not root.is_dir():
-        raise DatasetError(root, "dataset folder does not exist")
-    raise DatasetError(
-        root, f"no transforms_{split}.json (Blender format) nor transforms.json (nerfstudio format)"
-    )

@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import dataclass, field
 from typing import Literal
 
+# Method families (Tables I and II, the main comparison, the study) live with the methods.
+from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
+    AUTHORS_VARIANTS, BATCH_AWARE, FAMILIES, MAIN_COMPARISON, STUDY_METHODS, TABLE_I, TABLE_II, SelectionConfig,
+)
+
 PresetName = Literal["quick", "paper", "ablation", "tiny"]
 
-# Table I (terms) and Table II (NBV vs sampling) of the paper, as method names.
-TABLE_I = ("ours", "entropy-sampling", "distance")
-TABLE_II = ("ours", "ours-nbv", "fisherrf", "fisherrf-sampling", "entropy", "entropy-sampling")
-MAIN_COMPARISON = ("ours", "uniform", "entropy", "fisherrf")
 # The paper lowers the field's learning rate for these scenes "for model stability when adding data".
 LOW_FIELD_LR_SCENES = {"chair": 0.002, "materials": 0.002}
 
@@ -55,12 +57,33 @@ class ExperimentConfig:
     2-core machine: torch's second thread stalls whenever anything else wants a core."""
     save_renders: int = 3
     """Test renders saved per run (for the report's figures)."""
+    device: str = "auto"
+    """Where runs compute: auto (cuda when a GPU is visible, else cpu), cpu or cuda. Its kind
+    (cpu / cuda) is fingerprinted: the two give different numbers (other kernels and reduction
+    orders, and fp16 autocast on cuda), so a results folder never mixes them."""
+
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
+    """Options of the selection methods' estimators and selectors (each method applies its own
+    settings over them, e.g. ours-authors the authors' code's)."""
 
     def fingerprinted(self) -> dict:
-        """The settings that change a run's numbers; results made under others are not mixed."""
+        """The settings that change a run's numbers; results made under others are not mixed.
+
+        Flat, so a refusal names the setting: the protocol's settings by name, every
+        `SelectionConfig` field as "selection.<field>", and the engine preset's complete
+        `NerfConfig` as "engine.<field>" ("engine" keeps the preset's name; per-scene overrides
+        are "field_lr"). Values are as JSON stores them (tuples become lists), so a setting read
+        back from sweep.json compares equal to the same setting in code.
+        """
+        from nerfaug.device import device_kind
+        from nerfaug.nerf.config import NerfConfig
+
         keep = ("seed", "engine", "resolution", "steps", "add_at_step", "n_new", "n_initial", "pool",
                 "n_test", "render_samples", "field_lr", "threads_per_run")
-        return {k: getattr(self, k) for k in keep}
+        record = {k: getattr(self, k) for k in keep} | {"device": device_kind(self.device)}
+        record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
+        record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).to_dict().items()})
+        return json.loads(json.dumps(record, default=str))
 
     def replace(self, **changes) -> "ExperimentConfig":
         return dataclasses.replace(self, **changes)
@@ -83,7 +106,7 @@ def preset(name: PresetName) -> ExperimentConfig:
             steps=10_000, pool=500, n_test=200, render_samples=64,
         )
     if name == "ablation":
-        methods = tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",)))
+        methods = tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS))
         return ExperimentConfig(methods=methods, trials=5)
     if name == "tiny":
         return ExperimentConfig(

@@ -14,10 +14,13 @@ import torch
 
 from nerfaug.data import Views, load_dataset
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.frames import atomic_write_json
+from nerfaug.device import describe_device
 from nerfaug.experiment.config import ExperimentConfig
-from nerfaug.experiment.store import RunKey, fingerprint, write_result
-from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses
+from nerfaug.experiment.runfolder import (
+    FILES, write_config, write_history, write_metrics, write_progress, write_selection,
+)
+from nerfaug.experiment.store import RunKey, fingerprint, start_run_folder, write_result
+from nerfaug.hemisphere import half_hemisphere_poses
 
 PROGRESS_EVERY = 50
 # Set by a driver that shows progress in this process; called after each progress write.
@@ -33,17 +36,42 @@ class SceneData:
     test: Views
 
 
-def scene_dataset_dir(root: Path, scene: str, config: ExperimentConfig) -> Path:
-    """Where a scene's dataset lives: the user's folder, or the rendered built-in one."""
+def scene_folder(scene: str) -> Path | None:
+    """The user dataset folder `scene` names, or None for a built-in scene.
+
+    A built-in name means the built-in scene; a folder of that name must be written as a path
+    (`./lego`), and a bare name that is both is refused rather than guessed. Any other name must
+    be an existing folder.
+
+    Raises:
+        ValueError: the name is ambiguous, or neither a built-in scene nor a folder.
+    """
+    from nerfaug.scenes import BUILTIN_SCENES
+
+    explicit = "/" in scene or "\\" in scene or scene.startswith(".") or Path(scene).is_absolute()
+    if scene in BUILTIN_SCENES and not explicit:
+        if Path(scene).exists():
+            raise ValueError(f"scene {scene!r} is ambiguous: a built-in scene and the folder ./{scene}; write "
+                             f"./{scene} (or --data ./{scene}) for the folder, or run elsewhere for the built-in scene")
+        return None
     if Path(scene).is_dir():
         return Path(scene)
+    raise ValueError(f"unknown scene {scene!r}: not a dataset folder and not one of the built-in scenes "
+                     f"{', '.join(BUILTIN_SCENES)}")
+
+
+def scene_dataset_dir(root: Path, scene: str, config: ExperimentConfig) -> Path:
+    """Where a scene's dataset lives: the user's folder, or the rendered built-in one."""
+    folder = scene_folder(scene)
+    if folder is not None:
+        return folder
     return Path(root) / "datasets" / f"{scene}-{config.resolution}px"
 
 
 def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bool = True) -> Path:
     """Render a built-in scene once (cached), or check a user's dataset folder. Returns its folder."""
     folder = scene_dataset_dir(root, scene, config)
-    if Path(scene).is_dir():
+    if scene_folder(scene) is not None:
         load_dataset(folder, "train", lazy=True)  # fail early, with the dataset's own error
         if not (folder / "transforms_test.json").exists():
             raise DatasetError(folder / "transforms_test.json", "a test split is needed for evaluation: file not found")
@@ -56,6 +84,24 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
         scene, folder, resolution=config.resolution, pool=config.pool, test=config.n_test,
         initial=config.n_initial, samples=config.render_samples, seed=config.seed, progress=progress,
     )
+
+
+def builtin_dataset_digest(scene: str, config: ExperimentConfig) -> str:
+    """A built-in scene's identity before it is rendered: a digest of the manifest its dataset is
+    rendered with (`scenes.render.dataset_manifest`: the scene-building code, the bpy version and
+    the render arguments), so results made on other renders are never reused."""
+    import importlib.metadata
+    import inspect
+
+    from nerfaug.scenes.render import dataset_manifest, render_scene_dataset, scene_spec
+
+    val = inspect.signature(render_scene_dataset).parameters["val"].default  # what prepare_scene renders
+    args = (config.resolution, config.pool, config.n_test, config.n_initial, val, config.render_samples, config.seed)
+    try:
+        manifest = dataset_manifest(scene_spec(scene), *args)
+    except importlib.metadata.PackageNotFoundError:  # no bpy: such a scene cannot be rendered here anyway
+        manifest = {"scene": scene_spec(scene), "args": args, "bpy": None}
+    return fingerprint(manifest)
 
 
 def initial_view_indices(pool: Views, n: int) -> list[int]:
@@ -110,7 +156,7 @@ def train_with_progress(trainer, until_step: int, folder: Path) -> None:
     in any process (or on any Ray node sharing the folder) can show it."""
     while trainer.step < until_step:
         trainer.train(min(until_step, trainer.step + PROGRESS_EVERY))
-        atomic_write_json(folder / "progress.json", {"step": trainer.step})
+        write_progress(folder, trainer.step)
         if on_progress is not None:
             on_progress()
 
@@ -120,21 +166,23 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
 
     Returns the result record (also in result.json).
     """
+    from nerfaug.device import configure_process
     from nerfaug.evaluation import evaluate_views
     from nerfaug.maps import plot_hemisphere_map
     from nerfaug.nerf.trainer import Trainer
-    from nerfaug.selection import select_views
+    from nerfaug.selection import get_method, select_views
 
-    torch.set_num_threads(config.threads_per_run)
+    # A sweep worker's entry point (in-process, pool or Ray): its process-wide torch settings.
+    configure_process(threads=config.threads_per_run)
     folder = key.folder(root)
-    folder.mkdir(parents=True, exist_ok=True)
+    start_run_folder(folder)
     seed = config.seed + key.trial
     timing: dict[str, float] = {}
 
     start = time.perf_counter()
     data = load_scene_data(dataset_dir, config)
     engine = engine_config(config, key.scene)
-    trainer = Trainer(data.initial, engine, seed=seed, progress=progress)
+    trainer = Trainer(data.initial, engine, seed=seed, device=config.device, progress=progress)
     timing["setup"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -144,7 +192,8 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     start = time.perf_counter()
     generator = torch.Generator().manual_seed(seed)
     selection = select_views(
-        key.method, trainer.model, trainer.train_views.cameras, data.pool.cameras, config.n_new, generator
+        key.method, trainer.model, trainer.train_views.cameras, data.pool.cameras, config.n_new, generator,
+        config.selection,
     )
     timing["selection"] = time.perf_counter() - start
 
@@ -161,32 +210,28 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     start = time.perf_counter()
     evaluation = evaluate_views(
         lambda cameras, index: trainer.model.render_image(cameras, index)["rgb"],
-        data.test, lpips=cached_lpips(), save_dir=folder / "renders", save_count=config.save_renders, progress=progress,
+        data.test, lpips=cached_lpips(), save_dir=folder / FILES.renders, save_count=config.save_renders, progress=progress,
     )
     timing["evaluation"] = time.perf_counter() - start
     timing["total"] = sum(timing.values())
 
-    azimuth, polar, _ = angles_from_pose(data.pool.cameras.camera_to_world)
-    atomic_write_json(folder / "selection.json", {
-        **selection.to_dict(),
-        "chosen_names": [data.pool.names[i] for i in chosen],
-        "chosen_poses": data.pool.cameras.camera_to_world[chosen].tolist(),
-        "candidate_poses": data.pool.cameras.camera_to_world.tolist(),
-        "candidate_azimuth": azimuth.tolist(), "candidate_polar": polar.tolist(),
-        "train_poses": data.initial.cameras.camera_to_world.tolist(),
-    })
+    write_selection(folder, selection.to_dict(), [data.pool.names[i] for i in chosen],
+                    data.pool.cameras.camera_to_world, data.initial.cameras.camera_to_world)
     plot_hemisphere_map(
         data.pool.cameras.camera_to_world, selection.scores, data.initial.cameras.camera_to_world,
-        data.pool.cameras.camera_to_world[chosen], path=folder / "uncertainty.png", title=f"{key.scene}: {key.method}",
+        data.pool.cameras.camera_to_world[chosen], path=folder / FILES.uncertainty, title=f"{key.scene}: {key.method}",
     )
-    atomic_write_json(folder / "metrics.json", evaluation.to_dict())
-    atomic_write_json(folder / "history.json", trainer.history)
-    atomic_write_json(folder / "config.json", {"experiment": asdict(config), "engine": asdict(engine)})
+    write_metrics(folder, evaluation.to_dict())
+    write_history(folder, trainer.history)
+    spec = get_method(key.method)  # the settings the method ran with: the sweep's, with the method's own over them
+    write_config(folder, asdict(config), asdict(engine), device=describe_device(trainer.device),
+                 selection=spec.effective_config(config.selection).to_dict(), method=spec.definition())
     result = {
         "scene": key.scene, "method": key.method, "trial": key.trial, "seed": seed,
         "fingerprint": fingerprint(config.fingerprinted()),
         "metrics": evaluation.mean, "lpips_status": evaluation.lpips_status,
         "chosen": chosen, "timing": timing, "host": platform.node(), "torch": torch.__version__,
+        "device": describe_device(trainer.device),
     }
     write_result(folder, result)
     return result

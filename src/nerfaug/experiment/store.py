@@ -4,27 +4,44 @@ looks complete.
 Layout::
 
     RESULTS/
+      .nerfaug                         marker: nerfaug made this folder
       sweep.json                       what produced the results (fingerprint checked on re-runs)
+      superseded/<time>/               runs/ and sweep.json moved aside by --force (never deleted)
       datasets/<scene>/                the scene's Blender-format dataset (rendered once)
       runs/<scene>/<method>/trial_<k>/
-        config.json  selection.json  metrics.json  history.json  renders/*.png
+        .nerfaug  config.json  selection.json  metrics.json  history.json  renders/*.png
         result.json                    written last: the run is complete iff it exists and is valid
 
 Every file is written to a temporary name and renamed into place (atomic on POSIX).
+
+Nothing the user made is deleted or written over, and no finished result is ever deleted: a run
+folder is removed only when it has no result and is provably nerfaug's (its marker, or only the
+files of the run-folder contract); a results folder whose bookkeeping is missing or unreadable
+while runs exist is refused, as are runs made with another configuration or another dataset;
+`--force` moves finished results aside into `superseded/` instead of deleting them.
 """
 
 from __future__ import annotations
 
+import datetime
 import hashlib
 import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
-from nerfaug.data.frames import atomic_write_json
+from nerfaug import owned
+from nerfaug.errors import FolderRefused, NerfaugError
+from nerfaug.jsonio import atomic_write_json
 
 RESULT_FILE = "result.json"
 RESULT_KEYS = ("scene", "method", "trial", "seed", "fingerprint", "metrics", "timing")
+SWEEP_FILE = "sweep.json"
+SUPERSEDED_DIR = "superseded"
+RESULTS_KIND, RUN_KIND = "experiment-results", "experiment-run"
+# Files a run folder of an earlier nerfaug (before the marker) may hold; temporary files start with ".".
+_RUN_CONTRACT = ("result.json", "selection.json", "metrics.json", "history.json", "config.json",
+                 "progress.json", "error.json", "uncertainty.png", "renders")
 
 
 @dataclass(frozen=True)
@@ -68,14 +85,47 @@ def read_result(folder: Path, expected_fingerprint: str | None = None) -> dict |
     return result
 
 
-def clear_incomplete(folder: Path) -> bool:
-    """Remove a run folder that has no valid result (a crash or a corrupted file). Returns whether
-    anything was removed."""
+def is_run_folder(folder: Path) -> bool:
+    """Whether `folder` holds only what nerfaug writes into a run folder: the files of the
+    run-folder contract (renders holding only PNGs) and its marker. A marked folder into which a
+    user put a file of their own is not a run folder any more: removing it would lose that file."""
     folder = Path(folder)
-    if folder.exists():
-        shutil.rmtree(folder)
-        return True
-    return False
+    if not folder.is_dir():
+        return False
+    for entry in folder.iterdir():
+        if entry.name.startswith(".") and entry.is_file():
+            continue
+        if entry.name not in _RUN_CONTRACT:
+            return False
+        if entry.is_dir() and (entry.name != "renders" or any(not p.name.endswith(".png") for p in entry.iterdir())):
+            return False
+    return True
+
+
+def start_run_folder(folder: Path) -> None:
+    """Create a run folder and mark it as nerfaug's (so that an interrupted run can be redone)."""
+    owned.mark(folder, RUN_KIND)
+
+
+def clear_incomplete(folder: Path) -> bool:
+    """Remove a run folder that has no result (a crash or a corrupted file). Returns whether
+    anything was removed.
+
+    Raises:
+        FolderRefused: the folder holds files nerfaug did not write, or a finished result (of
+            another configuration): neither is ever deleted here.
+    """
+    folder = Path(folder)
+    if not folder.exists():
+        return False
+    if not is_run_folder(folder):
+        raise FolderRefused(f"{folder}: holds files nerfaug did not write, so it is not redone; move them "
+                            "elsewhere, or choose a new --out folder")
+    if read_result(folder) is not None:
+        raise IncompatibleResults(f"{folder}: holds a finished run of another configuration; it is not deleted. "
+                                  "Use a new --out folder, or --force to move the old runs aside")
+    shutil.rmtree(folder)
+    return True
 
 
 def write_result(folder: Path, result: dict) -> None:
@@ -86,31 +136,115 @@ def write_result(folder: Path, result: dict) -> None:
     atomic_write_json(Path(folder) / RESULT_FILE, result)
 
 
-class IncompatibleResults(RuntimeError):
-    """The results folder holds runs made with a different configuration."""
+class IncompatibleResults(NerfaugError, RuntimeError):
+    """The results folder holds runs made with a different configuration or dataset, or its
+    bookkeeping is missing; the message says how to proceed."""
 
 
-def check_sweep(root: Path, sweep: dict, force: bool = False) -> None:
+def finished_runs(root: Path) -> list[dict]:
+    """The results of every finished run under `root/runs`, whatever configuration made them."""
+    runs = Path(root) / "runs"
+    found = (read_result(folder) for folder in sorted(runs.glob("*/*/*")) if folder.is_dir())
+    return [r for r in found if r is not None]
+
+
+def run_folders(root: Path) -> list[Path]:
+    """Every folder under `root/runs` at run depth (finished or not)."""
+    return [p for p in sorted((Path(root) / "runs").glob("*/*/*")) if p.is_dir()]
+
+
+def read_sweep(root: Path) -> tuple[dict | None, str | None]:
+    """The folder's sweep record, or None and why not ("missing", or what is wrong)."""
+    path = Path(root) / SWEEP_FILE
+    if not path.exists():
+        return None, "is missing"
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        return None, f"is unreadable ({error})"
+    if not isinstance(data, dict) or not isinstance(data.get("fingerprint"), str):
+        return None, "holds no fingerprint"
+    return data, None
+
+
+def move_aside(root: Path) -> Path:
+    """Move `root/runs` and `root/sweep.json` into `root/superseded/<UTC time>/`; returns that folder."""
+    root = Path(root)
+    stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%S%fZ")
+    target = root / SUPERSEDED_DIR / stamp
+    target.mkdir(parents=True)
+    for name in ("runs", SWEEP_FILE):
+        if (root / name).exists():
+            (root / name).rename(target / name)
+    return target
+
+
+def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
     """Record the sweep's config in `root/sweep.json`, refusing to mix incompatible results.
 
-    Settings that change results (everything in `sweep["fingerprinted"]`) must match the folder's;
-    the list of scenes, methods and trials may grow (new runs are added beside old ones).
+    Settings that change results (everything in `sweep["fingerprinted"]`) and the user datasets
+    (`sweep["datasets"]`, by content) must match the folder's; the list of scenes, methods and
+    trials may grow (new runs are added beside old ones). With `force`, existing runs are moved
+    aside into `superseded/` (nothing is deleted) and every run is redone.
+
+    Returns:
+        The folder old runs were moved into, or None.
+
+    Raises:
+        IncompatibleResults: finished runs of another configuration or dataset, or runs without
+            a readable sweep.json (without `force`).
+        FolderRefused: `root` is not empty and is not a results folder.
     """
     root = Path(root)
-    path = root / "sweep.json"
-    if path.exists() and not force:
-        try:
-            previous = json.loads(path.read_text())
-        except json.JSONDecodeError:
-            previous = None
-        if previous is not None and previous.get("fingerprint") != sweep["fingerprint"]:
-            old, new = previous.get("fingerprinted", {}), sweep["fingerprinted"]
-            changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
-            details = "; ".join(f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in changed[:6])
-            raise IncompatibleResults(
-                f"{path}: results there were made with a different configuration ({details}). "
-                "Use another --out folder, or --force to discard them and start again."
-            )
-    if force and (root / "runs").exists():
-        shutil.rmtree(root / "runs")
+    if root.exists() and not root.is_dir():
+        raise FolderRefused(f"{root}: not a folder; choose a folder for --out")
+    path = root / SWEEP_FILE
+    previous, problem = read_sweep(root)
+    folders = run_folders(root)
+    if previous is None and not folders and not owned.is_empty(root) and not owned.marked(root, RESULTS_KIND):
+        raise FolderRefused(f"{root}: not empty and not a nerfaug results folder (no {SWEEP_FILE}), so nothing is "
+                            "written there; choose a new or empty folder for --out")
+    moved = None
+    if force:
+        if folders or previous is not None:
+            moved = move_aside(root)
+    elif previous is not None:
+        _check_compatible(path, previous, sweep, root)
+    elif folders:
+        raise IncompatibleResults(
+            f"{path} {problem} but {root / 'runs'} holds {len(folders)} run folder(s), so nerfaug cannot tell "
+            f"what made them; re-run with --force to move them aside into {root / SUPERSEDED_DIR} (nothing is "
+            "deleted), or use another --out folder")
+    owned.mark(root, RESULTS_KIND)
     atomic_write_json(path, sweep)
+    return moved
+
+
+def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> None:
+    how = (f"Use another --out folder, or --force to move the existing runs aside into {root / SUPERSEDED_DIR} "
+           "(nothing is deleted)")
+    if previous.get("fingerprint") != sweep["fingerprint"]:
+        old, new = previous.get("fingerprinted", {}), sweep["fingerprinted"]
+        changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+        details = "; ".join(f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in changed[:6])
+        raise IncompatibleResults(
+            f"{path}: results there were made with a different configuration ({details}). {how}.")
+    old_data, new_data = previous.get("datasets") or {}, sweep.get("datasets") or {}
+    for scene in sorted(set(old_data) & set(new_data)):
+        if old_data[scene].get("digest") != new_data[scene].get("digest"):
+            raise IncompatibleResults(
+                f"{path}, scene '{scene}': its runs were made on the dataset {old_data[scene].get('path')!r}, "
+                f"this sweep uses {new_data[scene].get('path')!r} with different content. {how}.")
+    others = sorted({r["scene"] + "/" + r["method"] for r in finished_runs(root)
+                     if r["fingerprint"] != sweep["fingerprint"]})
+    if others:
+        raise IncompatibleResults(f"{root / 'runs'}: finished runs of another configuration ({', '.join(others[:4])}) "
+                                  f"although {path} matches. {how}.")
+
+
+def dataset_digest(folder: Path) -> str:
+    """A short hash of a dataset folder's transforms files (what its frames and cameras are)."""
+    digest = hashlib.sha256()
+    for path in sorted(Path(folder).glob("transforms*.json")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]

@@ -8,7 +8,6 @@ for this configuration and redoes only missing, partial or corrupted runs.
 from __future__ import annotations
 
 import concurrent.futures as futures
-import json
 import multiprocessing
 import platform
 import sys
@@ -22,13 +21,16 @@ from typing import Literal
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from nerfaug.data.frames import atomic_write_json
 from nerfaug.experiment.config import ExperimentConfig
-from nerfaug.experiment.protocol import prepare_scene, run_trial
-from nerfaug.experiment.store import RunKey, check_sweep, clear_incomplete, fingerprint, read_result
+from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, scene_folder
+from nerfaug.experiment.runfolder import FILES, read_progress, write_error
+from nerfaug.experiment.store import (
+    IncompatibleResults, RunKey, check_sweep, clear_incomplete, dataset_digest, fingerprint, is_run_folder,
+    read_result,
+)
 
 Backend = Literal["local", "ray"]
-PROGRESS_FILE = "progress.json"
+PROGRESS_FILE = FILES.progress
 console = Console(stderr=True)
 
 
@@ -50,7 +52,85 @@ def plan_runs(config: ExperimentConfig) -> list[RunKey]:
 
 def scene_name(scene: str) -> str:
     """The name a scene has in results: a built-in name, or a dataset folder's name."""
-    return Path(scene).name if Path(scene).is_dir() else scene
+    folder = scene_folder(scene)
+    return scene if folder is None else folder.resolve().name
+
+
+def _need(ok: bool, name: str, value, problem: str) -> None:
+    if not ok:
+        raise ValueError(f"--{name.replace('_', '-')} {value!r}: {problem}")
+
+
+def check_config(config: ExperimentConfig) -> dict[str, dict]:
+    """Check every setting against the registries and the datasets, before any work starts.
+
+    Returns:
+        Per scene (its name in results), what it runs on: {"builtin": name} or, for a user
+        dataset, {"path", "digest", "width", "height", "initial", "pool", "test"}: the views and
+        image size the runs use.
+
+    Raises:
+        ValueError: naming the setting, its value and what would be accepted.
+        DatasetError: a user dataset is missing or malformed.
+    """
+    from nerfaug.selection import METHODS
+
+    _need(len(config.methods) > 0, "methods", config.methods, "give at least one selection method")
+    for method in config.methods:
+        _need(method in METHODS, "methods", method,
+              f"unknown selection method; choose from {', '.join(METHODS)} (`nerfaug methods`)")
+    _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
+    _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
+    for name in ("trials", "n_new", "n_initial", "n_test", "pool", "resolution", "render_samples", "threads_per_run"):
+        value = getattr(config, name)
+        _need(isinstance(value, int) and value >= 1, name, value, "must be an integer >= 1")
+    _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
+    _need(config.add_at_step >= 0, "add_at_step", config.add_at_step, "must be >= 0")
+    _need(config.steps > config.add_at_step, "steps", config.steps,
+          f"must be greater than the step at which views are added ({config.add_at_step}), or the added views "
+          "are never trained on")
+    _need(config.pool >= config.n_new, "pool", config.pool, f"the pool must hold the {config.n_new} views to add")
+    datasets: dict[str, dict] = {}
+    for scene in config.scenes:
+        name, folder = scene_name(scene), scene_folder(scene)
+        _need(name not in datasets, "scenes", scene, f"another scene is also named {name!r} in results; rename a folder")
+        datasets[name] = ({"builtin": scene, "digest": builtin_dataset_digest(scene, config)} if folder is None
+                          else _check_user_dataset(folder, config))
+    return datasets
+
+
+def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
+    """What a user dataset supplies, checked against the config (see `check_config`)."""
+    from nerfaug.data import DatasetError, load_dataset
+
+    train = load_dataset(folder, "train", lazy=True)
+    if not (folder / "transforms_test.json").exists():
+        raise DatasetError(folder / "transforms_test.json", "a test split is needed for evaluation: file not found")
+    test = load_dataset(folder, "test", lazy=True)
+    width, height = train.cameras.width, train.cameras.height
+    _need(config.resolution <= width, "resolution", config.resolution,
+          f"must be between 1 and the width of {folder}'s images ({width} px)")
+    ran = width // max(1, width // config.resolution)
+    if ran != config.resolution:  # images are shrunk by an integer factor: say what would run
+        sizes = sorted({width // k for k in range(1, width + 1)}, key=lambda size: abs(size - config.resolution))
+        _need(False, "resolution", config.resolution,
+              f"{folder}'s {width}-px images shrink by whole factors only; the nearest sizes are "
+              f"{', '.join(str(v) for v in sorted(sizes[:3]))}")
+    if (folder / "transforms_initial.json").exists():
+        initial = len(load_dataset(folder, "initial", lazy=True))
+        _need(initial == config.n_initial, "n_initial", config.n_initial,
+              f"{folder / 'transforms_initial.json'} holds {initial} initial views; they are all used")
+        pool = len(train)
+    else:
+        _need(len(train) >= config.n_initial + config.n_new, "n_initial", config.n_initial,
+              f"{folder / 'transforms_train.json'} holds {len(train)} views, fewer than {config.n_initial} initial + "
+              f"{config.n_new} new ones")
+        initial, pool = config.n_initial, len(train) - config.n_initial
+    _need(pool >= config.n_new, "n_new", config.n_new, f"the candidate pool of {folder} holds only {pool} views")
+    _need(len(test) >= config.n_test, "n_test", config.n_test,
+          f"{folder / 'transforms_test.json'} holds only {len(test)} test views")
+    return {"path": str(Path(folder).resolve()), "digest": dataset_digest(folder), "width": ran,
+            "height": height // (width // ran), "initial": initial, "pool": pool, "test": config.n_test}
 
 
 def versions() -> dict[str, str]:
@@ -63,11 +143,13 @@ def versions() -> dict[str, str]:
     return found
 
 
-def sweep_record(config: ExperimentConfig, command: list[str] | None = None) -> dict:
+def sweep_record(config: ExperimentConfig, command: list[str] | None = None, datasets: dict | None = None) -> dict:
+    """sweep.json: the fingerprint, the config, and what each scene ran on (`check_config`)."""
     fingerprinted = config.fingerprinted()
     return {
         "fingerprint": fingerprint(fingerprinted), "fingerprinted": fingerprinted,
         "config": asdict(config), "command": command or sys.argv, "versions": versions(),
+        "datasets": datasets or {},
     }
 
 
@@ -88,16 +170,28 @@ def run_sweep(
         backend: "local" (this process when workers == 1, else a process pool) or "ray".
         workers: concurrent runs for the local backend.
         address: a Ray cluster to join ("auto", "ray://host:10001"); None starts a local Ray.
-        force: discard existing runs and redo everything.
+        force: move existing runs aside (into root/superseded/) and redo everything.
+
+    Raises:
+        ValueError, DatasetError: a setting or a dataset is wrong (checked before any work).
+        IncompatibleResults, FolderRefused: `root` holds other results or files nerfaug did not write.
     """
     root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
-    record = sweep_record(config, command)
-    check_sweep(root, record, force=force)
+    _need(isinstance(workers, int) and workers >= 1, "workers", workers, "must be an integer >= 1")
+    record = sweep_record(config, command, check_config(config))
+    keys = plan_runs(config)
+    for key in [] if force else keys:  # refuse before anything is written, removed or rendered
+        folder = key.folder(root)
+        if folder.exists() and read_result(folder, record["fingerprint"]) is None and not is_run_folder(folder):
+            raise IncompatibleResults(f"{folder}: holds files nerfaug did not write; move them away or use "
+                                      "another --out folder")
+    moved = check_sweep(root, record, force=force)  # with --force, moves every run aside (deletes nothing)
+    if moved is not None:
+        console.print(f"--force: the earlier runs and sweep.json were moved to {moved}")
     datasets = {scene_name(s): prepare_scene(root, s, config, progress=progress) for s in config.scenes}
 
     results, todo = [], []
-    for key in plan_runs(config):
+    for key in keys:
         folder = key.folder(root)
         result = read_result(folder, record["fingerprint"])
         if result is not None:
@@ -161,11 +255,9 @@ class _Display:
             self.queued.remove(key)
             self.started(key)
         for key, task in self.running.items():
-            try:
-                step = json.loads((key.folder(self.root) / PROGRESS_FILE).read_text())["step"]
-            except (OSError, ValueError, KeyError):
-                continue
-            self.progress.update(task, completed=step)
+            step = read_progress(key.folder(self.root))
+            if step is not None:
+                self.progress.update(task, completed=step)
 
     def _describe(self) -> None:
         self.progress.update(
@@ -225,9 +317,7 @@ def _describe_failure(key: RunKey, error: BaseException, root: Path) -> str:
     console.print(f"[red]run {key} failed: {text}")
     folder = key.folder(root)
     if folder.exists():
-        atomic_write_json(folder / "error.json", {
-            "error": text, "traceback": "".join(traceback.format_exception(error)),
-        })
+        write_error(folder, text, "".join(traceback.format_exception(error)))
     return text
 
 
@@ -243,7 +333,10 @@ def _execute_ray(todo, datasets, config, root, workers, address, progress):
         else:
             ray.init(num_cpus=max(workers * config.threads_per_run, config.threads_per_run),
                      include_dashboard=False, log_to_driver=False)
-    use_gpu = config.engine == "paper" and ray.cluster_resources().get("GPU", 0) > 0
+    from nerfaug.device import device_kind
+
+    # A run asks Ray for a GPU exactly when it will compute on one.
+    use_gpu = device_kind(config.device) == "cuda" and ray.cluster_resources().get("GPU", 0) > 0
     remote = ray.remote(_run_and_report).options(
         num_cpus=config.threads_per_run, num_gpus=1 if use_gpu else 0, max_retries=2, retry_exceptions=True,
     )

@@ -43,6 +43,13 @@ class NerfConfig:
         proposal_*: samples per proposal level, hash levels and finest resolution of each
             proposal network, table size, MLP width, and the annealing of proposal weights.
         interlevel_loss_mult, distortion_loss_mult: loss weights (proposal sampler only).
+        proposal_update_every, proposal_warmup_steps: nerfacto's proposal-update schedule. The
+            proposal networks get gradients (from the interlevel loss) only on update steps;
+            on the others they run without a graph. Steps 0-9 all update; after that a step
+            updates once more than `clip(proposal_update_every * step / proposal_warmup_steps,
+            1, proposal_update_every)` steps have passed since the last update (so every 2nd
+            step early on, every 6th after warm-up, as nerfstudio's ProposalNetworkSampler).
+            `proposal_update_every = 0` updates every step.
 
     Optimisation:
         batch_size: rays per step, drawn uniformly from all pixels of all training views.
@@ -100,6 +107,8 @@ class NerfConfig:
     proposal_anneal_slope: float = 10.0
     interlevel_loss_mult: float = 1.0
     distortion_loss_mult: float = 0.002
+    proposal_update_every: int = 0
+    proposal_warmup_steps: int = 5000
 
     batch_size: int = 4096
     field_lr: float = 1e-2

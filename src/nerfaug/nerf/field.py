@@ -44,6 +44,8 @@ def density_activation(raw: Tensor, kind: str, average_init_density: float) -> T
         kind: "trunc_exp" (nerfacto: average_init_density * exp(raw)) or "softplus"
             (softplus shifted so that softplus(0 + shift) = average_init_density).
     """
+    # float32 even under autocast (nerfacto does the same): exp of a float16 overflows above 11.
+    raw = raw.float()
     if kind == "trunc_exp":
         return average_init_density * trunc_exp(raw)
     if kind == "softplus":

@@ -19,7 +19,7 @@ from nerfaug.cameras import Cameras, image_rays
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.field import DensityField, NerfField
 from nerfaug.nerf.occupancy import OccupancyGrid
-from nerfaug.nerf.proposal import distortion_loss, interlevel_loss, proposal_anneal
+from nerfaug.nerf.proposal import ProposalSchedule, distortion_loss, interlevel_loss, proposal_anneal
 from nerfaug.nerf.sampling import ray_box_span, sample_pdf, stratified_edges
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 
@@ -38,10 +38,6 @@ class NerfModel(nn.Module):
 
     def __init__(self, config: NerfConfig, background=(1.0, 1.0, 1.0)):
         super().__init__()
-        # Vanishing transmittances and saturated activations make subnormal floats, which slow
-        # x86 CPUs by an order of magnitude (measured: 12x per training step); flushing them to
-        # zero changes no result measurably. Process-wide, and a no-op where unsupported.
-        torch.set_flush_denormal(True)
         self.config = config
         self.field = NerfField(config)
         self.occupancy = None
@@ -58,6 +54,9 @@ class NerfModel(nn.Module):
         if len(self.proposals):
             # Exponent of the proposal weights, annealed from 0 to 1 by `before_step`.
             self.register_buffer("anneal", torch.tensor(1.0))
+            self.proposal_schedule = ProposalSchedule(config.proposal_update_every, config.proposal_warmup_steps)
+            # Whether this training step's proposal evaluations build a graph (set by `before_step`).
+            self.update_proposals = True
 
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
         """Trainable parameters by optimiser group: "field" and, if any, "proposal"."""
@@ -87,6 +86,7 @@ class NerfModel(nn.Module):
         else:
             config = self.config
             self.anneal.fill_(proposal_anneal(step, config.proposal_anneal_steps, config.proposal_anneal_slope))
+            self.update_proposals = self.proposal_schedule.updates(step)
 
     def forward(
         self, origins: Tensor, directions: Tensor, background: Tensor | None = None,
@@ -128,8 +128,8 @@ class NerfModel(nn.Module):
         proposal_edges, proposal_weights = [], []
         targets = list(config.proposal_samples[1:]) + [config.num_samples]
         # Samples are placed without gradient, so outside training (e.g. a Fisher information
-        # pass in eval mode) the proposal networks need no graph.
-        with torch.set_grad_enabled(torch.is_grad_enabled() and self.training):
+        # pass in eval mode) and on steps that do not update them the proposal networks need no graph.
+        with torch.set_grad_enabled(torch.is_grad_enabled() and self.training and self.update_proposals):
             for proposal, n_next in zip(self.proposals, targets):
                 weights = self._proposal_weights(proposal, origins, directions, edges)
                 proposal_edges.append(edges)

@@ -80,3 +80,43 @@ def proposal_anneal(step: int, anneal_steps: int, slope: float) -> float:
     1 at `anneal_steps` along nerfacto's biased curve slope * f / ((slope - 1) f + 1)."""
     fraction = min(max(step / max(anneal_steps, 1), 0.0), 1.0)
     return slope * fraction / ((slope - 1.0) * fraction + 1.0)
+
+
+def proposal_update_interval(step: int, update_every: int, warmup_steps: int) -> float:
+    """nerfacto's update schedule: how many steps must pass before the proposal networks are
+    updated again, rising linearly from 0 at step 0 to `update_every` at `warmup_steps`,
+    clipped to [1, update_every]."""
+    fraction = min(max(step / max(warmup_steps, 1), 0.0), 1.0)
+    return min(max(update_every * fraction, 1.0), float(update_every))
+
+
+class ProposalSchedule:
+    """Which training steps update the proposal networks (nerfstudio's ProposalNetworkSampler
+    rule): every step below 10, then a step once more than `proposal_update_interval` steps have
+    passed since the last update. A pure function of the step: a resumed run re-derives the
+    counter by replaying the rule from step 0.
+    """
+
+    def __init__(self, update_every: int, warmup_steps: int):
+        self.update_every, self.warmup_steps = update_every, warmup_steps
+        self._step, self._since_update = -1, 0
+
+    def _advance(self) -> bool:
+        self._step += 1
+        self._since_update += 1
+        interval = proposal_update_interval(self._step, self.update_every, self.warmup_steps)
+        updated = self._since_update > interval or self._step < 10
+        if updated:
+            self._since_update = 0
+        return updated
+
+    def updates(self, step: int) -> bool:
+        """Whether training step `step` updates the proposal networks."""
+        if self.update_every <= 0:
+            return True
+        if step <= self._step:  # asked again, or a step back (a reload): replay from the start
+            self._step, self._since_update = -1, 0
+        updated = True
+        while self._step < step:
+            updated = self._advance()
+        return updated

@@ -19,6 +19,7 @@ from torch import Tensor
 
 from nerfaug.cameras import Cameras, generate_rays
 from nerfaug.data.views import Views
+from nerfaug.device import autocast_dtype, resolve_device
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.model import NerfModel
 
@@ -55,14 +56,24 @@ class Trainer:
         step: completed training steps.
         train_views: the current training views (materialised).
         history: one dict per completed step: {"step", "loss", "psnr"} (psnr of the batch's rgb).
-        generator: the trainer's only source of randomness.
+        generator: the trainer's only source of randomness on the CPU (on a GPU, see
+            `step_generator`).
+        scaler: the float16 `GradScaler` when training under fp16 autocast (cuda), else None.
     """
 
     def __init__(
         self, views: Views, config: NerfConfig, seed: int = 0, device="cpu",
-        background=(1.0, 1.0, 1.0), progress: bool = True,
+        background=(1.0, 1.0, 1.0), progress: bool = True, precision: str = "auto",
     ):
-        self.config, self.seed, self.device = config, seed, torch.device(device)
+        # device: "cpu", "cuda", "auto" (cuda when available); precision: "auto" (fp16 autocast
+        # on cuda, fp32 on the CPU), "fp32", "fp16" or "bf16" (`nerfaug.device.autocast_dtype`).
+        self.config, self.seed, self.device = config, seed, resolve_device(device)
+        self._autocast = autocast_dtype(self.device, precision)
+        # float16 gradients underflow without loss scaling; bfloat16 has float32's range.
+        self.scaler = torch.amp.GradScaler("cuda") if self._autocast == torch.float16 else None
+        # Drawing a step's ~10^6 jitter numbers on the CPU and copying them costs more than the
+        # step on a GPU, so there they come from a generator on the device (see step_generator).
+        self._device_generator = None if self.device.type == "cpu" else torch.Generator(device=self.device)
         self.background = tuple(float(c) for c in background)
         self.progress = progress
         self.generator = torch.Generator().manual_seed(seed)
@@ -82,6 +93,15 @@ class Trainer:
         self.step = 0
         self.history: list[dict] = []
         self._set_views(views.materialised())
+
+    def step_generator(self) -> torch.Generator:
+        """The generator the next step draws from. On the CPU the trainer's own `generator`
+        (checkpointed with it). On another device a generator there, reseeded from (seed, step)
+        before every step: deterministic per seed, and a checkpoint resumes exactly on any device
+        without saving device RNG state."""
+        if self._device_generator is None:
+            return self.generator
+        return self._device_generator.manual_seed((self.seed * 2**32 + self.step) % 2**63)
 
     def _set_views(self, views: Views) -> None:
         """Hold `views` on the device as flat pixel arrays for uniform sampling."""
@@ -105,8 +125,9 @@ class Trainer:
             merged.alphas = None  # mixed sources: fall back to the composited images only
         self._set_views(merged)
 
-    def sample_batch(self) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        """A batch of rays drawn uniformly over all pixels of all training views.
+    def sample_batch(self, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """A batch of rays drawn uniformly over all pixels of all training views, from
+        `generator` (None: the trainer's `generator`).
 
         Returns:
             origins, directions (B, 3), target colours (B, 3), and the background to render
@@ -114,7 +135,10 @@ class Trainer:
         """
         cameras = self._cameras
         per_view = cameras.width * cameras.height
-        index = torch.randint(self._pixels.shape[0], (self.config.batch_size,), generator=self.generator)
+        generator = self.generator if generator is None else generator
+        index = torch.randint(
+            self._pixels.shape[0], (self.config.batch_size,), generator=generator, device=generator.device
+        )
         view, pixel = index // per_view, index % per_view
         origins, directions = generate_rays(cameras, view, pixel % cameras.width, pixel // cameras.width)
         index = index.to(self.device)
@@ -123,7 +147,7 @@ class Trainer:
         if self.config.random_background and self._alphas is not None:
             # Swap the stored background behind each pixel for a random colour the model must
             # learn to see through, so empty space cannot hide in the background colour.
-            background = torch.rand((index.shape[0], 3), generator=self.generator).to(self.device)
+            background = torch.rand((index.shape[0], 3), generator=generator, device=generator.device).to(self.device)
             transparency = 1.0 - self._alphas[index, None]
             target = target + transparency * (background - self.model.background)
         return origins, directions, target, background
@@ -136,10 +160,18 @@ class Trainer:
         """Run one step. Returns its history entry. Raises TrainingDiverged on a NaN/inf loss
         (before any parameter is updated)."""
         self.model.train()
-        self.model.before_step(self.step, self.generator)
-        origins, directions, target, background = self.sample_batch()
-        output = self.model(origins, directions, background, generator=self.generator)
-        mse = torch.nn.functional.mse_loss(output.rgb, target)
+        generator = self.step_generator()
+        self.model.before_step(self.step, generator)
+        origins, directions, target, background = self.sample_batch(generator)
+        if self._autocast is None:
+            output = self.model(origins, directions, background, generator=generator)
+        else:
+            # Mixed precision where nerfacto uses it: the networks run in half precision; the
+            # densities are float32 (`density_activation`), so weights, compositing and the
+            # losses below stay float32.
+            with torch.autocast(self.device.type, dtype=self._autocast):
+                output = self.model(origins, directions, background, generator=generator)
+        mse = torch.nn.functional.mse_loss(output.rgb.float(), target)
         loss = mse + self.model.auxiliary_loss(output)
         loss_value = float(loss.detach())
         if not math.isfinite(loss_value):
@@ -147,9 +179,14 @@ class Trainer:
             kept = path if path is not None and path.exists() else None
             raise TrainingDiverged(self.step, loss_value, kept)
         self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
         self._set_learning_rates()
-        self.optimizer.step()
+        if self.scaler is None:
+            loss.backward()
+            self.optimizer.step()
+        else:  # skips the update when a float16 gradient overflowed, and lowers the scale
+            self.scaler.scale(loss).backward()
+            self.scaler.step(self.optimizer)
+            self.scaler.update()
         self.step += 1
         entry = {"step": self.step, "loss": loss_value, "psnr": psnr_from_mse(float(mse.detach()))}
         self.history.append(entry)
@@ -197,6 +234,7 @@ class Trainer:
             "model": self.model.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "generator": self.generator.get_state(),
+            **({"scaler": self.scaler.state_dict()} if self.scaler is not None else {}),
             "views": {
                 "camera_to_world": cameras.camera_to_world, "fx": cameras.fx, "fy": cameras.fy,
                 "cx": cameras.cx, "cy": cameras.cy, "width": cameras.width, "height": cameras.height,
@@ -220,8 +258,11 @@ class Trainer:
         return path
 
     @classmethod
-    def load_checkpoint(cls, path: str | Path, device="cpu", progress: bool = True) -> "Trainer":
-        """A trainer restored from `save_checkpoint`; training continues exactly as it would have."""
+    def load_checkpoint(
+        cls, path: str | Path, device="cpu", progress: bool = True, precision: str = "auto"
+    ) -> "Trainer":
+        """A trainer restored from `save_checkpoint` (on any device); training continues exactly
+        as it would have on the device it is restored to."""
         state = torch.load(path, map_location="cpu", weights_only=True)
         if state.get("format") != CHECKPOINT_FORMAT:
             raise ValueError(f"{path}: unsupported checkpoint format {state.get('format')!r}")
@@ -229,10 +270,12 @@ class Trainer:
         cameras = Cameras(v["camera_to_world"], v["fx"], v["fy"], v["cx"], v["cy"], v["width"], v["height"])
         views = Views(cameras, v["images"], list(v["names"]), v["alphas"])
         config = NerfConfig.from_dict(state["config"])
-        trainer = cls(views, config, state["seed"], device, state["background"], progress)
+        trainer = cls(views, config, state["seed"], device, state["background"], progress, precision=precision)
         trainer.model.load_state_dict(state["model"])
         trainer.optimizer.load_state_dict(state["optimizer"])
         trainer.generator.set_state(state["generator"])
+        if trainer.scaler is not None and "scaler" in state:
+            trainer.scaler.load_state_dict(state["scaler"])
         trainer.step = state["step"]
         trainer.history = list(state["history"])
         return trainer

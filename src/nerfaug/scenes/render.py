@@ -33,11 +33,12 @@ from torch import Tensor
 import nerfaug
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views, write_blender_split
-from nerfaug.data.frames import atomic_write_json, read_image, read_json
+from nerfaug.data.frames import read_image
 from nerfaug.hemisphere import (
     BLENDER_CAMERA_ANGLE_X, BLENDER_RADIUS, fibonacci_angles, half_hemisphere_poses, pose_from_angles,
     sample_uniform_poses,
 )
+from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.scenes import BUILTIN_SCENES, worker
 
 # Bump when the layout or meaning of a rendered dataset changes; older caches then re-render.

@@ -1,17 +1,22 @@
 """Choosing which candidate views to add: candidates, selectors, and the registry of methods."""
 
+from nerfaug.selection.batch import batch_aware_sample, batch_posterior
 from nerfaug.selection.candidates import hemisphere_candidates, matching_poses, pool_candidates
 from nerfaug.selection.methods import (
-    METHODS, MethodSpec, Selection, SelectionConfig, candidate_scores, fisherrf_candidates,
-    get_method, select_views,
+    AUTHORS_SETTINGS, AUTHORS_VARIANTS, BATCH_AWARE, FAMILIES, MAIN_COMPARISON, METHODS, STUDY_METHODS,
+    TABLE_I, TABLE_I_ROWS, TABLE_II, TABLE_II_ROWS, MethodSpec, Selection, SelectionConfig, candidate_scores,
+    fisherrf_candidates, get_method, method_label, select_views,
 )
+from nerfaug.selection.registry import ESTIMATORS, SELECTORS, Request, Scoring, register_estimator, register_selector
 from nerfaug.selection.selectors import (
     greedy_farthest, rejection_sample, select_top_k, select_uniform,
 )
 
 __all__ = [
-    "METHODS", "MethodSpec", "Selection", "SelectionConfig", "candidate_scores",
-    "fisherrf_candidates", "get_method", "greedy_farthest", "hemisphere_candidates",
-    "matching_poses", "pool_candidates", "rejection_sample", "select_top_k", "select_uniform",
-    "select_views",
+    "AUTHORS_SETTINGS", "AUTHORS_VARIANTS", "BATCH_AWARE", "ESTIMATORS", "FAMILIES", "MAIN_COMPARISON",
+    "METHODS", "SELECTORS", "STUDY_METHODS", "TABLE_I", "TABLE_II", "TABLE_II_ROWS", "TABLE_I_ROWS",
+    "MethodSpec", "Request", "Scoring", "Selection", "SelectionConfig", "batch_aware_sample", "batch_posterior",
+    "candidate_scores", "fisherrf_candidates", "get_method", "greedy_farthest", "hemisphere_candidates",
+    "matching_poses", "method_label", "pool_candidates", "register_estimator", "register_selector",
+    "rejection_sample", "select_top_k", "select_uniform", "select_views",
 ]

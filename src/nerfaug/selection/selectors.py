@@ -32,16 +32,37 @@ def _check_k(n_candidates: int, k: int) -> None:
         raise ValueError(f"cannot choose {k} views out of {n_candidates} candidates")
 
 
-def select_uniform(n_candidates: int, k: int, generator: torch.Generator | None = None) -> Tensor:
-    """k distinct candidate indices uniformly at random. Shape (k,)."""
+def _check_eligible(eligible: Tensor | None, n_candidates: int, k: int) -> Tensor:
+    """The (n_candidates,) bool mask of candidates that may be chosen (all when None)."""
+    if eligible is None:
+        return torch.ones(n_candidates, dtype=torch.bool)
+    eligible = torch.as_tensor(eligible, dtype=torch.bool).cpu().reshape(-1)
+    if eligible.numel() != n_candidates:
+        raise ValueError(f"eligible has {eligible.numel()} entries for {n_candidates} candidates")
+    if int(eligible.sum()) < k:
+        raise ValueError(f"cannot choose {k} views: only {int(eligible.sum())} of {n_candidates} candidates are eligible")
+    return eligible
+
+
+def select_uniform(
+    n_candidates: int, k: int, generator: torch.Generator | None = None, eligible: Tensor | None = None
+) -> Tensor:
+    """k distinct candidate indices uniformly at random (among the `eligible` ones). Shape (k,)."""
     _check_k(n_candidates, k)
-    return torch.randperm(n_candidates, generator=generator)[:k]
+    if eligible is None:
+        return torch.randperm(n_candidates, generator=generator)[:k]
+    allowed = torch.nonzero(_check_eligible(eligible, n_candidates, k)).reshape(-1)
+    return allowed[torch.randperm(allowed.numel(), generator=generator)[:k]]
 
 
-def select_top_k(scores: Tensor, k: int) -> Tensor:
-    """Indices of the k highest scores, best first; ties go to the lower index. Shape (k,)."""
+def select_top_k(scores: Tensor, k: int, eligible: Tensor | None = None) -> Tensor:
+    """Indices of the k highest scores (among the `eligible` candidates), best first; ties go to
+    the lower index. Shape (k,)."""
     _check_k(scores.shape[0], k)
-    return torch.argsort(scores.detach().cpu(), descending=True, stable=True)[:k]
+    scores = scores.detach().cpu().double()
+    if eligible is not None:
+        scores = torch.where(_check_eligible(eligible, scores.shape[0], k), scores, -math.inf)
+    return torch.argsort(scores, descending=True, stable=True)[:k]
 
 
 def _check_scores(scores: Tensor) -> Tensor:
@@ -72,6 +93,7 @@ def rejection_sample(
     max_draws: int = MAX_DRAWS,
     variant: str = "paper",
     threshold: float = AUTHORS_THRESHOLD,
+    eligible: Tensor | None = None,
 ) -> Tensor:
     """Choose k distinct candidates with the paper's rejection sampler.
 
@@ -88,9 +110,10 @@ def rejection_sample(
     "authors": the authors' code: go through the candidates in order (again from the start while
     fewer than k are accepted), skip accepted ones, draw nu ~ U[0.05, 1] and accept if
     w > threshold * nu (threshold 15). Their scores are in [0, 1] with max 1; other scores are
-    divided by their max first. Only candidates with w > 0.75 can then be accepted, each with
-    probability (w / 15 - 0.05) / 0.95 per visit. Their code also skips some low elevations;
-    that rule is not specified and is not reproduced.
+    divided by their max first (the max over all candidates, eligible or not, as their code
+    normalises before its loop). Only candidates with w > 0.75 can then be accepted, each with
+    probability (w / 15 - 0.05) / 0.95 per visit. Their code also rejects candidates within
+    0.4 rad of the pole: pass those as not `eligible` (`SelectionConfig.min_polar`).
 
     Args:
         scores: Tensor with shape (n_candidates,), w >= 0 (an unnormalised density).
@@ -100,6 +123,9 @@ def rejection_sample(
         max_draws: give up (RuntimeError) after this many proposals.
         variant: "paper" or "authors".
         threshold: the authors' factor 15 ("authors" only).
+        eligible: bool Tensor with shape (n_candidates,): candidates that may be accepted
+            (an ineligible one is never accepted; "paper" takes M over the eligible ones); None
+            for all.
 
     Returns:
         Tensor with shape (k,), candidate indices in the order accepted.
@@ -112,9 +138,11 @@ def rejection_sample(
         raise ValueError(f"unknown sampler variant {variant!r}; valid: {', '.join(SAMPLERS)}")
     w = _check_scores(scores)
     _check_k(w.numel(), k)
+    allowed = _check_eligible(eligible, w.numel(), k)
     if variant == "authors":
-        return _authors_sample(w, k, generator, max_draws, threshold)
+        return _authors_sample(w, k, generator, max_draws, threshold, allowed)
 
+    w = torch.where(allowed, w, 0.0)
     peak = float(w.max()) if w.numel() else 0.0
     if scale_m is None:
         scale_m = peak
@@ -154,11 +182,13 @@ def rejection_sample(
     return torch.tensor(chosen, dtype=torch.long)
 
 
-def _authors_sample(w: Tensor, k: int, generator, max_draws: int, threshold: float) -> Tensor:
+def _authors_sample(w: Tensor, k: int, generator, max_draws: int, threshold: float, allowed: Tensor) -> Tensor:
     low, high = AUTHORS_NU_RANGE
     peak = float(w.max())
     if peak > 0:  # their rule assumes scores in [0, 1] with max 1 (as their normalisation gives)
         w = w / peak
+    # Their loop draws nu for an ineligible candidate too and then skips it: same as w = 0.
+    w = torch.where(allowed, w, 0.0)
     accept_prob = ((w / threshold - low) / (high - low)).clamp(0.0, 1.0)
     _require_acceptable(
         accept_prob, k, f"the authors' rule accepts only w > {threshold} * {low} = {threshold * low:.6g}"
@@ -186,7 +216,9 @@ def _authors_sample(w: Tensor, k: int, generator, max_draws: int, threshold: flo
     return torch.tensor(chosen, dtype=torch.long)
 
 
-def greedy_farthest(candidate_rotations: Tensor, training_rotations: Tensor, k: int) -> Tensor:
+def greedy_farthest(
+    candidate_rotations: Tensor, training_rotations: Tensor, k: int, eligible: Tensor | None = None
+) -> Tensor:
     """"Maximally apart": k times, pick the candidate whose smallest geodesic angle to the training
     views and the views already picked is largest.
 
@@ -195,21 +227,92 @@ def greedy_farthest(candidate_rotations: Tensor, training_rotations: Tensor, k: 
         training_rotations: Tensor with shape (n_training, 3, 3); with none, the first pick is
             candidate 0.
         k: number of views.
+        eligible: bool Tensor with shape (n_candidates,), candidates that may be picked; None for all.
 
     Returns:
         Tensor with shape (k,), in the order picked.
     """
     n = candidate_rotations.shape[0]
     _check_k(n, k)
+    allowed = _check_eligible(eligible, n, k)
     nearest = torch.full((n,), math.inf, dtype=candidate_rotations.dtype)
     if training_rotations.shape[0] > 0:
         nearest = min_geodesic_angle(candidate_rotations.cpu(), training_rotations.cpu())
     chosen: list[int] = []
     for _ in range(k):
-        gap = nearest.clone()
+        gap = torch.where(allowed, nearest, -math.inf)
         gap[chosen] = -math.inf
         best = int(torch.argmax(gap))
         chosen.append(best)
         to_best = min_geodesic_angle(candidate_rotations.cpu(), candidate_rotations[best : best + 1].cpu())
         nearest = torch.minimum(nearest, to_best)
     return torch.tensor(chosen, dtype=torch.long)
+
+
+# The registered selectors (`nerfaug.selection.registry`): adapters from a `Request` and the
+# estimator's `Scoring` to the functions above. Every one honours `Request.eligible`.
+from nerfaug.selection.registry import Request, Scoring, register_selector
+
+
+def sampling_density(request: Request, scoring: Scoring) -> Scoring:
+    """The scores a sampler draws from: `scoring.scores ** (1/T)` (see `posterior`). When T is not
+    1 the result's scores are that density and its components gain "uncertainty" (the scores
+    before) and "exponent" (1/T, repeated)."""
+    from nerfaug.selection.posterior import posterior_exponent, sharpen
+
+    config = request.config
+    exponent = posterior_exponent(scoring.scores, request.n, config.temperature, config.sharpness,
+                                  request.eligible)
+    if exponent == 1.0:
+        return scoring
+    components = {**scoring.components, "uncertainty": scoring.scores,
+                  "exponent": torch.full_like(scoring.scores, exponent)}
+    return Scoring(sharpen(scoring.scores, exponent), components, {**scoring.state, "exponent": exponent})
+
+
+@register_selector("sampling")
+def _sampling(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+    """The paper's rejection sampler (or the authors' sweep, `config.sampler`)."""
+    config = request.config
+    scoring = sampling_density(request, scoring)
+    indices = rejection_sample(scoring.scores, request.n, request.generator, config.scale_m, config.max_draws,
+                               config.sampler, config.authors_threshold, request.eligible)
+    return indices, scoring
+
+
+@register_selector("top-k")
+def _top_k(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+    """Next best views: the n highest scores."""
+    return select_top_k(scoring.scores, request.n, request.eligible), scoring
+
+
+@register_selector("uniform")
+def _uniform(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+    """n candidates uniformly at random."""
+    return select_uniform(len(request.candidates), request.n, request.generator, request.eligible), scoring
+
+
+@register_selector("farthest")
+def _farthest(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+    """Greedy farthest views; scored by the angle (radians) to the nearest training view."""
+    rotations = request.candidates.rotations.cpu().double()
+    training = request.train_cameras.rotations.cpu().double()
+    indices = greedy_farthest(rotations, training, request.n, request.eligible)
+    if training.shape[0]:
+        angle = min_geodesic_angle(rotations, training).float()
+        scoring = Scoring(angle, {"min_angle": angle}, scoring.state)
+    return indices, scoring
+
+
+@register_selector("greedy-fisher", needs=("fisher",))
+def _greedy_fisher(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+    """FisherRF's greedy batch: add each pick's H_cand into H_train and rescore."""
+    from nerfaug.uncertainty.fisher import fisherrf_greedy
+
+    scores = scoring.scores
+    if request.eligible is not None:
+        _check_eligible(request.eligible, scores.shape[0], request.n)
+        scores = torch.where(request.eligible, scores.double(), -math.inf)
+    indices, _ = fisherrf_greedy(scoring.state["h_train"], scoring.state["h_of"], request.n,
+                                 request.config.fisher_lambda, scores)
+    return indices, scoring

@@ -101,10 +101,11 @@ def minmax_normalise(values: Tensor) -> Tensor:
     return (values - low) / span
 
 
-def view_entropy(
+def mean_view_entropy(
     model: nn.Module, cameras: Cameras, resolution: int = 40, chunk: int = 4096, mode: str = "escape"
 ) -> Tensor:
-    """Mean ray entropy of each view, rendered at reduced resolution.
+    """Mean ray entropy of each view, rendered at reduced resolution, with no per-view
+    post-processing (in "authors" mode: the mean of their per-ray entropy, max over each view).
 
     Views are rendered together in batches of about `chunk` rays through the model's
     `render_weights_only` or `render_rays` (eval mode, no gradients; see `nerfaug.uncertainty.rays`),
@@ -116,11 +117,10 @@ def view_entropy(
         cameras: the n_views views to score.
         resolution: width of the reduced rendering in pixels (height keeps the aspect ratio).
         chunk: rays per batch (a batch holds whole views).
-        mode: as in `ray_entropy`. In "authors" mode the result is the authors' per-view score:
-            the cube of the mean, min-max normalised over the views to [0, 1].
+        mode: as in `ray_entropy`.
 
     Returns:
-        Tensor with shape (n_views,), bits (in [0, 1] for "authors"), on the cameras' device.
+        Tensor with shape (n_views,), on the cameras' device.
     """
     if mode not in ENTROPY_MODES:
         raise ValueError(f"unknown entropy mode {mode!r}; valid modes: {', '.join(ENTROPY_MODES)}")
@@ -136,7 +136,32 @@ def view_entropy(
         else:
             entropy = ray_entropy(weights.flatten(0, 1), mode).reshape(len(batch), n_pixels)
         scores.append(entropy.mean(dim=-1))
-    result = torch.cat(scores).to(cameras.camera_to_world.device)
+    return torch.cat(scores).to(cameras.camera_to_world.device)
+
+
+def authors_view_scores(means: Tensor) -> Tensor:
+    """The authors' per-view entropy score from per-view means (shape (n_views,)): the cube,
+    min-max normalised over the views to [0, 1]."""
+    return minmax_normalise(means**3)
+
+
+def view_entropy(
+    model: nn.Module, cameras: Cameras, resolution: int = 40, chunk: int = 4096, mode: str = "escape"
+) -> Tensor:
+    """Mean ray entropy of each view, rendered at reduced resolution (`mean_view_entropy`).
+
+    Args:
+        model: a module with the `NerfModel` interface.
+        cameras: the n_views views to score.
+        resolution: width of the reduced rendering in pixels (height keeps the aspect ratio).
+        chunk: rays per batch (a batch holds whole views).
+        mode: as in `ray_entropy`. In "authors" mode the result is the authors' per-view score:
+            the cube of the mean, min-max normalised over the views to [0, 1].
+
+    Returns:
+        Tensor with shape (n_views,), bits (in [0, 1] for "authors"), on the cameras' device.
+    """
+    result = mean_view_entropy(model, cameras, resolution, chunk, mode)
     if mode == "authors":
-        result = minmax_normalise(result**3)
+        result = authors_view_scores(result)
     return result

@@ -41,6 +41,7 @@ The model is put in eval mode (deterministic rendering) while the diagonal is co
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -88,8 +89,8 @@ def _flat(grads) -> Tensor:
     return torch.cat([g.reshape(-1) for g in grads])
 
 
-def _exact_vmap(model, params, origins, directions, groups, n_groups, background) -> Tensor:
-    """Per-ray Jacobians with torch.func, squared, summed into their group. (n_groups, P)."""
+def _exact_vmap(model, params, origins, directions, groups, n_groups, background, weights) -> Tensor:
+    """Per-ray Jacobians with torch.func, squared, weighted, summed into their group. (n_groups, P)."""
     frozen = {k: v.detach() for k, v in params.items()}
 
     def rgb_of_ray(p, origin, direction):
@@ -103,11 +104,11 @@ def _exact_vmap(model, params, origins, directions, groups, n_groups, background
     for start in range(0, origins.shape[0], chunk):
         jac = per_ray(frozen, origins[start : start + chunk], directions[start : start + chunk])
         squared = torch.cat([(j**2).sum(dim=1).flatten(1) for j in jac.values()], dim=1)
-        total.index_add_(0, groups[start : start + chunk], squared)
+        total.index_add_(0, groups[start : start + chunk], squared * weights[start : start + chunk, None])
     return total
 
 
-def _exact_loop(model, params, origins, directions, groups, n_groups, background) -> Tensor:
+def _exact_loop(model, params, origins, directions, groups, n_groups, background, weights) -> Tensor:
     """The same as `_exact_vmap`, one ray and one channel per backward pass."""
     n_params = sum(p.numel() for p in params.values())
     total = torch.zeros(n_groups, n_params, device=origins.device)
@@ -116,7 +117,7 @@ def _exact_loop(model, params, origins, directions, groups, n_groups, background
         for c in range(3):
             grads = torch.autograd.grad(rgb[c], list(params.values()), retain_graph=c < 2, allow_unused=True)
             grads = [torch.zeros_like(p) if g is None else g for g, p in zip(grads, params.values())]
-            total[groups[r]] += _flat(grads) ** 2
+            total[groups[r]] += weights[r] * _flat(grads) ** 2
     return total
 
 
@@ -148,21 +149,23 @@ def _probe_squares(rgb: Tensor, params: dict[str, Tensor], signs: Tensor) -> Ten
     return total
 
 
-def _random_sign(model, params, origins, directions, groups, n_groups, background, n_probes, seeds, chunk):
-    """Rademacher estimate per group; squares taken per chunk of at most `chunk` rays of one group;
-    group g's probes drawn from a generator seeded with seeds[g]."""
+def _random_sign(model, params, origins, directions, groups, n_groups, background, weights, n_probes, generators, chunk):
+    """Rademacher estimate of sum_i w_i (d c_i / d theta)^2 per group; squares taken per chunk of
+    at most `chunk` rays of one group; group g's probes drawn from generators[g].
+
+    The weight folds into the probe, v_i sqrt(w_i): E[(sum_i v_i sqrt(w_i) J_i)^2] = sum_i w_i J_i^2."""
     n_params = sum(p.numel() for p in params.values())
     total = torch.zeros(n_groups, n_params, device=origins.device)
     order = torch.argsort(groups, stable=True)
     bounds = torch.searchsorted(groups[order], torch.arange(n_groups + 1, device=groups.device)).tolist()
-    generators = [torch.Generator().manual_seed(seed) for seed in seeds]
     for g in range(n_groups):
         rays = order[bounds[g] : bounds[g + 1]]
         for start in range(0, rays.numel(), chunk):
             idx = rays[start : start + chunk]
             rgb = model(origins[idx], directions[idx], background=background).rgb
             signs = torch.randint(0, 2, (n_probes, rgb.shape[0]), generator=generators[g], dtype=torch.int8)
-            total[g] += _probe_squares(rgb, params, (signs.to(rgb.dtype) * 2.0 - 1.0).to(rgb.device))
+            probes = (signs.to(rgb.dtype) * 2.0 - 1.0).to(rgb.device) * weights[idx].sqrt()
+            total[g] += _probe_squares(rgb, params, probes)
     return total / n_probes
 
 
@@ -177,6 +180,7 @@ def fisher_diagonal_groups(
     generator: torch.Generator | None = None,
     chunk: int = 1024,
     background: Tensor | None = None,
+    weights: Tensor | None = None,
 ) -> Tensor:
     """Diagonal Fisher information of the model's trainable parameters, one per group of rays.
 
@@ -192,15 +196,23 @@ def fisher_diagonal_groups(
         chunk: most rays per forward pass and per squared probe ("random-sign"; "exact" sizes
             its own chunks).
         background: passed to the model's forward, Tensor with shape (3,) or None.
+        weights: Tensor with shape (n_rays,), each ray's weight w_i (the pixels it stands for, see
+            `stratified_pixels`); None for ones.
 
     Returns:
-        Tensor with shape (n_groups, P), P = number of trainable parameters, on the model's device.
+        Tensor with shape (n_groups, P), sum over each group's rays of w_i (d c_i / d theta)^2 summed
+        over the colour channels, P = number of trainable parameters, on the model's device.
     """
-    seeds = _group_seeds(generator, n_groups) if method == "random-sign" else []
-    return _fisher_groups(model, origins, directions, groups, n_groups, method, n_probes, seeds, chunk, background)
+    generators = [torch.Generator().manual_seed(s) for s in _group_seeds(generator, n_groups)] if (
+        method == "random-sign") else []
+    return _fisher_groups(
+        model, origins, directions, groups, n_groups, method, n_probes, generators, chunk, background, weights
+    )
 
 
-def _fisher_groups(model, origins, directions, groups, n_groups, method, n_probes, seeds, chunk, background) -> Tensor:
+def _fisher_groups(
+    model, origins, directions, groups, n_groups, method, n_probes, generators, chunk, background, weights
+) -> Tensor:
     if method not in FISHER_METHODS:
         raise ValueError(f"unknown Fisher method {method!r}; valid: {', '.join(FISHER_METHODS)}")
     if n_probes < 1:
@@ -208,16 +220,18 @@ def _fisher_groups(model, origins, directions, groups, n_groups, method, n_probe
     device = model_device(model)
     origins, directions = origins.to(device), directions.to(device)
     groups = torch.as_tensor(groups, device=device).long()
+    weights = (torch.ones(origins.shape[0]) if weights is None else torch.as_tensor(weights)).float().to(device)
     if background is not None:
         background = torch.as_tensor(background, dtype=torch.float32, device=device)
     params = trainable_parameters(model)
     with _eval_mode(model):
         if method == "random-sign":
             return _random_sign(
-                model, params, origins, directions, groups, n_groups, background, n_probes, seeds, chunk
+                model, params, origins, directions, groups, n_groups, background, weights, n_probes,
+                generators, chunk,
             )
         try:
-            return _exact_vmap(model, params, origins, directions, groups, n_groups, background)
+            return _exact_vmap(model, params, origins, directions, groups, n_groups, background, weights)
         except (RuntimeError, NotImplementedError, ValueError) as error:
             warnings.warn(
                 f"the model's forward does not run under torch.func.vmap ({type(error).__name__}: "
@@ -225,7 +239,7 @@ def _fisher_groups(model, origins, directions, groups, n_groups, method, n_probe
                 "diagonal one ray at a time, which is slower (method='random-sign' is faster)",
                 stacklevel=3,
             )
-            return _exact_loop(model, params, origins, directions, groups, n_groups, background)
+            return _exact_loop(model, params, origins, directions, groups, n_groups, background, weights)
 
 
 def fisher_diagonal(
@@ -237,30 +251,37 @@ def fisher_diagonal(
     generator: torch.Generator | None = None,
     chunk: int = 128,
     background: Tensor | None = None,
+    weights: Tensor | None = None,
 ) -> Tensor:
-    """diag(J^T J) over all the given rays, J = d(rendered rgb)/d(trainable parameters).
+    """sum_i w_i (d c_i / d theta)^2 over all the given rays i: diag(J^T W J), J = d(rendered
+    rgb)/d(trainable parameters); with `weights` from `stratified_pixels`, an unbiased estimate of
+    the diagonal over every pixel of the images.
 
     Args:
         model, method, n_probes, generator, background: as in `fisher_diagonal_groups`.
         origins, directions: Tensors with shape (n_rays, 3).
         chunk: rays per squared probe ("random-sign"): the rays are split into consecutive
             chunks, each estimated on its own, which removes the cross terms between chunks.
+        weights: Tensor with shape (n_rays,), or None for ones.
 
     Returns:
         Tensor with shape (P,), trainable parameters flattened in `named_parameters()` order.
     """
     if origins.shape[0] == 0:
         return torch.zeros(n_trainable(model), device=model_device(model))
+    weights = torch.ones(origins.shape[0]) if weights is None else torch.as_tensor(weights)
     one_group = torch.zeros(origins.shape[0], dtype=torch.long)
     if method != "random-sign":
-        return _fisher_groups(model, origins, directions, one_group, 1, method, n_probes, [], chunk, background)[0]
+        return _fisher_groups(
+            model, origins, directions, one_group, 1, method, n_probes, [], chunk, background, weights
+        )[0]
     starts = range(0, origins.shape[0], chunk)
     seeds = _group_seeds(generator, len(starts))
     # One chunk at a time, so that only one P-vector is held whatever the number of chunks.
     return sum(
         _fisher_groups(
             model, origins[s : s + chunk], directions[s : s + chunk], one_group[s : s + chunk], 1,
-            method, n_probes, [seed], chunk, background,
+            method, n_probes, [torch.Generator().manual_seed(seed)], chunk, background, weights[s : s + chunk],
         )[0]
         for s, seed in zip(starts, seeds)
     )
@@ -270,6 +291,8 @@ def sample_pixel_rays(
     cameras: Cameras, n_pixels: int, generator: torch.Generator | None = None
 ) -> tuple[Tensor, Tensor]:
     """Rays through `n_pixels` pixels drawn uniformly (with replacement) over all the cameras.
+
+    Unweighted; `stratified_pixel_rays` gives an estimate of the whole images' sum with less noise.
 
     Returns:
         origins, directions: Tensors with shape (n_pixels, 3).
@@ -281,39 +304,115 @@ def sample_pixel_rays(
     return generate_rays(cameras, views, xs, ys)
 
 
+def pixel_grid(n_pixels: int, width: int, height: int) -> tuple[int, int]:
+    """(columns, rows) of blocks, about `n_pixels` of them with the image's aspect ratio, at most
+    one block per pixel (then the grid is the whole image)."""
+    if n_pixels < 1:
+        raise ValueError(f"the number of pixels per view must be at least 1, got {n_pixels}")
+    columns = min(width, max(1, round(math.sqrt(n_pixels * width / height))))
+    rows = min(height, max(1, round(n_pixels / columns)))
+    return columns, rows
+
+
+def stratified_pixels(
+    n_views: int, width: int, height: int, columns: int, rows: int, generators: list[torch.Generator]
+) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """One pixel drawn uniformly in each block of a `columns` x `rows` grid over each view, weighted
+    by its block's area: sum_i w_i f(pixel_i) is an unbiased estimate of the sum of f over every
+    pixel of the views (E[area * f(uniform pixel of the block)] = the block's sum), with less
+    variance than uniform draws because the pixels are spread over the image. With one block per
+    pixel it is that sum, exactly.
+
+    Args:
+        n_views: views (a pixel set per view, view after view, blocks row-major).
+        width, height: image size in pixels.
+        columns, rows: the grid, at most width x height.
+        generators: one per view; view v's pixels are drawn from generators[v] only.
+
+    Returns:
+        views, xs, ys: Tensors with shape (n_views * columns * rows,), integer pixel coordinates.
+        weights: Tensor with shape (n_views * columns * rows,), block areas (sum width * height per view).
+    """
+    if not (1 <= columns <= width and 1 <= rows <= height):
+        raise ValueError(f"a {columns} x {rows} pixel grid does not fit a {width} x {height} image")
+    x_edges = torch.arange(columns + 1) * width // columns
+    y_edges = torch.arange(rows + 1) * height // rows
+    y0, x0 = torch.meshgrid(y_edges[:-1], x_edges[:-1], indexing="ij")
+    y_size, x_size = torch.meshgrid(y_edges.diff(), x_edges.diff(), indexing="ij")
+    x0, y0, x_size, y_size = x0.reshape(-1), y0.reshape(-1), x_size.reshape(-1), y_size.reshape(-1)
+    xs, ys = [], []
+    for v in range(n_views):
+        u = torch.rand(2, x0.numel(), generator=generators[v], dtype=torch.float64)
+        xs.append(x0 + (u[0] * x_size).long().minimum(x_size - 1))
+        ys.append(y0 + (u[1] * y_size).long().minimum(y_size - 1))
+    views = torch.arange(n_views).repeat_interleave(x0.numel())
+    weights = (x_size * y_size).double().repeat(n_views)
+    return views, torch.cat(xs), torch.cat(ys), weights
+
+
+def stratified_pixel_rays(
+    cameras: Cameras, n_pixels: int, generator: torch.Generator | None = None
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Rays through about `n_pixels` pixels spread evenly over the views (`stratified_pixels`,
+    n_pixels / n_views per view), with weights that make a weighted sum over them an unbiased
+    estimate of the sum over every pixel of every view.
+
+    Returns:
+        origins, directions: Tensors with shape (n_rays, 3).
+        weights: Tensor with shape (n_rays,), float32; they sum to n_views * width * height.
+    """
+    columns, rows = pixel_grid(max(1, n_pixels // len(cameras)), cameras.width, cameras.height)
+    generators = [torch.Generator().manual_seed(s) for s in _group_seeds(generator, len(cameras))]
+    views, xs, ys, weights = stratified_pixels(len(cameras), cameras.width, cameras.height, columns, rows, generators)
+    origins, directions = generate_rays(cameras, views, xs, ys)
+    return origins, directions, weights.float()
+
+
 def fisher_views(
     model: nn.Module,
     cameras: Cameras,
-    resolution: int = 8,
+    resolution: int = 16,
     method: str = DEFAULT_METHOD,
     n_probes: int = 1,
     generator: torch.Generator | None = None,
     chunk: int = 1024,
     background: Tensor | None = None,
 ) -> Tensor:
-    """H_cand of every view: the Fisher diagonal over its pixels at reduced resolution.
+    """H_cand of every view: an unbiased estimate of the Fisher diagonal over all its pixels.
 
-    Holds n_views x P floats; `fisherrf_view_scores` scores many views of a large model without.
+    The pixels are a stratified subsample (`stratified_pixels`) of the views at their own
+    resolution, `resolution` blocks across, rather than a rendering at reduced resolution: a tiny
+    rendering aliases (its rays sample the scene at a few fixed places, which decide the score),
+    and its sum is not on the scale of the training images' sum, which the score's lambda and the
+    greedy update (H_train + H_cand) need. Holds n_views x P floats; `fisherrf_view_scores`
+    scores many views of a large model without.
 
     Args:
         cameras: the n_views candidate views.
-        resolution: width of the reduced rendering in pixels (height keeps the aspect ratio).
+        resolution: blocks across each view (rows follow the aspect ratio); the view's width or
+            more gives the whole image, exactly.
         method, n_probes, generator, chunk, background: as in `fisher_diagonal_groups`; each view
-            is one group.
+            is one group and draws its pixels and probes from its own seed.
 
     Returns:
         Tensor with shape (n_views, P).
     """
-    seeds = _group_seeds(generator, len(cameras)) if method == "random-sign" else []
-    return _views_fisher(model, cameras, resolution, method, n_probes, seeds, chunk, background)
+    return _views_fisher(model, cameras, resolution, method, n_probes, _group_seeds(generator, len(cameras)),
+                         chunk, background)
 
 
 def _views_fisher(model, cameras, resolution, method, n_probes, seeds, chunk, background) -> Tensor:
-    small = reduced_cameras(cameras, resolution)
-    origins, directions = views_rays(small, list(range(len(small))))
-    groups = torch.arange(len(small)).repeat_interleave(small.width * small.height)
+    if resolution < 1:
+        raise ValueError(f"resolution must be at least 1 pixel, got {resolution}")
+    columns = min(resolution, cameras.width)
+    rows = min(cameras.height, max(1, round(resolution * cameras.height / cameras.width)))
+    generators = [torch.Generator().manual_seed(seed) for seed in seeds]
+    views, xs, ys, weights = stratified_pixels(len(cameras), cameras.width, cameras.height, columns, rows, generators)
+    origins, directions = generate_rays(cameras, views, xs, ys)
+    # Each view's probes continue from the generator its pixels came from.
     return _fisher_groups(
-        model, origins, directions, groups, len(small), method, n_probes, seeds, chunk, background
+        model, origins, directions, views, len(cameras), method, n_probes, generators, chunk, background,
+        weights.float(),
     )
 
 
@@ -363,7 +462,7 @@ def fisherrf_view_scores(
         h_of: view index -> its H_cand (P,), kept or recomputed (the same numbers: each view's
             probes come from its own seed).
     """
-    seeds = _group_seeds(generator, len(cameras)) if method == "random-sign" else [0] * len(cameras)
+    seeds = _group_seeds(generator, len(cameras))
     keep = max(1, cache_floats // max(1, h_train.numel()))
 
     def compute(indices: list[int]) -> Tensor:

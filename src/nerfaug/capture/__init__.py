@@ -1,0 +1,34 @@
+"""Active capture: a NeRF trained on the views you have proposes where to capture next, and grows
+its dataset with what you captured there.
+
+Rooms: `frame` (the hemisphere and the engine frame), `proposal` (proposed views, their JSON),
+`images` (captured images from any source, checked), `dataset` (the run's dataset folder and the
+one frame-copying helper), `state` (session.json, typed), `session` (`CaptureSession`).
+"""
+
+from nerfaug.capture.frame import (
+    ENGINE_RADIUS,
+    Hemisphere,
+    estimate_centre,
+    estimate_hemisphere,
+    estimate_up,
+)
+from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
+from nerfaug.capture.session import (
+    CHECKPOINT_FILE,
+    DATASET_DIR,
+    PROPOSALS_DIR,
+    CaptureSession,
+)
+from nerfaug.capture.state import (
+    SESSION_FILE,
+    SESSION_FORMAT,
+    SessionError,
+    SessionState,
+)
+
+__all__ = [
+    "CHECKPOINT_FILE", "DATASET_DIR", "ENGINE_RADIUS", "PROPOSALS_DIR", "SESSION_FILE", "SESSION_FORMAT",
+    "CaptureSession", "Hemisphere", "Proposal", "SessionError", "SessionState", "estimate_centre",
+    "estimate_hemisphere", "estimate_up", "proposal_seed", "read_poses",
+]

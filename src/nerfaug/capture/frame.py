@@ -1,0 +1,191 @@
+"""The hemisphere candidate views live on, and the engine frame the NeRF is trained in.
+
+Poses given to and returned by a session are in the dataset's world frame (OpenGL
+camera-to-world, as in the Blender and nerfstudio formats). The NeRF is trained in an *engine
+frame*: the hemisphere's centre at the origin, its `up` along +z, and its radius scaled to
+`ENGINE_RADIUS` (NeRF-synthetic's 4.03), so that the engine's scene bounds (near 2, far 6, a box
+of half-size 1.5) fit any object-centred capture, whatever its units. For NeRF-synthetic data
+the two frames coincide (up to the estimate of the centre and radius).
+
+The hemisphere is where candidate views live (the paper's Sec. III-C): the upper half, relative
+to `up`, of the sphere of `radius` about `centre`. Both can be given or estimated from the
+cameras (`estimate_hemisphere`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from nerfaug.hemisphere import BLENDER_RADIUS, angles_from_pose
+
+ENGINE_RADIUS = BLENDER_RADIUS
+
+
+def estimate_centre(camera_to_world: Tensor) -> Tensor:
+    """The point closest, in least squares, to every camera's optical axis.
+
+    Minimises sum_i || (I - d_i d_i^T) (x - o_i) ||^2 over x, for camera centres o_i and viewing
+    directions d_i (each camera's -z axis): the point the cameras look at.
+
+    Args:
+        camera_to_world: Tensor with shape (n, 4, 4), n >= 2, OpenGL convention.
+
+    Returns:
+        Tensor with shape (3,), float64, world space.
+
+    Raises:
+        ValueError: fewer than two cameras, or optical axes (nearly) parallel, so no single point
+            is looked at.
+
+    Example:
+        >>> from nerfaug.hemisphere import sample_uniform_poses
+        >>> estimate_centre(sample_uniform_poses(8, centre=(1.0, 2.0, 0.5)))  # doctest: +SKIP
+        tensor([1.0000, 2.0000, 0.5000], dtype=torch.float64)
+    """
+    poses = torch.as_tensor(camera_to_world).double().reshape(-1, 4, 4)
+    if poses.shape[0] < 2:
+        raise ValueError(f"estimating the centre needs at least 2 cameras, got {poses.shape[0]}")
+    origins = poses[:, :3, 3]
+    directions = -poses[:, :3, 2]
+    directions = directions / directions.norm(dim=-1, keepdim=True)
+    projectors = torch.eye(3, dtype=torch.float64) - directions[:, :, None] * directions[:, None, :]
+    a = projectors.sum(0)
+    b = (projectors @ origins[:, :, None]).sum(0)[:, 0]
+    eigenvalues = torch.linalg.eigvalsh(a)
+    # An eigenvalue near 0 means a direction along which every axis runs: no unique closest point.
+    if eigenvalues[0] < 1e-6 * poses.shape[0]:
+        raise ValueError(
+            "the cameras' optical axes are (nearly) parallel, so they do not look at one point; "
+            "give the hemisphere's centre and radius explicitly"
+        )
+    return torch.linalg.solve(a, b)
+
+
+def estimate_up(camera_to_world: Tensor) -> Tensor:
+    """The mean of the cameras' +y (up) axes, normalised: the world's up for captures taken upright.
+
+    Args:
+        camera_to_world: Tensor with shape (n, 4, 4).
+
+    Returns:
+        Tensor with shape (3,), float64, unit length.
+    """
+    poses = torch.as_tensor(camera_to_world).double().reshape(-1, 4, 4)
+    up = poses[:, :3, 1].mean(0)
+    if up.norm() < 1e-6:
+        raise ValueError("the cameras' up axes cancel out; give the up direction explicitly")
+    return up / up.norm()
+
+
+@dataclass(frozen=True)
+class Hemisphere:
+    """The upper half, relative to `up`, of the sphere of `radius` about `centre` (world frame).
+
+    It also defines the engine frame the NeRF is trained in: centre at the origin, `up` along +z,
+    world x (or y, if `up` is close to x) projected onto the horizontal plane along +x, and
+    lengths divided by `radius / ENGINE_RADIUS`.
+
+    Attributes:
+        centre: the point looked at, world space.
+        radius: distance of the candidate cameras from the centre, world units.
+        up: the hemisphere's pole direction (unit length), world space.
+    """
+
+    centre: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius: float = ENGINE_RADIUS
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+    def __post_init__(self) -> None:
+        centre = tuple(float(c) for c in np.asarray(self.centre, dtype=np.float64).reshape(-1))
+        up = np.asarray(self.up, dtype=np.float64).reshape(-1)
+        if len(centre) != 3 or up.shape != (3,):
+            raise ValueError(f"centre and up must be 3-vectors, got {self.centre} and {self.up}")
+        if not all(math.isfinite(c) for c in centre):
+            raise ValueError(f"the hemisphere's centre must be finite, got {self.centre}")
+        if not (math.isfinite(float(self.radius)) and float(self.radius) > 0):
+            raise ValueError(f"the hemisphere's radius must be a positive number, got {self.radius}")
+        if not np.isfinite(up).all() or np.linalg.norm(up) < 1e-9:
+            raise ValueError(f"up must be a non-zero direction, got {self.up}")
+        object.__setattr__(self, "centre", centre)
+        object.__setattr__(self, "radius", float(self.radius))
+        object.__setattr__(self, "up", tuple(float(u) for u in up / np.linalg.norm(up)))
+
+    @property
+    def scale(self) -> float:
+        """World units per engine unit."""
+        return self.radius / ENGINE_RADIUS
+
+    def rotation(self) -> Tensor:
+        """Engine-to-world rotation, float64 (3, 3); its columns are the engine axes in the world."""
+        up = torch.tensor(self.up, dtype=torch.float64)
+        axis = [1.0, 0.0, 0.0] if abs(float(up[0])) < 0.9 else [0.0, 1.0, 0.0]
+        reference = torch.tensor(axis, dtype=torch.float64)
+        x = reference - (reference @ up) * up
+        x = x / x.norm()
+        return torch.stack([x, torch.linalg.cross(up, x), up], dim=1)
+
+    def to_engine(self, camera_to_world: Tensor) -> Tensor:
+        """World-frame poses (n, 4, 4) in the engine frame, float32 (n, 4, 4)."""
+        poses = torch.as_tensor(camera_to_world).double().reshape(-1, 4, 4)
+        rotation = self.rotation()
+        out = poses.clone()
+        out[:, :3, :3] = rotation.T @ poses[:, :3, :3]
+        offset = poses[:, :3, 3] - torch.tensor(self.centre, dtype=torch.float64)
+        out[:, :3, 3] = offset @ rotation / self.scale
+        return out.float()
+
+    def to_world(self, camera_to_world: Tensor) -> Tensor:
+        """Engine-frame poses (n, 4, 4) in the world frame, float32 (n, 4, 4)."""
+        poses = torch.as_tensor(camera_to_world).double().reshape(-1, 4, 4)
+        rotation = self.rotation()
+        out = poses.clone()
+        out[:, :3, :3] = rotation @ poses[:, :3, :3]
+        out[:, :3, 3] = torch.tensor(self.centre, dtype=torch.float64) + self.scale * poses[:, :3, 3] @ rotation.T
+        return out.float()
+
+    def angles(self, camera_to_world: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Azimuth and polar angle (radians, about `up`) and distance (world units) of world poses.
+
+        Returns:
+            azimuth, polar, radius: Tensors with shape (n,).
+        """
+        azimuth, polar, radius = angles_from_pose(self.to_engine(camera_to_world))
+        return azimuth, polar, radius * self.scale
+
+    def to_dict(self) -> dict:
+        return {"centre": list(self.centre), "radius": self.radius, "up": list(self.up)}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Hemisphere:
+        return cls(tuple(data["centre"]), float(data["radius"]), tuple(data["up"]))
+
+
+def estimate_hemisphere(
+    camera_to_world: Tensor, centre=None, radius: float | None = None, up=(0.0, 0.0, 1.0)
+) -> Hemisphere:
+    """The hemisphere the cameras sit on: what is not given is estimated from them.
+
+    Args:
+        camera_to_world: Tensor with shape (n, 4, 4), the existing cameras.
+        centre: the point looked at; None for `estimate_centre` (the point closest to all
+            optical axes).
+        radius: None for the mean distance of the cameras from the centre.
+        up: the pole direction; "estimate" for `estimate_up` (the mean camera up axis).
+
+    Returns:
+        Hemisphere.
+    """
+    poses = torch.as_tensor(camera_to_world).double().reshape(-1, 4, 4)
+    if isinstance(up, str):
+        if up != "estimate":
+            raise ValueError(f"up must be a 3-vector or 'estimate', got {up!r}")
+        up = estimate_up(poses)
+    centre = estimate_centre(poses) if centre is None else torch.as_tensor(centre, dtype=torch.float64)
+    if radius is None:
+        radius = float((poses[:, :3, 3] - centre).norm(dim=-1).mean())
+    return Hemisphere(tuple(centre.tolist()), radius, tuple(torch.as_tensor(up, dtype=torch.float64).tolist()))

@@ -1,0 +1,133 @@
+"""Proposals: the views a session asks to capture next, written as a Blender-style transforms
+JSON (world-frame poses, every candidate's score) that a robot, Blender or `add_views` reads."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+import nerfaug
+from nerfaug.cameras import Cameras
+from nerfaug.capture.frame import Hemisphere
+from nerfaug.data import DatasetError
+from nerfaug.data.frames import check_pose
+from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
+
+
+def proposal_seed(seed: int, number: int) -> int:
+    """The seed of proposal `number` of a session seeded with `seed`: independent of the global
+    RNG and of everything done before, so a resumed session proposes what the original would."""
+    return int(np.random.SeedSequence([int(seed), int(number)]).generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
+@dataclass
+class Proposal:
+    """The views a session proposes to capture next.
+
+    Attributes:
+        number: the session's proposal counter (0 for the first).
+        method: the selection method (`nerfaug methods`).
+        poses: Tensor with shape (n, 4, 4), world-frame OpenGL camera-to-world: where to capture.
+        names: n suggested image names (file stems), e.g. "capture_000_00"; `add_views` matches
+            captured files to poses by them.
+        azimuth, polar: Tensors with shape (n,), radians, about the hemisphere's centre and up.
+        indices: Tensor with shape (n,), the chosen candidates' indices.
+        candidates: the world-frame cameras that were scored (n_candidates).
+        scores: Tensor with shape (n_candidates,), every candidate's score (bright on the map).
+        components: name -> Tensor with shape (n_candidates,), the terms behind the scores.
+        map_path: the hemisphere map PNG (scores, training views, chosen views), or None.
+        step: training step of the model that scored them.
+        seed: the seed of the generator used (None when the caller passed a generator).
+        camera_angle_x: horizontal field of view of the cameras, radians.
+        hemisphere: the session's hemisphere.
+    """
+
+    number: int
+    method: str
+    poses: Tensor
+    names: list[str]
+    azimuth: Tensor
+    polar: Tensor
+    indices: Tensor
+    candidates: Cameras
+    scores: Tensor
+    components: dict[str, Tensor]
+    map_path: Path | None
+    step: int
+    seed: int | None
+    camera_angle_x: float
+    hemisphere: Hemisphere
+
+    def __len__(self) -> int:
+        return self.poses.shape[0]
+
+    def transforms(self, include_candidates: bool = False) -> dict:
+        """A Blender-style transforms dict, ready for a robot or for Blender:
+        {camera_angle_x, w, h, fl_x, fl_y, cx, cy, frames: [{file_path, transform_matrix,
+        azimuth, polar, score}], nerfaug: {...}}. The extra keys are ignored by other readers."""
+        c = self.candidates
+        chosen = self.indices.tolist()
+        frames = [
+            {"file_path": f"./{name}", "transform_matrix": pose.tolist(), "azimuth": float(a),
+             "polar": float(p), "score": float(self.scores[i])}
+            for name, pose, a, p, i in zip(self.names, self.poses.double(), self.azimuth, self.polar, chosen)
+        ]
+        info = {
+            "proposal": self.number, "method": self.method, "step": self.step, "seed": self.seed,
+            "hemisphere": self.hemisphere.to_dict(), "nerfaug": nerfaug.__version__,
+            "map": None if self.map_path is None else str(self.map_path),
+        }
+        if include_candidates:
+            info["candidates"] = {
+                "transform_matrix": c.camera_to_world.tolist(), "scores": self.scores.tolist(),
+                "components": {k: v.tolist() for k, v in self.components.items()},
+                "chosen": chosen,
+            }
+        return {
+            "camera_angle_x": self.camera_angle_x, "w": c.width, "h": c.height,
+            "fl_x": float(c.fx[0]), "fl_y": float(c.fy[0]), "cx": float(c.cx[0]), "cy": float(c.cy[0]),
+            "frames": frames, "nerfaug": info,
+        }
+
+    def write(self, path: str | Path, include_candidates: bool = False) -> Path:
+        """Write `transforms()` to `path` (JSON) and the map beside it (`path` with suffix .png).
+
+        Returns the JSON path.
+        """
+        path = Path(path)
+        data = self.transforms(include_candidates)
+        if self.map_path is not None and Path(self.map_path).exists():
+            map_copy = path.with_suffix(".png")
+            if Path(self.map_path).resolve() != map_copy.resolve():
+                atomic_write_bytes(map_copy, Path(self.map_path).read_bytes())
+            data["nerfaug"]["map"] = map_copy.name
+        atomic_write_json(path, data)
+        return path
+
+
+def read_poses(path: str | Path) -> tuple[Tensor, list[str]]:
+    """The poses and frame names of a Blender-style transforms JSON (e.g. a written `Proposal`).
+
+    Returns:
+        poses: Tensor with shape (n, 4, 4), float32.
+        names: n file stems of the frames' `file_path`.
+
+    Raises:
+        DatasetError: naming the file, the frame and the value of a missing or malformed entry.
+    """
+    path = Path(path)
+    data = read_json(path)
+    frames = data.get("frames")
+    if not isinstance(frames, list) or not frames:
+        raise DatasetError(path, "frames must be a non-empty list", field="frames", value=frames)
+    poses, names = [], []
+    for i, frame in enumerate(frames):
+        if not isinstance(frame, dict) or "transform_matrix" not in frame:
+            raise DatasetError(path, "each frame needs a transform_matrix", field=f"frames[{i}]", value=frame)
+        poses.append(check_pose(frame["transform_matrix"], path, f"frames[{i}].transform_matrix"))
+        names.append(Path(str(frame.get("file_path", f"frame_{i:03d}"))).stem)
+    return torch.stack(poses), names

@@ -1,0 +1,667 @@
+"""`CaptureSession`: train a NeRF on the views you have, ask which views to capture next, add the
+images you captured there (a robot, a phone, a simulator), and go on training.
+
+A session lives in a run folder:
+
+    run/
+      .nerfaug              marker: nerfaug made this folder (nothing is removed from a folder without it)
+      session.json          state (`SessionState`): step, seed, engine, intrinsics, hemisphere, proposals, additions
+      checkpoint.pt         the trainer (`Trainer.save_checkpoint`): model, optimiser, RNG, views
+      dataset/              the dataset as it has grown, in the source's standard format:
+                              Blender (`transforms_train.json` + `train/*.png`) or
+                              nerfstudio (`transforms.json` + `images/*`)
+      proposals/            proposal_000.json (poses + every candidate's score), proposal_000.png (map)
+
+Poses given to and returned by a session are in the dataset's world frame; the NeRF is trained in
+the engine frame of the session's hemisphere (`nerfaug.capture.frame`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from nerfaug import owned
+from nerfaug.cameras import Cameras
+from nerfaug.capture.dataset import (
+    DISTORTION_KEYS,
+    NAME,
+    blender_compatible,
+    copy_frames,
+    copy_split,
+    dataset_json,
+    file_path,
+    frame_files,
+    has_distortion,
+    unique_stem,
+)
+from nerfaug.capture.frame import ENGINE_RADIUS, Hemisphere, estimate_hemisphere
+from nerfaug.capture.images import as_array, check_capture, collect_images, stored_bytes
+from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
+from nerfaug.capture.state import (
+    SESSION_FILE,
+    AdditionRecord,
+    DatasetInfo,
+    Intrinsics,
+    ProposalRecord,
+    SessionError,
+    SessionState,
+    SourceInfo,
+    now,
+)
+from nerfaug.data import DatasetError, Views, load_dataset
+from nerfaug.data.frames import check_pose, read_image
+from nerfaug.errors import FolderRefused
+from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
+
+CHECKPOINT_FILE = "checkpoint.pt"
+DATASET_DIR = "dataset"
+PROPOSALS_DIR = "proposals"
+# Marker kinds (`nerfaug.owned`): the run folder, its dataset copy, and a folder `export` wrote.
+RUN_KIND, DATASET_KIND, EXPORT_KIND = "capture-session", "capture-dataset", "capture-export"
+
+
+class CaptureSession:
+    """Active capture over a dataset folder and a run folder; see the module docstring.
+
+    Make one with `create` (from a dataset) or `open` (a run folder), not the constructor.
+    Changes to the model and the proposal history are kept in memory until `save()`; `add_views`
+    writes the grown dataset at once (it is the data), and `open` re-reads views the checkpoint
+    has not seen yet, so nothing captured is ever lost.
+
+    Example:
+        >>> session = CaptureSession.create("data/lego", "runs/lego", split="initial")  # doctest: +SKIP
+        >>> session.train(1000)                                      # doctest: +SKIP
+        >>> proposal = session.propose(6)                            # doctest: +SKIP
+        >>> proposal.write("poses.json")                             # doctest: +SKIP
+        >>> session.add_views("captures/", "poses.json")             # doctest: +SKIP
+        >>> session.train(1000); session.save()                      # doctest: +SKIP
+    """
+
+    def __init__(self, run_dir: Path, trainer, state: SessionState):
+        self.run_dir = Path(run_dir)
+        self.trainer = trainer
+        self.state = state
+        self._saved: tuple[int, int] | None = None  # (step, views) of the checkpoint on disk
+
+    # -- creation and persistence --
+
+    @classmethod
+    def create(
+        cls, data_dir: str | Path, run_dir: str | Path, preset: str = "cpu", seed: int = 0,
+        split: str = "train", *, config=None, centre=None, radius: float | None = None,
+        up=(0.0, 0.0, 1.0), downscale: int = 1, background=(1.0, 1.0, 1.0), device="cpu",
+        progress: bool = False,
+    ) -> CaptureSession:
+        """Start a session: copy `split` of the dataset into `run_dir/dataset`, build the NeRF,
+        save. Nothing is trained yet (call `train`).
+
+        Args:
+            data_dir: a Blender-format (`transforms_{split}.json`) or nerfstudio-format
+                (`transforms.json`) dataset folder: the views captured so far.
+            run_dir: the run folder to create (must not hold a session already).
+            preset: NeRF engine preset ("cpu", "paper", "test"); ignored if `config` is given.
+            seed: seeds the model's initialisation, its training and every proposal.
+            split: the Blender split holding the captured views ("initial" for built-in scenes).
+            config: a `NerfConfig` to use instead of the preset.
+            centre, radius: the hemisphere; None estimates them from the cameras (centre: the
+                point closest to all optical axes; radius: the mean camera distance to it).
+            up: the hemisphere's pole, world space; "estimate" for the mean camera up axis.
+            downscale: train on images shrunk by this integer factor (captures are still added,
+                and stored, at the dataset's full size).
+            background: colour behind transparent pixels, RGB in [0, 1].
+            device: torch device for the NeRF.
+            progress: show training progress bars.
+
+        Raises:
+            DatasetError: the dataset is missing or malformed (naming the file, frame and value).
+            SessionError: `run_dir` already holds a session.
+            FolderRefused: `run_dir` is not empty and was not made by nerfaug, or holds the dataset.
+        """
+        from nerfaug.nerf.config import NerfConfig
+        from nerfaug.nerf.trainer import Trainer
+
+        data_dir, run_dir = Path(data_dir).resolve(), Path(run_dir)
+        if (run_dir / SESSION_FILE).exists():
+            raise SessionError(f"{run_dir} already holds a capture session; open it with CaptureSession.open "
+                               "(`nerfaug train RUN` trains it further)")
+        check_new_run(data_dir, run_dir)
+        if int(seed) < 0:
+            raise ValueError(f"seed must be >= 0, got {seed}")
+        if int(downscale) < 1:
+            raise ValueError(f"downscale must be a positive integer, got {downscale}")
+        if len(background) != 3 or not all(0 <= float(c) <= 1 for c in background):
+            raise ValueError(f"background must be three numbers in [0, 1], got {background}")
+        source = load_dataset(data_dir, split, lazy=True)  # validates the JSON and every path
+        json_path, fmt = dataset_json(data_dir, split)
+        cameras = source.cameras
+        if int(downscale) > min(cameras.width, cameras.height):
+            raise ValueError(f"downscale must be at most the image size ({cameras.width}x{cameras.height}), "
+                             f"got {downscale}")
+        if fmt == "nerfstudio" and blender_compatible(cameras) and not has_distortion(read_json(json_path)):
+            fmt_out = "blender"
+        else:
+            fmt_out = fmt
+        hemisphere = estimate_hemisphere(cameras.camera_to_world, centre, radius, up)
+        preset_name = preset if config is None else "custom"
+        config = config if config is not None else NerfConfig.preset(preset)
+
+        # Everything is checked: from here on the run folder is written, and marked as nerfaug's first.
+        owned.mark(run_dir, RUN_KIND)
+        dataset = run_dir / DATASET_DIR
+        owned.remove_owned(dataset, DATASET_KIND, f"move it out of {run_dir} or choose another run folder")
+        owned.mark(dataset, DATASET_KIND)  # a half-made copy (no session.json) is redone next time
+        folder = "train" if fmt_out == "blender" else "images"
+        copied = copy_split(data_dir, json_path, dataset, folder, fmt_out, float(cameras.camera_angle_x[0]))
+        out_json = dataset / ("transforms_train.json" if fmt_out == "blender" else "transforms.json")
+        atomic_write_json(out_json, copied)
+
+        state = SessionState(
+            source=SourceInfo(str(data_dir), split, fmt),
+            dataset=DatasetInfo(fmt_out, folder, out_json.name),
+            preset=preset_name,
+            engine=config.to_dict(),
+            seed=int(seed),
+            downscale=int(downscale),
+            background=tuple(float(c) for c in background),
+            intrinsics=Intrinsics(cameras.width, cameras.height, float(cameras.fx[0]), float(cameras.fy[0]),
+                                  float(cameras.cx[0]), float(cameras.cy[0]), float(cameras.camera_angle_x[0])),
+            hemisphere=hemisphere,
+            hemisphere_estimated={"centre": centre is None, "radius": radius is None, "up": isinstance(up, str)},
+        )
+        session = cls(run_dir, None, state)
+        views = session._engine_views(0)
+        session.trainer = Trainer(views, config, seed=int(seed), device=device, background=tuple(background),
+                                  progress=progress)
+        session.state.views_in_model = len(views)
+        session.save()
+        return session
+
+    @classmethod
+    def open(
+        cls, run_dir: str | Path, device="cpu", progress: bool = False, load_model: bool = True
+    ) -> CaptureSession:
+        """Reopen a session where `save()` left it (plus any views added after that save).
+
+        Args:
+            load_model: False skips the checkpoint: enough to read the state or `export`, not to
+                train or propose.
+
+        Raises:
+            SessionError: naming the missing or inconsistent file, or the field of session.json
+                that is missing, malformed or points outside the run folder.
+        """
+        from nerfaug.nerf.trainer import Trainer
+
+        run_dir = Path(run_dir)
+        state = SessionState.read(run_dir)
+        session = cls(run_dir, None, state)
+        json_path = session._json_path()  # checks it stays inside the run folder
+        if not load_model:
+            return session
+        checkpoint = run_dir / CHECKPOINT_FILE
+        if not checkpoint.exists():
+            raise SessionError(f"{checkpoint}: checkpoint not found; the run folder is incomplete")
+        try:
+            trainer = Trainer.load_checkpoint(checkpoint, device=device, progress=progress)
+        except Exception as error:  # noqa: BLE001 -- torch.load and the state dicts raise many types
+            reason = str(error).split(".")[0][:160]
+            raise SessionError(f"{checkpoint}: cannot load the checkpoint ({type(error).__name__}: {reason}); restore "
+                               "it from a backup, or start a new session with `nerfaug train DATA --out NEW_RUN`")
+        session.trainer = trainer
+        in_model = len(trainer.train_views)
+        session._saved = (trainer.step, in_model)
+        frames = session._frames()
+        if len(frames) < in_model:
+            raise SessionError(f"{json_path} lists {len(frames)} frames but the checkpoint was "
+                               f"trained on {in_model}: the dataset was edited outside the session")
+        if len(frames) > in_model:  # added after the last save: train on them too
+            trainer.add_views(session._engine_views(in_model))
+        state.views_in_model = len(frames)
+        state.step = trainer.step
+        return session
+
+    def save(self) -> Path:
+        """Write the checkpoint (when the model changed since the last save) and session.json.
+
+        Returns the run folder.
+        """
+        self._require_model()
+        current = (self.trainer.step, len(self.trainer.train_views))
+        if self._saved != current or not (self.run_dir / CHECKPOINT_FILE).exists():
+            self.trainer.save_checkpoint(self.run_dir / CHECKPOINT_FILE)
+            self._saved = current
+        self.state.step = self.trainer.step
+        self.state.views_in_model = len(self.trainer.train_views)
+        self.state.saved = now()
+        atomic_write_json(self.run_dir / SESSION_FILE, self.state.to_dict())
+        return self.run_dir
+
+    # -- what the session holds --
+
+    @property
+    def step(self) -> int:
+        return self.trainer.step
+
+    @property
+    def seed(self) -> int:
+        return self.state.seed
+
+    @property
+    def hemisphere(self) -> Hemisphere:
+        return self.state.hemisphere
+
+    @property
+    def dataset_dir(self) -> Path:
+        return self.run_dir / DATASET_DIR
+
+    @property
+    def proposals(self) -> list[ProposalRecord]:
+        """The proposal history (one record per `propose` call), as stored in session.json."""
+        return self.state.proposals
+
+    @property
+    def cameras(self) -> Cameras:
+        """The world-frame cameras of every view in the dataset, at full resolution."""
+        return self.dataset().cameras
+
+    def dataset(self) -> Views:
+        """The grown dataset, world frame, full resolution (images loaded on access)."""
+        return load_dataset(self.dataset_dir, "train", lazy=True, background=tuple(self.state.background))
+
+    def template(self, width: int | None = None, height: int | None = None) -> Cameras:
+        """One camera with the session's intrinsics at the identity pose (full resolution unless a
+        size is given)."""
+        k = self.state.intrinsics
+        camera = Cameras(torch.eye(4), k.fx, k.fy, k.cx, k.cy, k.width, k.height)
+        return camera if width is None else camera.resized(width, height)
+
+    def _require_model(self) -> None:
+        if self.trainer is None:
+            raise SessionError(f"{self.run_dir} was opened with load_model=False; open it with the model to do this")
+
+    def _json_path(self) -> Path:
+        """The dataset's transforms file; SessionError if session.json sends it outside the run folder."""
+        path = self.dataset_dir / self.state.dataset.json
+        if not owned.overlaps(path, self.run_dir) or path.resolve() == self.run_dir.resolve():
+            raise SessionError(f"{self.run_dir / SESSION_FILE}, field 'dataset.json': the dataset file must lie "
+                               f"inside the run folder (got {str(path.resolve())!r})")
+        return path
+
+    def _frames(self) -> list:
+        """The frames of the dataset's transforms file (DatasetError unless a list)."""
+        json_path = self._json_path()
+        frames = read_json(json_path).get("frames")
+        if not isinstance(frames, list):
+            raise DatasetError(json_path, "frames must be a list", field="frames", value=frames)
+        return frames
+
+    def _engine_views(self, start: int) -> Views:
+        """Dataset frames `start:` loaded as the trainer sees them: downscaled, engine frame."""
+        json_path = self._json_path()
+        frames = self._frames()[start:]
+        files = frame_files(self.dataset_dir, json_path, frames)
+        background = torch.tensor(self.state.background, dtype=torch.float32)
+        downscale = self.state.downscale
+        loaded = [read_image(f, background, downscale, json_path, f"frames[{start + i}].file_path")
+                  for i, f in enumerate(files)]
+        full = load_dataset(self.dataset_dir, "train", lazy=True).cameras
+        cameras = full[list(range(start, len(full)))]
+        height, width = full.height // downscale, full.width // downscale
+        for i, (image, _) in enumerate(loaded):
+            if image.shape[:2] != (height, width):
+                raise DatasetError(json_path, f"image size differs from the dataset's {full.width}x{full.height}",
+                                   field=f"frames[{start + i}].file_path", value=str(files[i]))
+        if (width, height) != (cameras.width, cameras.height):
+            cameras = cameras.resized(width, height)
+        cameras = Cameras(self.hemisphere.to_engine(cameras.camera_to_world), cameras.fx, cameras.fy,
+                          cameras.cx, cameras.cy, cameras.width, cameras.height)
+        alphas = None
+        if all(a is not None for _, a in loaded):
+            alphas = torch.stack([a for _, a in loaded])
+        return Views(cameras, torch.stack([im for im, _ in loaded]), [str(f["file_path"]) for f in frames], alphas)
+
+    # -- the loop --
+
+    def train(self, steps: int) -> dict:
+        """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"})."""
+        self._require_model()
+        if steps < 0:
+            raise ValueError(f"steps must be >= 0, got {steps}")
+        self.trainer.train(self.trainer.step + int(steps))
+        return self.trainer.history[-1] if self.trainer.history else {"step": self.trainer.step}
+
+    def candidate_cameras(self, candidates=None, n_candidates: int = 500,
+                          generator: torch.Generator | None = None) -> Cameras:
+        """The world-frame candidate cameras for `propose` (see its `candidates`), without the
+        poses the model already trains on."""
+        from nerfaug.selection import hemisphere_candidates, matching_poses
+
+        self._require_model()
+        template = self.template()
+        engine_train = self.trainer.train_views.cameras.to("cpu")
+        if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
+            engine = hemisphere_candidates(self.template(engine_train.width, engine_train.height),
+                                           n_candidates, generator, radius=ENGINE_RADIUS, training=engine_train)
+            return _with_poses(template, self.hemisphere.to_world(engine.camera_to_world))
+        if isinstance(candidates, Cameras):
+            given = candidates
+        elif isinstance(candidates, (str, Path)):
+            given = _with_poses(template, read_poses(candidates)[0])
+        else:
+            poses = np.asarray(as_array(candidates), dtype=np.float64)
+            if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+                raise ValueError(f"candidate poses must have shape (n, 4, 4), got {poses.shape}")
+            given = _with_poses(template, torch.stack(
+                [check_pose(p, Path("candidates"), f"candidates[{i}]") for i, p in enumerate(poses)]))
+        # Compared in the engine frame, so the tolerance does not depend on the data's units.
+        known = matching_poses(self.hemisphere.to_engine(given.camera_to_world), engine_train.camera_to_world)
+        return given[torch.nonzero(~known).reshape(-1).tolist()]
+
+    def propose(
+        self, n: int = 6, method: str = "ours", candidates=None, n_candidates: int = 500,
+        generator: torch.Generator | None = None, seed: int | None = None, config=None,
+        map: bool = True,
+    ) -> Proposal:
+        """Choose `n` views to capture next.
+
+        Args:
+            n: how many views.
+            method: a selection method (`nerfaug.selection.METHODS`; "ours" is the paper's).
+            candidates: where views may be taken from. None or "hemisphere": `n_candidates`
+                poses uniform on the session's hemisphere (minus the training views); Cameras or
+                an (C, 4, 4) array of world-frame poses (e.g. what a robot can reach; the
+                session's intrinsics are used for poses); or a path to a transforms JSON of them.
+            n_candidates: hemisphere candidates to draw.
+            generator: random source for the candidates and the selector; None seeds one from
+                the session seed and the proposal number (`proposal_seed`), so a resumed session
+                proposes exactly what the original would have.
+            seed: seed a generator with this instead.
+            config: a `nerfaug.selection.SelectionConfig` (or its `to_dict()`); None for the
+                paper's defaults. The method's own settings apply over it; what was used is
+                recorded with the proposal (`extra["selection"]` of its history record).
+            map: draw the hemisphere map to `run/proposals/proposal_NNN.png`.
+
+        Returns:
+            Proposal (world-frame poses, names, angles, every candidate's score, map path). The
+            proposal is recorded in the history (saved with `save()`) and written, with its
+            candidates, to `run/proposals/proposal_NNN.json`.
+        """
+        self._require_model()
+        from nerfaug.selection import SelectionConfig, get_method, select_views
+
+        check_method(method)
+        if isinstance(config, dict):
+            config = SelectionConfig.from_dict(config)
+        used_config = get_method(method).effective_config(config)
+        if int(n) < 1 or int(n) != n:
+            raise ValueError(f"n (views to propose) must be an integer >= 1, got {n}")
+        if int(n_candidates) < 1:
+            raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
+        number = len(self.state.proposals)
+        used_seed = None
+        if generator is None:
+            used_seed = proposal_seed(self.seed, number) if seed is None else int(seed)
+            generator = torch.Generator().manual_seed(used_seed)
+        world = self.candidate_cameras(candidates, n_candidates, generator)
+        if len(world) < n:
+            raise ValueError(f"cannot propose {n} views from {len(world)} candidates")
+        hemisphere = self.hemisphere
+        engine_train = self.trainer.train_views.cameras
+        engine = Cameras(hemisphere.to_engine(world.camera_to_world), world.fx, world.fy, world.cx, world.cy,
+                         world.width, world.height)
+        if (engine.width, engine.height) != (engine_train.width, engine_train.height):
+            engine = engine.resized(engine_train.width, engine_train.height)
+        selection = select_views(method, self.trainer.model, engine_train, engine.to(self.trainer.device), n,
+                                 generator, config)
+        chosen = selection.indices.long()
+        poses = world.camera_to_world[chosen]
+        azimuth, polar, _ = hemisphere.angles(poses)
+        names = [f"capture_{number:03d}_{i:02d}" for i in range(n)]
+        folder = self.run_dir / PROPOSALS_DIR
+        map_path = None
+        if map:
+            from nerfaug.maps import plot_hemisphere_map
+
+            map_path = plot_hemisphere_map(
+                engine.camera_to_world, selection.scores, engine_train.camera_to_world.cpu(),
+                engine.camera_to_world[chosen], path=folder / f"proposal_{number:03d}.png",
+                title=f"proposal {number}: {method} at step {self.step}",
+            )
+        angle_x = float(world.camera_angle_x[0])
+        proposal = Proposal(number, selection.method or method, poses, names, azimuth, polar, chosen, world,
+                            selection.scores.float(), dict(selection.components), map_path, self.step,
+                            used_seed, angle_x, hemisphere)
+        record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
+        self.state.proposals.append(ProposalRecord(
+            number=number, method=proposal.method, n=n, step=self.step, seed=used_seed,
+            candidates=_describe_candidates(candidates), n_candidates=len(world), names=names,
+            poses=poses.tolist(), azimuth=azimuth.tolist(), polar=polar.tolist(),
+            file=str(record_path.relative_to(self.run_dir)), created=now(),
+            extra={"selection": used_config.to_dict()},
+        ))
+        return proposal
+
+    def add_views(self, images, poses=None, names: Sequence[str] | None = None) -> list[str]:
+        """Add captured images, taken at world-frame `poses`, to the dataset and to training.
+
+        Everything is checked before anything is written; on any error the dataset folder is
+        left exactly as it was. Then the images are written, then the transforms JSON (atomically).
+
+        Args:
+            images: a folder (matched to the poses' names by file stem when the poses come from
+                a transforms JSON or a Proposal, else every image file in it, sorted by name); a
+                list of image files and/or arrays; an array or tensor (n, H, W, 3 | 4) of uint8,
+                uint16 or float in [0, 1] (RGBA alpha is kept); or `Views` (e.g. an oracle's
+                capture, composited over the session's background; its cameras' poses are used
+                when `poses` is None).
+            poses: world-frame camera-to-world poses: an (n, 4, 4) array or tensor, a `Proposal`,
+                or a path to a transforms JSON (e.g. one `Proposal.write` made).
+            names: image names (file stems) for the new frames; by default the poses' frame
+                names, else the files' stems, else `view_NNNN`.
+
+        Returns:
+            The new frames' names.
+
+        Raises:
+            DatasetError: naming the file or index and the value: count mismatch, wrong image
+                size, unreadable file, values out of range, non-rigid pose, duplicate name.
+        """
+        self._require_model()
+        expected_names: list[str] | None = None
+        pose_source = "poses"
+        if poses is None:
+            if not isinstance(images, Views):
+                raise ValueError("poses are needed unless images are Views with their cameras")
+            poses = images.cameras.camera_to_world
+        if isinstance(poses, Proposal):
+            expected_names, poses = list(poses.names), poses.poses
+        elif isinstance(poses, (str, Path)):
+            pose_source = str(poses)
+            poses, expected_names = read_poses(poses)
+        array = np.asarray(as_array(poses), dtype=np.float64)
+        if array.ndim == 2:
+            array = array[None]
+        if array.ndim != 3 or array.shape[1:] != (4, 4):
+            raise DatasetError(pose_source, "poses must have shape (n, 4, 4)", value=f"shape {array.shape}")
+        checked = torch.stack([check_pose(p, Path(pose_source), f"poses[{i}]") for i, p in enumerate(array)])
+
+        if names is not None:
+            expected_names = list(names)
+        is_folder = isinstance(images, (str, Path)) and Path(images).is_dir()
+        captures = collect_images(images, expected_names if is_folder else None,
+                                  tuple(self.state.background))
+        if len(captures) != len(checked):
+            where = str(images) if isinstance(images, (str, Path)) else "images"
+            raise DatasetError(where, f"got {len(captures)} images but {len(checked)} poses; "
+                                      "give one image per pose", value=f"{len(captures)} images")
+        if expected_names is not None and len(expected_names) != len(checked):
+            raise DatasetError(pose_source, f"got {len(expected_names)} names but {len(checked)} poses")
+        k = self.state.intrinsics
+        for capture in captures:
+            check_capture(capture, k.width, k.height)
+
+        json_path = self._json_path()
+        meta = read_json(json_path)
+        frames = self._frames()
+        existing = {Path(str(f["file_path"])).stem for f in frames}
+        if expected_names is None:
+            from_files = [c.name for c in captures]
+            if all(from_files) and len(set(from_files)) == len(from_files):
+                expected_names = from_files
+            else:
+                taken = set(existing)
+                expected_names = [unique_stem(f"view_{len(frames) + i:04d}", taken) for i in range(len(captures))]
+        seen: set[str] = set()
+        for i, name in enumerate(expected_names):
+            if not NAME.fullmatch(name):
+                raise DatasetError(pose_source, "an image name may hold only letters, digits, '.', '_', '-'",
+                                   field=f"names[{i}]", value=name)
+            if name in existing:
+                raise DatasetError(json_path, f"the dataset already has a frame named {name!r}; was this capture "
+                                              "added before?", field=f"names[{i}]", value=name)
+            if name in seen:
+                raise DatasetError(pose_source, "two new images share this name", field=f"names[{i}]", value=name)
+            seen.add(name)
+
+        fmt, folder = self.state.dataset.format, self.state.dataset.folder
+        new_frames = []
+        for name, capture, pose in zip(expected_names, captures, checked):
+            data, suffix = stored_bytes(capture, png_only=fmt == "blender")
+            atomic_write_bytes(self.dataset_dir / folder / f"{name}{suffix}", data)
+            frame = {"file_path": file_path(fmt, folder, name, suffix), "transform_matrix": pose.double().tolist()}
+            if fmt == "nerfstudio":
+                frame.update({"fl_x": k.fx, "fl_y": k.fy, "cx": k.cx, "cy": k.cy, "w": k.width, "h": k.height})
+            new_frames.append(frame)
+        start = len(frames)
+        atomic_write_json(json_path, {**meta, "frames": frames + new_frames})
+
+        self.trainer.add_views(self._engine_views(start))
+        self.state.views_in_model = len(self.trainer.train_views)
+        matched = [p.number for p in self.state.proposals if set(expected_names) <= set(p.names)]
+        self.state.additions.append(AdditionRecord(
+            step=self.step, names=list(expected_names), proposal=matched[-1] if matched else None, created=now(),
+        ))
+        return list(expected_names)
+
+    def render(self, poses, width: int | None = None) -> Tensor:
+        """What the NeRF sees from world-frame `poses` (n, 4, 4): images (n, H, W, 3) in [0, 1],
+        at the training resolution (or `width` pixels across)."""
+        self._require_model()
+        train = self.trainer.train_views.cameras
+        camera = self.template(train.width, train.height)
+        if width is not None:
+            camera = camera.resized(width, max(1, round(width * train.height / train.width)))
+        engine = self.hemisphere.to_engine(torch.as_tensor(as_array(poses), dtype=torch.float32).reshape(-1, 4, 4))
+        cameras = _with_poses(camera, engine).to(self.trainer.device)
+        background = torch.tensor(self.state.background, dtype=torch.float32, device=self.trainer.device)
+        return torch.stack([self.trainer.model.render_image(cameras, i, background)["rgb"].cpu()
+                            for i in range(len(cameras))])
+
+    def export(self, out: str | Path, format: str = "nerfstudio", source_splits: bool = True) -> Path:
+        """Write the grown dataset to `out` so other tools open it.
+
+        "nerfstudio": `transforms.json` (OPENCV camera model, intrinsics global or per frame) and
+        `images/`, for nerfstudio (`ns-train nerfacto --data OUT`) and instant-ngp.
+        "blender": `transforms_train.json` and `train/*.png` (NeRF-synthetic), plus the source's
+        val and test splits when it has them (nerfstudio's blender parser needs a val split).
+        Images are copied byte for byte (never decoded and re-encoded), except non-PNG images
+        in the Blender format, which become lossless PNGs.
+
+        `out` must be new, empty, or an earlier export (nerfaug's marker): nothing else is written over.
+
+        Returns the transforms JSON path (of the train split for "blender").
+
+        Raises:
+            FolderRefused: `out` holds files nerfaug did not write, or overlaps the run folder.
+        """
+        if format not in ("nerfstudio", "blender"):
+            raise ValueError(f"format must be 'nerfstudio' or 'blender', got {format!r}")
+        out = Path(out)
+        if owned.overlaps(out, self.run_dir) or owned.overlaps(out, self.state.source.data_dir):
+            raise FolderRefused(f"{out}: the export folder must lie outside the run folder {self.run_dir} and "
+                                      f"the source dataset {self.state.source.data_dir}; choose another --out")
+        if not owned.is_empty(out) and not owned.marked(out, EXPORT_KIND):
+            raise FolderRefused(f"{out}: not empty and not an earlier nerfaug export, so nothing is written "
+                                      "there; choose a new or empty folder for --out")
+        json_path = self._json_path()
+        meta = read_json(json_path)
+        frames = self._frames()
+        frame_files(self.dataset_dir, json_path, frames)  # every image found before anything is written
+        cameras = self.cameras
+        if format == "blender" and not blender_compatible(cameras):
+            raise ValueError("these cameras do not fit the Blender format (one camera_angle_x, square pixels, "
+                             "centred principal point); export with format='nerfstudio'")
+        folder = "images" if format == "nerfstudio" else "train"
+        owned.mark(out, EXPORT_KIND)
+        new_frames = copy_frames(self.dataset_dir, json_path, frames, out, folder, format)
+        if format == "blender":
+            path = out / "transforms_train.json"
+            atomic_write_json(path, {"camera_angle_x": float(cameras.camera_angle_x[0]), "frames": new_frames})
+            source = Path(self.state.source.data_dir)
+            # The source is the user's dataset folder (recorded at creation); its files are read only.
+            if source_splits and self.state.source.format == "blender" and source.is_absolute() and source.is_dir():
+                for split in ("val", "test"):
+                    split_json = source / f"transforms_{split}.json"
+                    if split_json.exists() and split != self.state.source.split:
+                        copied = copy_split(source, split_json, out, split, "blender")
+                        atomic_write_json(out / split_json.name, copied)
+            return path
+        intrinsics = {"fl_x": cameras.fx, "fl_y": cameras.fy, "cx": cameras.cx, "cy": cameras.cy}
+        shared = all(bool((v - v[0]).abs().max() <= 1e-6 * max(1.0, float(v[0].abs()))) for v in intrinsics.values())
+        top = {"camera_model": "OPENCV", "w": cameras.width, "h": cameras.height}
+        if meta.get("camera_model"):
+            top["camera_model"] = meta["camera_model"]
+        top.update({k: meta[k] for k in DISTORTION_KEYS if k in meta})
+        if shared:
+            top.update({k: float(v[0]) for k, v in intrinsics.items()})
+        else:
+            for i, frame in enumerate(new_frames):
+                frame.update({k: float(v[i]) for k, v in intrinsics.items()})
+        path = out / "transforms.json"
+        atomic_write_json(path, {**top, "frames": new_frames})
+        return path
+
+
+def _with_poses(template: Cameras, poses: Tensor) -> Cameras:
+    """Cameras at `poses` (n, 4, 4) with the intrinsics of `template`'s first camera."""
+    first = template[0]
+    return Cameras(poses, float(first.fx[0]), float(first.fy[0]), float(first.cx[0]), float(first.cy[0]),
+                   template.width, template.height)
+
+
+def _describe_candidates(candidates) -> str:
+    if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
+        return "hemisphere"
+    if isinstance(candidates, (str, Path)):
+        return str(candidates)
+    return "given"
+
+def check_new_run(data_dir: Path, run_dir: Path) -> None:
+    """Refuse a run folder that would hold or hide the dataset, or that holds files nerfaug did not write.
+
+    Raises:
+        FolderRefused: saying which folder and what to choose instead.
+    """
+    run_dir = Path(run_dir)
+    data_dir = Path(data_dir).resolve()
+    if data_dir == run_dir.resolve() or run_dir.resolve() in data_dir.parents:
+        raise FolderRefused(f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
+                                  f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset")
+    if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
+        what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
+        raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder "
+                                  "for --out")
+
+
+def check_method(method: str) -> None:
+    """Raise ValueError unless `method` names a selection method."""
+    from nerfaug.selection import METHODS
+
+    if method not in METHODS:
+        raise ValueError(f"unknown selection method {method!r}; choose one of {', '.join(METHODS)} "
+                         "(`nerfaug methods` describes them)")

@@ -1,0 +1,278 @@
+"""The study (issue 9): the study family of selection methods x the engine presets x the scenes,
+each as one resumable sweep per engine into `OUT/<engine>/`, then one combined summary
+(`nerfaug.report.study`).
+
+    OUT/
+      study.json              the plan: engines run and left out (with the reason), scenes,
+                              methods, trials, the command, the machine
+      datasets/<res>px/<scene>/  each built-in scene rendered once, shared by every engine
+      <engine>/               a results folder as `nerfaug run` writes it (sweep.json, runs/, report)
+      study.md, figures/      the summary
+
+Re-running the same command skips completed runs (each engine's sweep resumes on its own).
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import platform
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from nerfaug.experiment.config import ExperimentConfig, preset
+
+STUDY_FILE = "study.json"
+DEFAULT_TRIALS = 5
+"""The smallest n at which a two-sided Mann-Whitney test, Bonferroni x3, can reach p < 0.05."""
+SMOKE_ENGINES = ("test",)
+"""Engine presets made for the test suite: never part of a default study."""
+GPU_ENGINES = ("paper",)
+"""Engine presets left out of a default study on a CPU: the paper's nerfacto-sized engine is about
+100x slower there than the cpu preset (BENCHMARKS.md), so one study would take weeks."""
+StudyPreset = Literal["study", "tiny"]
+
+
+def study_methods() -> tuple[str, ...]:
+    """The study's methods: the registry's "study" family (ours, its authors' variant, the
+    batch-aware variants and the baselines)."""
+    from nerfaug.selection.methods import FAMILIES
+
+    return tuple(FAMILIES["study"])
+
+
+def engine_presets() -> tuple[str, ...]:
+    """Every engine preset that exists (`nerfaug.nerf.config.PRESETS`), in its order."""
+    from nerfaug.nerf.config import PRESETS
+
+    return tuple(PRESETS)
+
+
+def default_engines(device: str) -> tuple[list[str], dict[str, str]]:
+    """The engines a study runs by default on `device` ("cpu" or "cuda"), and those it leaves out
+    with the reason."""
+    chosen, left_out = [], {}
+    for name in engine_presets():
+        if name in SMOKE_ENGINES:
+            left_out[name] = "a smoke-test preset for the test suite, not a NeRF to compare methods on"
+        elif name in GPU_ENGINES and device != "cuda":
+            left_out[name] = ("needs a GPU: on a CPU it is about 100x slower than the cpu preset; run it on a GPU "
+                              f"with --engines {name} --device cuda")
+        else:
+            chosen.append(name)
+    return chosen, left_out
+
+
+def min_trials(n_comparisons: int, alpha: float = 0.05, start: int = DEFAULT_TRIALS) -> int:
+    """The smallest n >= `start` (equal trials per method) at which a two-sided Mann-Whitney test,
+    Bonferroni x `n_comparisons`, can reach p < alpha (complete separation)."""
+    from nerfaug.statistics import min_attainable_p
+
+    n = start
+    while min_attainable_p(n, n) * max(1, n_comparisons) >= alpha:
+        n += 1
+    return n
+
+
+def base_config(name: StudyPreset) -> ExperimentConfig:
+    """The protocol every engine runs: "study" is `ExperimentConfig`'s defaults (the paper's
+    protocol at 100x100: 6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50 test
+    views); "tiny" is the seconds-long preset of the tests."""
+    if name == "study":
+        return ExperimentConfig()
+    if name == "tiny":
+        return preset("tiny")
+    raise ValueError(f"unknown study preset {name!r}; choose study or tiny")
+
+
+def machine() -> dict:
+    """What the study ran on, for its summary."""
+    import torch
+
+    return {"platform": platform.platform(), "cpu_count": os.cpu_count(), "torch": torch.__version__,
+            "python": platform.python_version(), "host": platform.node()}
+
+
+@dataclass
+class StudyPlan:
+    """What a study runs. `scenes` are names as results show them; `datasets` their folders."""
+
+    out: Path
+    config: ExperimentConfig
+    engines: list[str]
+    left_out: dict[str, str] = field(default_factory=dict)
+    scenes: list[str] = field(default_factory=list)
+    datasets: dict[str, str] = field(default_factory=dict)
+    command: list[str] = field(default_factory=list)
+
+    def engine_config(self, engine: str) -> ExperimentConfig:
+        return self.config.replace(engine=engine, scenes=tuple(self.datasets[s] for s in self.scenes))
+
+    def record(self) -> dict:
+        return {
+            "engines": self.engines, "left_out": self.left_out, "scenes": self.scenes, "datasets": self.datasets,
+            "methods": list(self.config.methods), "trials": self.config.trials, "config": asdict(self.config),
+            "command": self.command, "machine": machine(),
+            "written": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        }
+
+
+def prepare_datasets(out: Path, scenes: tuple[str, ...], config: ExperimentConfig,
+                     progress: bool = True) -> dict[str, str]:
+    """scene name -> dataset folder (absolute). A built-in scene is rendered once (cached by its
+    manifest) into OUT/datasets/<res>px/<scene>/, a folder named by the scene so that results and
+    per-scene settings (the field learning rate) know it by its name; a dataset folder is used
+    as it is, named by its folder."""
+    from nerfaug.experiment.protocol import scene_folder
+
+    found = {}
+    for scene in scenes:
+        folder = scene_folder(scene)
+        if folder is None:
+            from nerfaug.scenes import render_scene_dataset
+
+            folder = render_scene_dataset(
+                scene, Path(out) / "datasets" / f"{config.resolution}px" / scene, resolution=config.resolution,
+                pool=config.pool, test=config.n_test, initial=config.n_initial, samples=config.render_samples,
+                seed=config.seed, progress=progress,
+            )
+        name = Path(folder).name
+        if name in found:
+            raise ValueError(f"two scenes are named {name!r} ({found[name]} and {folder}); rename a dataset folder")
+        found[name] = str(Path(folder).resolve())
+    return found
+
+
+def run_study(plan: StudyPlan, workers: int = 1, force: bool = False, progress: bool = True) -> dict[str, dict]:
+    """Run every engine's sweep (resuming), writing OUT/study.json first. Returns engine ->
+    {"failed": {run: reason}, "results": n valid results}."""
+    from nerfaug.experiment.sweep import run_sweep
+    from nerfaug.jsonio import atomic_write_json
+
+    plan.out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(plan.out / STUDY_FILE, plan.record())
+    outcomes = {}
+    for engine in plan.engines:
+        if progress:
+            print(f"study: engine {engine} -> {plan.out / engine}", file=sys.stderr)
+        outcome = run_sweep(plan.engine_config(engine), plan.out / engine, workers=workers, force=force,
+                            progress=progress, command=plan.command)
+        outcomes[engine] = {"failed": outcome.failed, "results": len(outcome.results)}
+    return outcomes
+
+
+def study(
+    out: Path = Path("results/study"),
+    engines: tuple[str, ...] | None = None,
+    scenes: tuple[str, ...] | None = None,
+    methods: tuple[str, ...] | None = None,
+    trials: int | None = None,
+    resolution: int = 100,
+    steps: int | None = None,
+    workers: int | None = None,
+    force: bool = False,
+    device: Literal["auto", "cpu", "cuda"] = "auto",
+    preset: StudyPreset = "study",
+    summary_only: bool = False,
+    results_doc: Path | None = None,
+) -> None:
+    """The study: which selection method wins where. Runs the study family of methods x engine
+    presets x scenes as one resumable sweep per engine into OUT/<engine>/, then writes the summary
+    OUT/study.md (winner per scene and engine, every method's median difference to uniform with a
+    bootstrap 95% CI, Mann-Whitney p-values, PSNR/SSIM/LPIPS, coverage of the chosen views).
+
+    Args:
+        out: the study folder.
+        engines: engine presets (default: every preset but the test one, and the paper's only on
+            a GPU; the reason is printed).
+        scenes: built-in scene names or dataset folders (default: lego, chair, materials).
+        methods: selection methods (default: the registry's "study" family).
+        trials: trials per (scene, method, engine) (default: 5, or more when Bonferroni over
+            the comparisons with uniform needs more for p < 0.05 to be reachable).
+        resolution: image size of the built-in scenes.
+        steps: training steps per run (default: the preset's, 2000).
+        workers: concurrent runs (default: one per core; one on a GPU).
+        force: discard existing runs and redo them.
+        device: auto (cuda when there is a GPU), cpu or cuda.
+        preset: study (the paper's protocol at 100x100) or tiny (seconds; tests).
+        summary_only: run nothing; rewrite the summary from what OUT holds.
+        results_doc: also write this Markdown summary (e.g. docs/results.md), figures beside it.
+    """
+    from nerfaug.report.study import write_results_doc, write_study
+
+    out = Path(out)
+    failed = {}
+    if not summary_only:
+        command = study_command(out, engines, scenes, methods, trials, resolution, steps, device, preset)
+        plan = make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command)
+        for engine, why in plan.left_out.items():
+            print(f"study: engine {engine} left out: {why}", file=sys.stderr)
+        if workers is None:
+            workers = 1 if plan.config.device == "cuda" else max(1, (os.cpu_count() or 1) // plan.config.threads_per_run)
+        outcomes = run_study(plan, workers=workers, force=force)
+        failed = {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
+    paths = write_study(out)
+    print("study summary: " + ", ".join(str(p) for p in paths))
+    if results_doc is not None:
+        print(f"results: {write_results_doc(out, results_doc)}")
+    if failed:
+        print(f"{len(failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
+        for key, why in failed.items():
+            print(f"  {key}: {why}", file=sys.stderr)
+        raise SystemExit(1)
+
+
+def study_command(out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str,
+                  preset_name: str) -> list[str]:
+    """The command line that plans this study again (the options that decide what runs)."""
+    command = ["nerfaug", "study", "--out", str(out)]
+    for flag, values in (("--engines", engines), ("--scenes", scenes), ("--methods", methods)):
+        if values:
+            command += [flag, *map(str, values)]
+    for flag, value in (("--trials", trials), ("--resolution", resolution), ("--steps", steps),
+                        ("--device", device), ("--preset", preset_name)):
+        if value is not None:
+            command += [flag, str(value)]
+    return command
+
+
+def make_plan(out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str,
+              preset_name: StudyPreset = "study", command: list[str] | None = None,
+              progress: bool = True) -> StudyPlan:
+    """The plan from the command's options (None: the default), with the datasets prepared."""
+    from nerfaug.device import resolve_device
+    from nerfaug.scenes import BUILTIN_SCENES
+
+    try:
+        device_type = resolve_device(device).type
+    except ValueError as error:
+        raise SystemExit(f"nerfaug study: --device: {error}") from None
+    known = engine_presets()
+    if engines is None:
+        chosen, left_out = default_engines(device_type)
+    else:
+        unknown = [e for e in engines if e not in known]
+        if unknown:
+            raise SystemExit(f"nerfaug study: --engines: unknown preset(s) {', '.join(unknown)}; "
+                             f"valid: {', '.join(known)}")
+        chosen, left_out = list(dict.fromkeys(engines)), {}
+    methods = tuple(methods) if methods else study_methods()
+    comparisons = max(1, sum(m != "uniform" for m in methods))
+    if trials is None:
+        trials = min_trials(comparisons)
+    config = base_config(preset_name).replace(
+        methods=methods, trials=trials, resolution=resolution, device=device_type,
+        **({"steps": steps} if steps is not None else {}),
+    )
+    scenes = tuple(scenes) if scenes else BUILTIN_SCENES
+    datasets = prepare_datasets(out, scenes, config, progress=progress)
+    return StudyPlan(Path(out), config, chosen, left_out, list(datasets), datasets,
+                     command or ["nerfaug", *sys.argv[1:]])
+
+
+__all__ = [
+    "DEFAULT_TRIALS", "STUDY_FILE", "StudyPlan", "default_engines", "engine_presets", "make_plan", "min_trials",
+    "prepare_datasets", "run_study", "study", "study_command", "study_methods",
+]

@@ -1,0 +1,75 @@
+"""The report of a results folder: median/IQR tables with Mann-Whitney U tests, the paper's
+ablation tables and figures, run times and the runs left out, as `report.md` and a self-contained
+`report.html` (figures embedded as data URIs), with the figures as PNGs under `figures/`.
+
+Rooms: `collect` (reading the results folder), `document` (blocks, Markdown, HTML, number
+formats), `figures` (the PNGs), `sections` (what the report says), `study` (the multi-engine
+study's summary).
+
+Only runs whose result.json is valid for the sweep's fingerprint (`store.read_result`) are
+aggregated; every other run folder is listed with the reason, never silently counted.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from nerfaug.jsonio import atomic_write_bytes
+from nerfaug.report.collect import (
+    NotAggregated,
+    ReportError,
+    Results,
+    Run,
+    collect_results,
+    why_not_valid,
+)
+from nerfaug.report.document import Block, to_html, to_markdown
+from nerfaug.report.figures import Figures, history_series, make_figures
+from nerfaug.report.sections import (
+    figure_sections,
+    header_section,
+    problems_section,
+    scene_section,
+    summary_section,
+    table_i_section,
+    table_ii_section,
+    timing_section,
+)
+
+
+def build_report(results: Results, figures: Figures) -> list[Block]:
+    blocks = header_section(results) + summary_section(results)
+    for scene in results.scenes:
+        blocks += scene_section(results, scene, figures.boxplots.get(scene))
+    blocks += table_i_section(results) + table_ii_section(results)
+    blocks += figure_sections(results, figures) + timing_section(results) + problems_section(results)
+    return blocks
+
+
+def write_report(results_dir: Path) -> list[Path]:
+    """Write `report.md`, a self-contained `report.html` and the figures (`figures/*.png`) for a
+    results folder written by `nerfaug run`.
+
+    Args:
+        results_dir: the folder holding sweep.json and runs/<scene>/<method>/trial_<k>/.
+
+    Returns:
+        The paths written: report.md, report.html, then the figures.
+
+    Raises:
+        ReportError: no readable sweep.json in `results_dir`.
+    """
+    results = collect_results(results_dir)
+    figures = make_figures(results)
+    blocks = build_report(results, figures)
+    root = results.root
+    markdown, page = root / "report.md", root / "report.html"
+    atomic_write_bytes(markdown, to_markdown(blocks, root).encode())
+    atomic_write_bytes(page, to_html(blocks, f"nerfaug report: {root.name}").encode())
+    return [markdown, page] + figures.paths()
+
+
+__all__ = [
+    "NotAggregated", "ReportError", "Results", "Run", "build_report", "collect_results", "history_series",
+    "why_not_valid", "write_report",
+]

@@ -1,0 +1,147 @@
+"""The registered estimators: what scores the candidates.
+
+- "combined": the paper's U = a H + b D (`combined_uncertainty`), with the config's weights.
+- "entropy": H only (weights (1, 0)); "distance": D only (weights (0, 1)).
+- "fisher": FisherRF's expected information gain (`methods.fisherrf_candidates`).
+- "none": no scores (ones), for selectors that ignore them.
+
+The entropy is taken over `scoring_cameras`: the candidates rendered `entropy_resolution` pixels
+across, optionally with another field of view and only the central part of the image
+(`scoring_fov`, `scoring_crop`), as the authors' code renders them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from nerfaug.cameras import Cameras
+from nerfaug.hemisphere import angles_from_pose, pose_from_angles
+from nerfaug.selection.registry import Request, Scoring, register_estimator
+from nerfaug.uncertainty.combined import combined_uncertainty
+from nerfaug.uncertainty.entropy import authors_view_scores, mean_view_entropy
+from nerfaug.uncertainty.rays import reduced_cameras
+from nerfaug.uncertainty.so3 import coverage_distance
+
+DISTANCE_ROTATIONS = ("pose", "azimuth")
+
+
+def scoring_cameras(candidates: Cameras, resolution: int, fov_deg: float | None = None,
+                    crop: float = 1.0) -> Cameras:
+    """The cameras the entropy of `candidates` is rendered with.
+
+    `resolution` pixels across (the height keeps the aspect ratio). With `fov_deg` the
+    horizontal field of view is that many degrees instead of the candidates' own; with
+    `crop` < 1 only the central `crop` fraction of that image (in width and height) is rendered,
+    still `resolution` pixels across. The authors' code: fov 75, crop 0.5 (the central 400x400
+    of an 800x800 render); that crop spans 2 atan(0.5 tan(37.5 deg)) = 42.0 degrees (NeRF-synthetic: 39.6).
+
+    Returns:
+        Cameras with the candidates' poses and principal points at the image centre.
+    """
+    if not 0 < crop <= 1:
+        raise ValueError(f"scoring_crop must be in (0, 1], got {crop}")
+    small = reduced_cameras(candidates, resolution)
+    if fov_deg is None and crop == 1.0:
+        return small
+    if fov_deg is None:
+        focal = small.fx
+    else:
+        if not 0 < fov_deg < 180:
+            raise ValueError(f"scoring_fov must be in (0, 180) degrees, got {fov_deg}")
+        focal = torch.full_like(small.fx, 0.5 * small.width / math.tan(math.radians(fov_deg) / 2))
+    focal = focal / crop
+    return Cameras(small.camera_to_world, focal, focal, small.width / 2.0, small.height / 2.0,
+                   small.width, small.height)
+
+
+def candidate_entropy(request: Request) -> Tensor:
+    """H per candidate (shape (n_candidates,), CPU) as `combined_uncertainty` takes it: the mean
+    ray entropy in bits, or the authors' score (cube, min-max) in "authors" mode. Candidates
+    farther than `entropy_max_polar` from the pole get mean entropy 0 first (the authors'
+    entropy NBV)."""
+    config = request.config
+    cameras = scoring_cameras(request.candidates, config.entropy_resolution, config.scoring_fov,
+                              config.scoring_crop)
+    means = mean_view_entropy(request.require_model(), cameras, config.entropy_resolution, config.chunk,
+                              config.entropy_mode).cpu()
+    if config.entropy_max_polar is not None:
+        means = torch.where(request.polar > config.entropy_max_polar, 0.0, means.double()).to(means.dtype)
+    return authors_view_scores(means) if config.entropy_mode == "authors" else means
+
+
+def distance_rotations(candidates: Cameras, how: str) -> Tensor:
+    """The rotations the coverage term compares, float64 (n, 3, 3) on the CPU: the cameras' own
+    ("pose"), or ("azimuth", the authors' NBV code) those of the same azimuth at polar angle 0,
+    which makes D depend on the azimuth alone. Their Euler-'xyz' rotation (polar, 0, azimuth +
+    pi/2) is exactly `pose_from_angles`' rotation, so only the zeroed polar angle differs."""
+    if how not in DISTANCE_ROTATIONS:
+        raise ValueError(f"distance_rotations must be one of {', '.join(DISTANCE_ROTATIONS)}, got {how!r}")
+    if how == "pose":
+        return candidates.rotations.cpu().double()
+    azimuth, _, _ = angles_from_pose(candidates.camera_to_world.cpu())
+    return pose_from_angles(azimuth, torch.zeros_like(azimuth))[:, :3, :3].double()
+
+
+def _metric(request: Request) -> Tensor | None:
+    metric = request.config.metric
+    return None if metric is None else torch.tensor(metric, dtype=torch.float64)
+
+
+def _terms(request: Request, a: float, b: float) -> Scoring:
+    """U = a H + b D with the config's normalisation; the state carries what a batch-aware
+    selector needs to recompute D as views are accepted."""
+    config = request.config
+    components: dict[str, Tensor] = {}
+    state: dict = {"weights": (a, b), "entropy": None}
+    if a:
+        state["entropy"] = candidate_entropy(request)
+        components["entropy"] = state["entropy"].float()
+    if b:
+        rotations = distance_rotations(request.candidates, config.distance_rotations)
+        training = request.train_cameras.rotations.cpu().double()
+        distance = coverage_distance(rotations, training, _metric(request))
+        state.update(distance=distance, rotations=rotations, metric=_metric(request))
+        components["distance"] = distance.float()
+    scores = combined_uncertainty(
+        state["entropy"], state.get("distance"), a, b, config.normalisation
+    ).float()
+    return Scoring(scores, components, state)
+
+
+@register_estimator("combined")
+def combined(request: Request) -> Scoring:
+    """The paper's U = a H + b D with the config's weights (a, b)."""
+    return _terms(request, request.config.entropy_weight, request.config.distance_weight)
+
+
+@register_estimator("entropy")
+def entropy_only(request: Request) -> Scoring:
+    """H only (Table I "entropy only"; Lee et al.'s spatial entropy)."""
+    return _terms(request, 1.0, 0.0)
+
+
+@register_estimator("distance")
+def distance_only(request: Request) -> Scoring:
+    """D only (Table I "distance only")."""
+    return _terms(request, 0.0, 1.0)
+
+
+@register_estimator("none")
+def no_scores(request: Request) -> Scoring:
+    """Ones: for selectors that ignore scores (uniform, farthest)."""
+    return Scoring(torch.ones(len(request.candidates)))
+
+
+@register_estimator("fisher")
+def fisher(request: Request) -> Scoring:
+    """FisherRF's information gain per candidate; H_train and H_cand on demand in the state."""
+    from nerfaug.selection.methods import fisherrf_candidates
+
+    h_train, scores, h_of = fisherrf_candidates(
+        request.require_model(), request.train_cameras, request.candidates, request.config, request.generator
+    )
+    scores = scores.cpu()
+    return Scoring(scores, {"fisher": scores}, {"h_train": h_train, "h_of": h_of})

@@ -1,0 +1,154 @@
+"""The study command end to end at toy size (the `test` engine, 2 methods x 2 trials x 1 scene,
+on an analytic dataset so no Blender is needed), and its summary's numbers against a
+recomputation from the run folders with scipy and numpy."""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy import stats
+
+from nerfaug.cameras import Cameras, image_rays
+from nerfaug.data import Views, write_blender_split
+from nerfaug.experiment.study import default_engines, engine_presets, min_trials
+from nerfaug.hemisphere import (
+    BLENDER_CAMERA_ANGLE_X,
+    fibonacci_angles,
+    half_hemisphere_poses,
+    pose_from_angles,
+    sample_uniform_poses,
+)
+from nerfaug.statistics import min_attainable_p
+
+SIZE = 24
+
+
+def render_sphere(poses, prefix: str) -> Views:
+    """Exact renders of a unit sphere at the origin coloured by its normal, on white."""
+    cameras = Cameras.from_fov(poses.float(), BLENDER_CAMERA_ANGLE_X, SIZE, SIZE)
+    images = []
+    for i in range(len(cameras)):
+        origins, directions = image_rays(cameras, i)
+        b = (origins * directions).sum(-1)
+        disc = b**2 - ((origins**2).sum(-1) - 1.0)
+        hit = disc > 0
+        normal = origins + (-b - disc.clamp(min=0).sqrt())[:, None] * directions
+        rgb = torch.where(hit[:, None], 0.5 + 0.5 * normal, torch.ones(3)).clamp(0, 1)
+        images.append(rgb.reshape(SIZE, SIZE, 3))
+    images = (torch.stack(images) * 255).round() / 255  # survives the PNG round trip exactly
+    return Views(cameras, images, [f"./{prefix}/r_{i}" for i in range(len(cameras))])
+
+
+@pytest.fixture(scope="module")
+def sphere(tmp_path_factory) -> Path:
+    """A Blender-format dataset: a pool of 12 views, 3 initial views on one half, 3 test views."""
+    root = tmp_path_factory.mktemp("data") / "sphere"
+    write_blender_split(root, "train", render_sphere(sample_uniform_poses(12, torch.Generator().manual_seed(0)), "train"))
+    write_blender_split(root, "initial", render_sphere(half_hemisphere_poses(3), "initial"))
+    write_blender_split(root, "test", render_sphere(pose_from_angles(*fibonacci_angles(3)), "test"))
+    return root
+
+
+@pytest.fixture(scope="module")
+def study_out(sphere, tmp_path_factory):
+    from nerfaug.cli import main
+
+    out = tmp_path_factory.mktemp("study")
+    docs = out.parent / f"{out.name}_docs" / "results.md"
+    main(["study", "--out", str(out), "--preset", "tiny", "--engines", "test", "--scenes", str(sphere),
+          "--methods", "ours", "uniform", "--trials", "2", "--resolution", str(SIZE), "--steps", "60",
+          "--workers", "1", "--device", "cpu", "--results-doc", str(docs)])
+    return out, docs
+
+
+def run_folders(out: Path, method: str) -> list[Path]:
+    return sorted((out / "test" / "runs" / "sphere" / method).glob("trial_*"))
+
+
+def psnrs(out: Path, method: str) -> list[float]:
+    return [json.loads((f / "result.json").read_text())["metrics"]["psnr"] for f in run_folders(out, method)]
+
+
+def unseen_share(folder: Path) -> float:
+    """Recomputed with numpy alone: chosen views more than 90 degrees in azimuth from the initial
+    views' mean direction."""
+    selection = json.loads((folder / "selection.json").read_text())
+    chosen = np.asarray(selection["chosen_poses"])[:, :3, 3]
+    initial = np.asarray(selection["train_poses"])[:, :3, 3]
+    mean = np.arctan2(np.sin(np.arctan2(initial[:, 1], initial[:, 0])).mean(),
+                      np.cos(np.arctan2(initial[:, 1], initial[:, 0])).mean())
+    offset = np.angle(np.exp(1j * (np.arctan2(chosen[:, 1], chosen[:, 0]) - mean)))
+    return float((np.abs(offset) > math.pi / 2).mean())
+
+
+def test_study_writes_every_run_and_a_summary(study_out):
+    out, docs = study_out
+    plan = json.loads((out / "study.json").read_text())
+    assert plan["engines"] == ["test"] and plan["methods"] == ["ours", "uniform"] and plan["trials"] == 2
+    assert plan["machine"]["cpu_count"] and plan["machine"]["torch"] == torch.__version__
+    for method in ("ours", "uniform"):
+        assert len(run_folders(out, method)) == 2
+    assert (out / "study.md").is_file() and (out / "figures" / "coverage_test.png").is_file()
+    assert (out / "figures" / "boxplots_test_sphere.png").is_file()
+    text = docs.read_text()
+    assert "nerfaug study --out" in text and "torch " + torch.__version__ in text
+    assert (docs.parent / "results" / "coverage_test.png").is_file()  # figures copied beside the page
+    assert "](results/coverage_test.png)" in text
+
+
+def test_summary_numbers_equal_a_recomputation(study_out):
+    from nerfaug.report.study import BOOTSTRAP_SEED, collect_study
+
+    out, _ = study_out
+    (cell,) = collect_study(out).cells
+    ours, uniform = psnrs(out, "ours"), psnrs(out, "uniform")
+    assert cell.methods["ours"].values["psnr"] == ours and cell.methods["uniform"].values["psnr"] == uniform
+    assert cell.winner == ("ours" if np.median(ours) > np.median(uniform) else "uniform")
+    entry = cell.methods["ours"].vs_reference["psnr"]
+    assert entry["difference"] == pytest.approx(np.median(ours) - np.median(uniform), abs=1e-12)
+    ci = stats.bootstrap((np.array(ours), np.array(uniform)), lambda x, y, axis: np.median(x, axis) - np.median(y, axis),
+                         paired=False, vectorized=True, n_resamples=9999, method="percentile",
+                         rng=np.random.default_rng(BOOTSTRAP_SEED)).confidence_interval
+    assert (entry["low"], entry["high"]) == pytest.approx((ci.low, ci.high), abs=1e-12)
+    p = stats.mannwhitneyu(ours, uniform, alternative="two-sided", method="exact").pvalue
+    assert entry["p_value"] == pytest.approx(p) and entry["p_bonferroni"] == pytest.approx(min(1.0, p * 1))
+    for method in ("ours", "uniform"):
+        found = sorted(c["unseen_share"] for c in cell.methods[method].coverage)
+        assert found == pytest.approx(sorted(unseen_share(f) for f in run_folders(out, method)))
+    # ... and the page shows them as computed.
+    text = (out / "study.md").read_text()
+    shown = [round(entry[k], 2) + 0.0 for k in ("difference", "low", "high")]  # "+0.00", never "-0.00"
+    assert f"{shown[0]:+.2f} [{shown[1]:.2f}, {shown[2]:.2f}]" in text
+    assert f"{cell.winner} ({np.median(ours if cell.winner == 'ours' else uniform):.2f} dB)" in text
+
+
+def test_summary_names_engines_not_run_and_lpips(study_out):
+    from nerfaug.report.study import write_study
+
+    out, _ = study_out
+    plan = json.loads((out / "study.json").read_text())
+    plan["engines"].append("cpu")  # planned but never run: its cells are incomplete
+    (out / "study.json").write_text(json.dumps(plan))
+    try:
+        text = write_study(out)[0].read_text()
+    finally:
+        plan["engines"].remove("cpu")
+        (out / "study.json").write_text(json.dumps(plan))
+    incomplete = text.split("## Incomplete cells", 1)[1]
+    assert "engine cpu: not run yet" in incomplete
+    lpips = [json.loads((f / "result.json").read_text())["metrics"]["lpips"] for f in run_folders(out, "ours")]
+    assert ("LPIPS n/a" in text) == (None in lpips)
+
+
+def test_default_engines_and_trials():
+    engines, left_out = default_engines("cpu")
+    assert "test" in left_out and "test" not in engines
+    assert set(engines) | set(left_out) == set(engine_presets())
+    if "paper" in engine_presets():
+        assert "paper" in left_out and "GPU" in left_out["paper"] and "paper" in default_engines("cuda")[0]
+    # 5 trials: the smallest n at which Bonferroni x3 can reach 0.05 (2 / C(10, 5) = 0.0079)
+    assert min_trials(3) == 5 and min_attainable_p(4, 4) * 3 >= 0.05
+    assert min_trials(6) == 5 and min_trials(7) == 6  # 0.0079 x 7 = 0.056
