@@ -152,3 +152,22 @@ def test_default_engines_and_trials():
     # 5 trials: the smallest n at which Bonferroni x3 can reach 0.05 (2 / C(10, 5) = 0.0079)
     assert min_trials(3) == 5 and min_attainable_p(4, 4) * 3 >= 0.05
     assert min_trials(6) == 5 and min_trials(7) == 6  # 0.0079 x 7 = 0.056
+
+
+def test_a_study_run_in_sittings_keeps_every_engine_and_scene(tmp_path):
+    from nerfaug.experiment.study import merged_record
+
+    path = tmp_path / "study.json"
+    first = {"engines": ["cpu"], "left_out": {"paper": "needs a GPU", "nerfacto-cpu": "not asked"},
+             "scenes": ["lego"], "datasets": {"lego": "/d/lego"}, "command": ["nerfaug", "study", "a"]}
+    assert merged_record(path, first) == first  # nothing to merge with yet
+    path.write_text(json.dumps(first))
+    second = {"engines": ["nerfacto-cpu"], "left_out": {}, "scenes": ["chair"], "datasets": {"chair": "/d/chair"},
+              "command": ["nerfaug", "study", "b"]}
+    merged = merged_record(path, second)
+    assert merged["engines"] == ["cpu", "nerfacto-cpu"] and merged["scenes"] == ["lego", "chair"]
+    assert merged["datasets"] == {"lego": "/d/lego", "chair": "/d/chair"}
+    assert merged["left_out"] == {"paper": "needs a GPU"}  # an engine run is no longer left out
+    assert merged["commands"] == [first["command"], second["command"]]
+    path.write_text("{not json")
+    assert merged_record(path, second) == second  # an unreadable plan is replaced, never merged

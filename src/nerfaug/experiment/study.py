@@ -15,6 +15,7 @@ Re-running the same command skips completed runs (each engine's sweep resumes on
 from __future__ import annotations
 
 import datetime
+import json
 import os
 import platform
 import sys
@@ -145,6 +146,28 @@ def prepare_datasets(out: Path, scenes: tuple[str, ...], config: ExperimentConfi
     return found
 
 
+def merged_record(path: Path, record: dict) -> dict:
+    """`record` grown by the study.json at `path`, if any: a study may run in sittings, one engine
+    or scene at a time (`--engines nerfacto-cpu --scenes lego`), and its summary covers every
+    engine and scene run so far. The methods and trials are the latest command's; the commands
+    of every sitting are kept."""
+    try:
+        previous = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return record
+    if not isinstance(previous, dict):
+        return record
+    merged = dict(record)
+    merged["engines"] = list(dict.fromkeys([*previous.get("engines", []), *record["engines"]]))
+    merged["scenes"] = list(dict.fromkeys([*previous.get("scenes", []), *record["scenes"]]))
+    merged["datasets"] = {**previous.get("datasets", {}), **record["datasets"]}
+    left_out = {**previous.get("left_out", {}), **record["left_out"]}
+    merged["left_out"] = {e: why for e, why in left_out.items() if e not in merged["engines"]}
+    commands = [c for c in previous.get("commands", [previous.get("command")]) if c]
+    merged["commands"] = [*commands, record["command"]] if record["command"] not in commands else commands
+    return merged
+
+
 def run_study(plan: StudyPlan, workers: int = 1, force: bool = False, progress: bool = True) -> dict[str, dict]:
     """Run every engine's sweep (resuming), writing OUT/study.json first. Returns engine ->
     {"failed": {run: reason}, "results": n valid results}."""
@@ -152,7 +175,7 @@ def run_study(plan: StudyPlan, workers: int = 1, force: bool = False, progress: 
     from nerfaug.jsonio import atomic_write_json
 
     plan.out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(plan.out / STUDY_FILE, plan.record())
+    atomic_write_json(plan.out / STUDY_FILE, merged_record(plan.out / STUDY_FILE, plan.record()))
     outcomes = {}
     for engine in plan.engines:
         if progress:

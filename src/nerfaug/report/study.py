@@ -250,9 +250,10 @@ def cell_tables(cell: Cell) -> list[Block]:
 def _header(study: Study) -> list[Block]:
     plan, config = study.plan, study.plan.get("config", {})
     host = plan.get("machine", {})
-    command = " ".join(plan.get("command", [])) or "n/a"
+    commands = plan.get("commands") or [plan.get("command", [])]
+    command = "; ".join(f"`{' '.join(c)}`" for c in commands if c) or "n/a"
     items = [
-        f"command: `{command}`",
+        f"command{'s (one per sitting)' if len(commands) > 1 else ''}: {command}",
         f"study last started: {plan.get('written', 'n/a')}",
         (f"machine: {host.get('platform', '?')}, {host.get('cpu_count', '?')} CPUs, torch {host.get('torch', '?')}, "
          f"device {config.get('device', '?')}"),
