@@ -215,7 +215,7 @@ def propose(
         selection: options of the selection method (recorded with the proposal in session.json);
             a method's own settings (e.g. ours-authors') apply over them.
     """
-    from nerfaug.capture.session import check_method
+    from nerfaug.capture.choose import check_method
 
     check_method(method)
     if n < 1 or n_candidates < 1:

@@ -3,7 +3,9 @@ its dataset with what you captured there.
 
 Rooms: `frame` (the hemisphere and the engine frame), `proposal` (proposed views, their JSON),
 `images` (captured images from any source, checked), `dataset` (the run's dataset folder and the
-one frame-copying helper), `state` (session.json, typed), `session` (`CaptureSession`).
+one frame-copying helper), `state` (session.json, typed, and the run folder's names), `session`
+(`CaptureSession`: create, open, save, train), and what its methods do: `choose` (proposing the
+next views), `add` (adding captured views), `export` (writing the dataset for other tools).
 """
 
 from nerfaug.capture.frame import (
@@ -14,13 +16,11 @@ from nerfaug.capture.frame import (
     estimate_up,
 )
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.session import (
+from nerfaug.capture.session import CaptureSession
+from nerfaug.capture.state import (
     CHECKPOINT_FILE,
     DATASET_DIR,
     PROPOSALS_DIR,
-    CaptureSession,
-)
-from nerfaug.capture.state import (
     SESSION_FILE,
     SESSION_FORMAT,
     SessionError,

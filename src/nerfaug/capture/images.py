@@ -42,7 +42,7 @@ def read_capture(path: Path, label: str | None = None) -> Capture:
     try:
         array = np.asarray(iio.imread(path))
     except Exception as error:  # noqa: BLE001 -- imageio raises many types; all mean "cannot read"
-        raise DatasetError(path, f"cannot read image: {error}", field=label)
+        raise DatasetError(path, f"cannot read image: {error}", field=label) from None
     return Capture(str(path), array, source=path, name=path.stem)
 
 

@@ -21,30 +21,22 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
 import torch
 from torch import Tensor
 
 from nerfaug import owned
 from nerfaug.cameras import Cameras
-from nerfaug.capture.dataset import (
-    DISTORTION_KEYS,
-    NAME,
-    blender_compatible,
-    copy_frames,
-    copy_split,
-    dataset_json,
-    file_path,
-    frame_files,
-    has_distortion,
-    unique_stem,
-)
-from nerfaug.capture.frame import ENGINE_RADIUS, Hemisphere, estimate_hemisphere
-from nerfaug.capture.images import as_array, check_capture, collect_images, stored_bytes
-from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
+from nerfaug.capture import add, choose, export
+from nerfaug.capture.dataset import blender_compatible, copy_split, dataset_json, frame_files, has_distortion
+from nerfaug.capture.frame import Hemisphere, estimate_hemisphere
+from nerfaug.capture.images import as_array
+from nerfaug.capture.proposal import Proposal
 from nerfaug.capture.state import (
+    CHECKPOINT_FILE,
+    DATASET_DIR,
+    DATASET_KIND,
+    RUN_KIND,
     SESSION_FILE,
-    AdditionRecord,
     DatasetInfo,
     Intrinsics,
     ProposalRecord,
@@ -54,15 +46,9 @@ from nerfaug.capture.state import (
     now,
 )
 from nerfaug.data import DatasetError, Views, load_dataset
-from nerfaug.data.frames import check_pose, read_image
+from nerfaug.data.frames import read_image
 from nerfaug.errors import FolderRefused
-from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
-
-CHECKPOINT_FILE = "checkpoint.pt"
-DATASET_DIR = "dataset"
-PROPOSALS_DIR = "proposals"
-# Marker kinds (`nerfaug.owned`): the run folder, its dataset copy, and a folder `export` wrote.
-RUN_KIND, DATASET_KIND, EXPORT_KIND = "capture-session", "capture-dataset", "capture-export"
+from nerfaug.jsonio import atomic_write_json, read_json
 
 
 class CaptureSession:
@@ -174,7 +160,7 @@ class CaptureSession:
             hemisphere_estimated={"centre": centre is None, "radius": radius is None, "up": isinstance(up, str)},
         )
         session = cls(run_dir, None, state)
-        views = session._engine_views(0)
+        views = session.engine_views(0)
         session.trainer = Trainer(views, config, seed=int(seed), device=device, background=tuple(background),
                                   progress=progress)
         session.state.views_in_model = len(views)
@@ -200,7 +186,7 @@ class CaptureSession:
         run_dir = Path(run_dir)
         state = SessionState.read(run_dir)
         session = cls(run_dir, None, state)
-        json_path = session._json_path()  # checks it stays inside the run folder
+        json_path = session.json_path()  # checks it stays inside the run folder
         if not load_model:
             return session
         checkpoint = run_dir / CHECKPOINT_FILE
@@ -210,17 +196,18 @@ class CaptureSession:
             trainer = Trainer.load_checkpoint(checkpoint, device=device, progress=progress)
         except Exception as error:  # noqa: BLE001 -- torch.load and the state dicts raise many types
             reason = str(error).split(".")[0][:160]
-            raise SessionError(f"{checkpoint}: cannot load the checkpoint ({type(error).__name__}: {reason}); restore "
-                               "it from a backup, or start a new session with `nerfaug train DATA --out NEW_RUN`")
+            raise SessionError(f"{checkpoint}: cannot load the checkpoint ({type(error).__name__}: {reason}); "
+                               "restore it from a backup, or start a new session with `nerfaug train DATA --out "
+                               "NEW_RUN`") from None
         session.trainer = trainer
         in_model = len(trainer.train_views)
         session._saved = (trainer.step, in_model)
-        frames = session._frames()
+        frames = session.frames()
         if len(frames) < in_model:
             raise SessionError(f"{json_path} lists {len(frames)} frames but the checkpoint was "
                                f"trained on {in_model}: the dataset was edited outside the session")
         if len(frames) > in_model:  # added after the last save: train on them too
-            trainer.add_views(session._engine_views(in_model))
+            trainer.add_views(session.engine_views(in_model))
         state.views_in_model = len(frames)
         state.step = trainer.step
         return session
@@ -230,7 +217,7 @@ class CaptureSession:
 
         Returns the run folder.
         """
-        self._require_model()
+        self.require_model()
         current = (self.trainer.step, len(self.trainer.train_views))
         if self._saved != current or not (self.run_dir / CHECKPOINT_FILE).exists():
             self.trainer.save_checkpoint(self.run_dir / CHECKPOINT_FILE)
@@ -280,11 +267,11 @@ class CaptureSession:
         camera = Cameras(torch.eye(4), k.fx, k.fy, k.cx, k.cy, k.width, k.height)
         return camera if width is None else camera.resized(width, height)
 
-    def _require_model(self) -> None:
+    def require_model(self) -> None:
         if self.trainer is None:
             raise SessionError(f"{self.run_dir} was opened with load_model=False; open it with the model to do this")
 
-    def _json_path(self) -> Path:
+    def json_path(self) -> Path:
         """The dataset's transforms file; SessionError if session.json sends it outside the run folder."""
         path = self.dataset_dir / self.state.dataset.json
         if not owned.overlaps(path, self.run_dir) or path.resolve() == self.run_dir.resolve():
@@ -292,18 +279,18 @@ class CaptureSession:
                                f"inside the run folder (got {str(path.resolve())!r})")
         return path
 
-    def _frames(self) -> list:
+    def frames(self) -> list:
         """The frames of the dataset's transforms file (DatasetError unless a list)."""
-        json_path = self._json_path()
+        json_path = self.json_path()
         frames = read_json(json_path).get("frames")
         if not isinstance(frames, list):
             raise DatasetError(json_path, "frames must be a list", field="frames", value=frames)
         return frames
 
-    def _engine_views(self, start: int) -> Views:
+    def engine_views(self, start: int) -> Views:
         """Dataset frames `start:` loaded as the trainer sees them: downscaled, engine frame."""
-        json_path = self._json_path()
-        frames = self._frames()[start:]
+        json_path = self.json_path()
+        frames = self.frames()[start:]
         files = frame_files(self.dataset_dir, json_path, frames)
         background = torch.tensor(self.state.background, dtype=torch.float32)
         downscale = self.state.downscale
@@ -329,7 +316,7 @@ class CaptureSession:
 
     def train(self, steps: int) -> dict:
         """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"})."""
-        self._require_model()
+        self.require_model()
         if steps < 0:
             raise ValueError(f"steps must be >= 0, got {steps}")
         self.trainer.train(self.trainer.step + int(steps))
@@ -339,28 +326,7 @@ class CaptureSession:
                           generator: torch.Generator | None = None) -> Cameras:
         """The world-frame candidate cameras for `propose` (see its `candidates`), without the
         poses the model already trains on."""
-        from nerfaug.selection import hemisphere_candidates, matching_poses
-
-        self._require_model()
-        template = self.template()
-        engine_train = self.trainer.train_views.cameras.to("cpu")
-        if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
-            engine = hemisphere_candidates(self.template(engine_train.width, engine_train.height),
-                                           n_candidates, generator, radius=ENGINE_RADIUS, training=engine_train)
-            return _with_poses(template, self.hemisphere.to_world(engine.camera_to_world))
-        if isinstance(candidates, Cameras):
-            given = candidates
-        elif isinstance(candidates, (str, Path)):
-            given = _with_poses(template, read_poses(candidates)[0])
-        else:
-            poses = np.asarray(as_array(candidates), dtype=np.float64)
-            if poses.ndim != 3 or poses.shape[1:] != (4, 4):
-                raise ValueError(f"candidate poses must have shape (n, 4, 4), got {poses.shape}")
-            given = _with_poses(template, torch.stack(
-                [check_pose(p, Path("candidates"), f"candidates[{i}]") for i, p in enumerate(poses)]))
-        # Compared in the engine frame, so the tolerance does not depend on the data's units.
-        known = matching_poses(self.hemisphere.to_engine(given.camera_to_world), engine_train.camera_to_world)
-        return given[torch.nonzero(~known).reshape(-1).tolist()]
+        return choose.candidate_cameras(self, candidates, n_candidates, generator)
 
     def propose(
         self, n: int = 6, method: str = "ours", candidates=None, n_candidates: int = 500,
@@ -391,60 +357,7 @@ class CaptureSession:
             proposal is recorded in the history (saved with `save()`) and written, with its
             candidates, to `run/proposals/proposal_NNN.json`.
         """
-        self._require_model()
-        from nerfaug.selection import SelectionConfig, get_method, select_views
-
-        check_method(method)
-        if isinstance(config, dict):
-            config = SelectionConfig.from_dict(config)
-        used_config = get_method(method).effective_config(config)
-        if int(n) < 1 or int(n) != n:
-            raise ValueError(f"n (views to propose) must be an integer >= 1, got {n}")
-        if int(n_candidates) < 1:
-            raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
-        number = len(self.state.proposals)
-        used_seed = None
-        if generator is None:
-            used_seed = proposal_seed(self.seed, number) if seed is None else int(seed)
-            generator = torch.Generator().manual_seed(used_seed)
-        world = self.candidate_cameras(candidates, n_candidates, generator)
-        if len(world) < n:
-            raise ValueError(f"cannot propose {n} views from {len(world)} candidates")
-        hemisphere = self.hemisphere
-        engine_train = self.trainer.train_views.cameras
-        engine = Cameras(hemisphere.to_engine(world.camera_to_world), world.fx, world.fy, world.cx, world.cy,
-                         world.width, world.height)
-        if (engine.width, engine.height) != (engine_train.width, engine_train.height):
-            engine = engine.resized(engine_train.width, engine_train.height)
-        selection = select_views(method, self.trainer.model, engine_train, engine.to(self.trainer.device), n,
-                                 generator, config)
-        chosen = selection.indices.long()
-        poses = world.camera_to_world[chosen]
-        azimuth, polar, _ = hemisphere.angles(poses)
-        names = [f"capture_{number:03d}_{i:02d}" for i in range(n)]
-        folder = self.run_dir / PROPOSALS_DIR
-        map_path = None
-        if map:
-            from nerfaug.maps import plot_hemisphere_map
-
-            map_path = plot_hemisphere_map(
-                engine.camera_to_world, selection.scores, engine_train.camera_to_world.cpu(),
-                engine.camera_to_world[chosen], path=folder / f"proposal_{number:03d}.png",
-                title=f"proposal {number}: {method} at step {self.step}",
-            )
-        angle_x = float(world.camera_angle_x[0])
-        proposal = Proposal(number, selection.method or method, poses, names, azimuth, polar, chosen, world,
-                            selection.scores.float(), dict(selection.components), map_path, self.step,
-                            used_seed, angle_x, hemisphere)
-        record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
-        self.state.proposals.append(ProposalRecord(
-            number=number, method=proposal.method, n=n, step=self.step, seed=used_seed,
-            candidates=_describe_candidates(candidates), n_candidates=len(world), names=names,
-            poses=poses.tolist(), azimuth=azimuth.tolist(), polar=polar.tolist(),
-            file=str(record_path.relative_to(self.run_dir)), created=now(),
-            extra={"selection": used_config.to_dict()},
-        ))
-        return proposal
+        return choose.propose(self, n, method, candidates, n_candidates, generator, seed, config, map)
 
     def add_views(self, images, poses=None, names: Sequence[str] | None = None) -> list[str]:
         """Add captured images, taken at world-frame `poses`, to the dataset and to training.
@@ -471,93 +384,18 @@ class CaptureSession:
             DatasetError: naming the file or index and the value: count mismatch, wrong image
                 size, unreadable file, values out of range, non-rigid pose, duplicate name.
         """
-        self._require_model()
-        expected_names: list[str] | None = None
-        pose_source = "poses"
-        if poses is None:
-            if not isinstance(images, Views):
-                raise ValueError("poses are needed unless images are Views with their cameras")
-            poses = images.cameras.camera_to_world
-        if isinstance(poses, Proposal):
-            expected_names, poses = list(poses.names), poses.poses
-        elif isinstance(poses, (str, Path)):
-            pose_source = str(poses)
-            poses, expected_names = read_poses(poses)
-        array = np.asarray(as_array(poses), dtype=np.float64)
-        if array.ndim == 2:
-            array = array[None]
-        if array.ndim != 3 or array.shape[1:] != (4, 4):
-            raise DatasetError(pose_source, "poses must have shape (n, 4, 4)", value=f"shape {array.shape}")
-        checked = torch.stack([check_pose(p, Path(pose_source), f"poses[{i}]") for i, p in enumerate(array)])
-
-        if names is not None:
-            expected_names = list(names)
-        is_folder = isinstance(images, (str, Path)) and Path(images).is_dir()
-        captures = collect_images(images, expected_names if is_folder else None,
-                                  tuple(self.state.background))
-        if len(captures) != len(checked):
-            where = str(images) if isinstance(images, (str, Path)) else "images"
-            raise DatasetError(where, f"got {len(captures)} images but {len(checked)} poses; "
-                                      "give one image per pose", value=f"{len(captures)} images")
-        if expected_names is not None and len(expected_names) != len(checked):
-            raise DatasetError(pose_source, f"got {len(expected_names)} names but {len(checked)} poses")
-        k = self.state.intrinsics
-        for capture in captures:
-            check_capture(capture, k.width, k.height)
-
-        json_path = self._json_path()
-        meta = read_json(json_path)
-        frames = self._frames()
-        existing = {Path(str(f["file_path"])).stem for f in frames}
-        if expected_names is None:
-            from_files = [c.name for c in captures]
-            if all(from_files) and len(set(from_files)) == len(from_files):
-                expected_names = from_files
-            else:
-                taken = set(existing)
-                expected_names = [unique_stem(f"view_{len(frames) + i:04d}", taken) for i in range(len(captures))]
-        seen: set[str] = set()
-        for i, name in enumerate(expected_names):
-            if not NAME.fullmatch(name):
-                raise DatasetError(pose_source, "an image name may hold only letters, digits, '.', '_', '-'",
-                                   field=f"names[{i}]", value=name)
-            if name in existing:
-                raise DatasetError(json_path, f"the dataset already has a frame named {name!r}; was this capture "
-                                              "added before?", field=f"names[{i}]", value=name)
-            if name in seen:
-                raise DatasetError(pose_source, "two new images share this name", field=f"names[{i}]", value=name)
-            seen.add(name)
-
-        fmt, folder = self.state.dataset.format, self.state.dataset.folder
-        new_frames = []
-        for name, capture, pose in zip(expected_names, captures, checked):
-            data, suffix = stored_bytes(capture, png_only=fmt == "blender")
-            atomic_write_bytes(self.dataset_dir / folder / f"{name}{suffix}", data)
-            frame = {"file_path": file_path(fmt, folder, name, suffix), "transform_matrix": pose.double().tolist()}
-            if fmt == "nerfstudio":
-                frame.update({"fl_x": k.fx, "fl_y": k.fy, "cx": k.cx, "cy": k.cy, "w": k.width, "h": k.height})
-            new_frames.append(frame)
-        start = len(frames)
-        atomic_write_json(json_path, {**meta, "frames": frames + new_frames})
-
-        self.trainer.add_views(self._engine_views(start))
-        self.state.views_in_model = len(self.trainer.train_views)
-        matched = [p.number for p in self.state.proposals if set(expected_names) <= set(p.names)]
-        self.state.additions.append(AdditionRecord(
-            step=self.step, names=list(expected_names), proposal=matched[-1] if matched else None, created=now(),
-        ))
-        return list(expected_names)
+        return add.add_views(self, images, poses, names)
 
     def render(self, poses, width: int | None = None) -> Tensor:
         """What the NeRF sees from world-frame `poses` (n, 4, 4): images (n, H, W, 3) in [0, 1],
         at the training resolution (or `width` pixels across)."""
-        self._require_model()
+        self.require_model()
         train = self.trainer.train_views.cameras
         camera = self.template(train.width, train.height)
         if width is not None:
             camera = camera.resized(width, max(1, round(width * train.height / train.width)))
         engine = self.hemisphere.to_engine(torch.as_tensor(as_array(poses), dtype=torch.float32).reshape(-1, 4, 4))
-        cameras = _with_poses(camera, engine).to(self.trainer.device)
+        cameras = choose.with_poses(camera, engine).to(self.trainer.device)
         background = torch.tensor(self.state.background, dtype=torch.float32, device=self.trainer.device)
         return torch.stack([self.trainer.model.render_image(cameras, i, background)["rgb"].cpu()
                             for i in range(len(cameras))])
@@ -579,67 +417,8 @@ class CaptureSession:
         Raises:
             FolderRefused: `out` holds files nerfaug did not write, or overlaps the run folder.
         """
-        if format not in ("nerfstudio", "blender"):
-            raise ValueError(f"format must be 'nerfstudio' or 'blender', got {format!r}")
-        out = Path(out)
-        if owned.overlaps(out, self.run_dir) or owned.overlaps(out, self.state.source.data_dir):
-            raise FolderRefused(f"{out}: the export folder must lie outside the run folder {self.run_dir} and "
-                                      f"the source dataset {self.state.source.data_dir}; choose another --out")
-        if not owned.is_empty(out) and not owned.marked(out, EXPORT_KIND):
-            raise FolderRefused(f"{out}: not empty and not an earlier nerfaug export, so nothing is written "
-                                      "there; choose a new or empty folder for --out")
-        json_path = self._json_path()
-        meta = read_json(json_path)
-        frames = self._frames()
-        frame_files(self.dataset_dir, json_path, frames)  # every image found before anything is written
-        cameras = self.cameras
-        if format == "blender" and not blender_compatible(cameras):
-            raise ValueError("these cameras do not fit the Blender format (one camera_angle_x, square pixels, "
-                             "centred principal point); export with format='nerfstudio'")
-        folder = "images" if format == "nerfstudio" else "train"
-        owned.mark(out, EXPORT_KIND)
-        new_frames = copy_frames(self.dataset_dir, json_path, frames, out, folder, format)
-        if format == "blender":
-            path = out / "transforms_train.json"
-            atomic_write_json(path, {"camera_angle_x": float(cameras.camera_angle_x[0]), "frames": new_frames})
-            source = Path(self.state.source.data_dir)
-            # The source is the user's dataset folder (recorded at creation); its files are read only.
-            if source_splits and self.state.source.format == "blender" and source.is_absolute() and source.is_dir():
-                for split in ("val", "test"):
-                    split_json = source / f"transforms_{split}.json"
-                    if split_json.exists() and split != self.state.source.split:
-                        copied = copy_split(source, split_json, out, split, "blender")
-                        atomic_write_json(out / split_json.name, copied)
-            return path
-        intrinsics = {"fl_x": cameras.fx, "fl_y": cameras.fy, "cx": cameras.cx, "cy": cameras.cy}
-        shared = all(bool((v - v[0]).abs().max() <= 1e-6 * max(1.0, float(v[0].abs()))) for v in intrinsics.values())
-        top = {"camera_model": "OPENCV", "w": cameras.width, "h": cameras.height}
-        if meta.get("camera_model"):
-            top["camera_model"] = meta["camera_model"]
-        top.update({k: meta[k] for k in DISTORTION_KEYS if k in meta})
-        if shared:
-            top.update({k: float(v[0]) for k, v in intrinsics.items()})
-        else:
-            for i, frame in enumerate(new_frames):
-                frame.update({k: float(v[i]) for k, v in intrinsics.items()})
-        path = out / "transforms.json"
-        atomic_write_json(path, {**top, "frames": new_frames})
-        return path
+        return export.export(self, out, format, source_splits)
 
-
-def _with_poses(template: Cameras, poses: Tensor) -> Cameras:
-    """Cameras at `poses` (n, 4, 4) with the intrinsics of `template`'s first camera."""
-    first = template[0]
-    return Cameras(poses, float(first.fx[0]), float(first.fy[0]), float(first.cx[0]), float(first.cy[0]),
-                   template.width, template.height)
-
-
-def _describe_candidates(candidates) -> str:
-    if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
-        return "hemisphere"
-    if isinstance(candidates, (str, Path)):
-        return str(candidates)
-    return "given"
 
 def check_new_run(data_dir: Path, run_dir: Path) -> None:
     """Refuse a run folder that would hold or hide the dataset, or that holds files nerfaug did not write.
@@ -657,11 +436,3 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
         raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder "
                                   "for --out")
 
-
-def check_method(method: str) -> None:
-    """Raise ValueError unless `method` names a selection method."""
-    from nerfaug.selection import METHODS
-
-    if method not in METHODS:
-        raise ValueError(f"unknown selection method {method!r}; choose one of {', '.join(METHODS)} "
-                         "(`nerfaug methods` describes them)")

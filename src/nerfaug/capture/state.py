@@ -18,7 +18,13 @@ from nerfaug.capture.frame import Hemisphere
 from nerfaug.errors import NerfaugError
 
 SESSION_FORMAT = 1
+# The run folder's names (the layout is drawn in `nerfaug.capture.session`).
 SESSION_FILE = "session.json"
+CHECKPOINT_FILE = "checkpoint.pt"
+DATASET_DIR = "dataset"
+PROPOSALS_DIR = "proposals"
+# Marker kinds (`nerfaug.owned`): the run folder, its dataset copy, and a folder `export` wrote.
+RUN_KIND, DATASET_KIND, EXPORT_KIND = "capture-session", "capture-dataset", "capture-export"
 DATASET_FORMATS = ("blender", "nerfstudio")
 
 
@@ -196,9 +202,9 @@ class SessionState:
         try:
             data = json.loads(path.read_text())
         except json.JSONDecodeError as error:
-            raise SessionError(f"{path}: invalid JSON at line {error.lineno}: {error.msg}")
+            raise SessionError(f"{path}: invalid JSON at line {error.lineno}: {error.msg}") from None
         except (OSError, UnicodeDecodeError) as error:
-            raise SessionError(f"{path}: cannot read: {error}")
+            raise SessionError(f"{path}: cannot read: {error}") from None
         return cls.from_dict(data, path)
 
 
