@@ -104,6 +104,11 @@ def builtin_dataset_digest(scene: str, config: ExperimentConfig) -> str:
     return fingerprint(manifest)
 
 
+def dataset_cache_dir(root: Path) -> Path:
+    """Where a sweep's runs share their downscaled datasets (`nerfaug.scenes.cache`)."""
+    return Path(root) / "datasets" / "cache"
+
+
 def initial_view_indices(pool: Views, n: int) -> list[int]:
     """For datasets without an `initial` split: the pool views nearest (in direction) to the fixed
     half-hemisphere layout `half_hemisphere_poses(n)`, so every trial starts from the same views."""
@@ -118,16 +123,28 @@ def initial_view_indices(pool: Views, n: int) -> list[int]:
     return chosen
 
 
-def load_scene_data(folder: Path, config: ExperimentConfig) -> SceneData:
-    """Initial, pool (candidates) and test views of a dataset folder at the configured size."""
+def load_scene_data(folder: Path, config: ExperimentConfig, cache_dir: Path | None = None) -> SceneData:
+    """Initial, pool (candidates) and test views of a dataset folder at the configured size.
+
+    With `cache_dir`, each split's downscaled images are read from (or written to) a cache there
+    (`nerfaug.scenes.cache`), keyed by the digest of the folder's files: the same images, bit for
+    bit, without decoding and shrinking every image in every run.
+    """
+    from nerfaug.scenes.cache import folder_digest, load_split_cached
+
     folder = Path(folder)
     probe = load_dataset(folder, "train", lazy=True)
     downscale = max(1, probe.cameras.width // config.resolution)
-    pool = load_dataset(folder, "train", downscale=downscale)
-    test = load_dataset(folder, "test", downscale=downscale)
+    if cache_dir is None:
+        load = functools.partial(load_dataset, folder, downscale=downscale)
+    else:
+        load = functools.partial(load_split_cached, folder, downscale=downscale, cache_dir=cache_dir,
+                                 digest=folder_digest(folder))
+    pool = load(split="train")
+    test = load(split="test")
     test = test.subset(range(min(config.n_test, len(test))))
     if (folder / "transforms_initial.json").exists():
-        initial = load_dataset(folder, "initial", downscale=downscale)
+        initial = load(split="initial")
     else:
         chosen = initial_view_indices(pool, config.n_initial)
         initial = pool.subset(chosen)
@@ -180,7 +197,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     timing: dict[str, float] = {}
 
     start = time.perf_counter()
-    data = load_scene_data(dataset_dir, config)
+    data = load_scene_data(dataset_dir, config, cache_dir=dataset_cache_dir(root))
     engine = engine_config(config, key.scene)
     trainer = Trainer(data.initial, engine, seed=seed, device=config.device, progress=progress)
     timing["setup"] = time.perf_counter() - start
