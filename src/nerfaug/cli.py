@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import os
 import sys
+import warnings
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Literal
 
 import tyro
 
@@ -133,7 +134,7 @@ def run(
     try:
         changes["device"] = resolve_device(device).type
     except ValueError as error:
-        raise SystemExit(f"nerfaug run: --device: {error}") from None
+        raise SystemExit(f"--device: {error}") from None
     changes["selection"] = replace(config.selection, **selection_changes(selection))
     config = config.replace(**changes)
     if workers is None:
@@ -171,7 +172,7 @@ def report(results: Positional[Path]) -> None:
     try:
         paths = write_report(results)
     except ReportError as error:
-        raise SystemExit(f"nerfaug report: {error}")
+        raise SystemExit(str(error)) from None
     for path in paths:
         print(path)
 
@@ -213,6 +214,9 @@ def main(argv: list[str] | None = None) -> None:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("NERFAUG_DEBUG", "") not in ("", "0")
     argv = [arg for arg in argv if arg != "--debug"]
+    # Flushing denormals (configure_process) makes numpy warn, once per float type, that the
+    # smallest subnormal is zero: expected, and eight lines of noise before any one-line error.
+    warnings.filterwarnings("ignore", message="The value of the smallest subnormal", category=UserWarning)
     try:
         from nerfaug.device import configure_process
 

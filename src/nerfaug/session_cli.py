@@ -218,8 +218,11 @@ def propose(
     from nerfaug.capture.choose import check_method
 
     check_method(method)
-    if n < 1 or n_candidates < 1:
-        raise ValueError(f"--n {n} --n-candidates {n_candidates}: both must be >= 1")
+    for name, value in (("n", n), ("n-candidates", n_candidates)):
+        if value < 1:
+            raise ValueError(f"--{name} {value}: must be >= 1")
+    if seed is not None and seed < 0:
+        raise ValueError(f"--seed {seed}: must be >= 0")
     _check_poses_out(out)
     session = _open(run, device)
     proposal = session.propose(n, method, candidates=candidates, n_candidates=n_candidates, seed=seed,
@@ -256,6 +259,7 @@ def add(
     _check_steps(steps)  # before anything is written: a refused call changes nothing
     session = _open(run, device)
     names = session.add_views(images, poses)
+    session.save()  # the addition's record is kept even if training is stopped at once
     print(f"added {len(names)} views ({', '.join(names)}); the dataset now has "
           f"{len(session.trainer.train_views)} views")
     last = _train(session, steps)
@@ -310,6 +314,11 @@ def render_proposals(
     from nerfaug.capture import read_poses
     from nerfaug.scenes.render import render_poses
 
+    for name, value in (("samples", samples), ("threads", threads)):
+        if value < 1:
+            raise ValueError(f"--{name} {value}: must be >= 1")
+    if seed < 0:
+        raise ValueError(f"--seed {seed}: must be >= 0")
     k = SessionState.read(run).intrinsics
     if abs(k.fx - k.fy) > 1e-3 * k.fx:
         raise SystemExit("Blender renders square pixels; this session's camera has fx != fy")

@@ -86,6 +86,8 @@ def propose(
         raise ValueError(f"n (views to propose) must be an integer >= 1, got {n}")
     if int(n_candidates) < 1:
         raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
+    if seed is not None and int(seed) < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
     number = len(session.state.proposals)
     used_seed = None
     if generator is None:
@@ -93,7 +95,9 @@ def propose(
         generator = torch.Generator().manual_seed(used_seed)
     world = candidate_cameras(session, candidates, n_candidates, generator)
     if len(world) < n:
-        raise ValueError(f"cannot propose {n} views from {len(world)} candidates")
+        raise ValueError(f"{describe_candidates(candidates)}: cannot propose {n} views from {len(world)} candidates "
+                         "(poses the model already trains on are left out); ask for fewer views or give more "
+                         "candidates")
     hemisphere = session.hemisphere
     engine_train = session.trainer.train_views.cameras
     engine = Cameras(hemisphere.to_engine(world.camera_to_world), world.fx, world.fy, world.cx, world.cy,
