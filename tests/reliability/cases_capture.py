@@ -1,0 +1,355 @@
+"""Bad inputs of active capture: `nerfaug train`, `propose`, `add`, `export` and damaged run folders."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from cases import Bases, case, copy_dataset, edit_json, train_on
+from harness import Case, copy, write_images
+
+
+def _session(tmp, bases) -> Path:
+    return copy(bases.session, tmp / "run")
+
+
+def _propose(run: Path, tmp: Path, *extra) -> list:
+    return ["propose", run, "--out", tmp / "poses.json", "--n-candidates", "12", "--device", "cpu", *extra]
+
+
+def _propose_case(tmp, bases, *extra, says=()) -> Case:
+    run = _session(tmp, bases)
+    return Case(_propose(run, tmp, *extra), [run], says=says)
+
+
+def _broken_session(tmp, bases, change, *says) -> Case:
+    run = _session(tmp, bases)
+    edit_json(run / "session.json", change)
+    return Case(_propose(run, tmp), [run], says=("session.json", *says))
+
+
+@case
+def train_into_the_folder_holding_the_dataset(tmp, bases):
+    """The issue's data loss: `nerfaug train proj/dataset --out proj` deleted proj/dataset."""
+    project = tmp / "proj"
+    copy(bases.dataset, project / "dataset")
+    return Case(["train", project / "dataset", "--out", project, "--preset", "test", "--steps", "1",
+                 "--device", "cpu"], [project], says=(str(project),))
+
+
+@case
+def train_out_is_the_dataset(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(["train", data, "--out", data, "--preset", "test", "--device", "cpu"], [data], says=(str(data),))
+
+
+@case
+def train_out_is_a_users_folder(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (tmp / "mine").mkdir()
+    (tmp / "mine" / "notes.txt").write_text("keep me")
+    (tmp / "mine" / "dataset").mkdir()
+    (tmp / "mine" / "dataset" / "photo.png").write_bytes(b"1234")
+    return Case(["train", data, "--out", tmp / "mine", "--preset", "test", "--device", "cpu"], [data, tmp / "mine"],
+                says=("mine",))
+
+
+@case
+def train_out_is_a_file(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (tmp / "out.txt").write_text("x")
+    return Case(["train", data, "--out", tmp / "out.txt", "--preset", "test", "--device", "cpu"],
+                [data, tmp / "out.txt"], says=("out.txt",))
+
+
+@case
+def train_negative_steps(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--steps", "-1").argv, [data, tmp], says=("--steps", "-1"))
+
+
+@case
+def train_downscale_zero(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--downscale", "0").argv, [data, tmp], says=("downscale", "0"))
+
+
+@case
+def train_downscale_larger_than_images(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--downscale", "100").argv, [data, tmp], says=("downscale", "100"))
+
+
+@case
+def train_unknown_preset(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--preset", "fastest").argv, [data, tmp], says=("fastest",), usage=True)
+
+
+@case
+def train_negative_radius(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--radius", "-1").argv, [data, tmp], says=("radius", "-1"))
+
+
+@case
+def train_zero_up(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--up", "0", "0", "0").argv, [data, tmp], says=("up",))
+
+
+@case
+def train_nan_centre(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--centre", "nan", "0", "0").argv, [data, tmp], says=("centre", "nan"))
+
+
+@case
+def train_negative_seed(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--seed", "-1").argv, [data, tmp], says=("seed", "-1"))
+
+
+@case
+def train_dataset_without_out(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(["train", data, "--device", "cpu"], [data, tmp], says=("--out",))
+
+
+@case
+def train_session_with_out(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["train", run, "--out", tmp / "other", "--device", "cpu"], [run, tmp], says=(str(run),))
+
+
+@case
+def train_session_negative_steps(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["train", run, "--steps", "-2", "--device", "cpu"], [run], says=("--steps", "-2"))
+
+
+@case
+def propose_zero_views(tmp, bases):
+    return _propose_case(tmp, bases, "--n", "0", says=("--n", "0"))
+
+
+@case
+def propose_negative_views(tmp, bases):
+    return _propose_case(tmp, bases, "--n", "-3", says=("--n", "-3"))
+
+
+@case
+def propose_unknown_method(tmp, bases):
+    return _propose_case(tmp, bases, "--method", "best-views", says=("best-views",))
+
+
+@case
+def propose_zero_candidates(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["propose", run, "--out", tmp / "poses.json", "--n-candidates", "0", "--device", "cpu"], [run],
+                says=("--n-candidates", "0"))
+
+
+@case
+def propose_more_views_than_candidates(tmp, bases):
+    return _propose_case(tmp, bases, "--n", "50", says=("50",))
+
+
+@case
+def propose_candidates_file_missing(tmp, bases):
+    return _propose_case(tmp, bases, "--candidates", tmp / "reach.json", says=("reach.json",))
+
+
+@case
+def propose_candidates_file_invalid(tmp, bases):
+    (tmp / "reach.json").write_text("{oops")
+    return _propose_case(tmp, bases, "--candidates", tmp / "reach.json", says=("reach.json",))
+
+
+@case
+def propose_on_a_dataset(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(_propose(data, tmp), [data], says=(str(data), "session.json"))
+
+
+@case
+def propose_over_a_users_file(tmp, bases):
+    run = _session(tmp, bases)
+    (tmp / "poses.json").write_text('{"my": "notes"}')
+    return Case(_propose(run, tmp), [run, tmp / "poses.json"], says=("poses.json",))
+
+
+@case
+def session_json_truncated(tmp, bases):
+    run = _session(tmp, bases)
+    text = (run / "session.json").read_text()
+    (run / "session.json").write_text(text[: len(text) // 2])
+    return Case(_propose(run, tmp), [run], says=("session.json",))
+
+
+@case
+def session_json_dataset_file_outside(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d["dataset"].update(json="../../../etc/passwd"), "dataset.json")
+
+
+@case
+def session_json_dataset_folder_absolute(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d["dataset"].update(folder="/tmp"), "dataset.folder")
+
+
+@case
+def session_json_unknown_format(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d.update(format=99), "format", "99")
+
+
+@case
+def session_json_without_intrinsics(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d.pop("intrinsics"), "intrinsics")
+
+
+@case
+def session_json_bad_background(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d.update(background=[2, 0, 0]), "background")
+
+
+@case
+def session_json_proposal_file_outside(tmp, bases):
+    record = {"number": 0, "method": "ours", "n": 1, "step": 3, "seed": 1, "candidates": "hemisphere",
+              "n_candidates": 12, "names": ["capture_000_00"], "poses": [], "azimuth": [], "polar": [],
+              "file": "../../elsewhere/proposal.json", "created": "now"}
+    return _broken_session(tmp, bases, lambda d: d.update(proposals=[record]), "proposals[0].file")
+
+
+@case
+def checkpoint_missing(tmp, bases):
+    run = _session(tmp, bases)
+    (run / "checkpoint.pt").unlink()
+    return Case(_propose(run, tmp), [run], says=("checkpoint.pt",))
+
+
+@case
+def checkpoint_corrupt(tmp, bases):
+    run = _session(tmp, bases)
+    (run / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    return Case(_propose(run, tmp), [run], says=("checkpoint.pt",))
+
+
+def _poses(tmp: Path, bases: Bases, names=("capture_000_00", "capture_000_01"), change=None) -> Path:
+    """A poses JSON as `nerfaug propose` writes it (two poses of the dataset's test split)."""
+    test = json.loads((bases.dataset / "transforms_test.json").read_text())
+    frames = [{"file_path": f"./{name}", "transform_matrix": frame["transform_matrix"]}
+              for name, frame in zip(names, test["frames"])]
+    data = {"camera_angle_x": test["camera_angle_x"], "frames": frames}
+    if change is not None:
+        change(data)
+    (tmp / "poses.json").write_text(json.dumps(data))
+    return tmp / "poses.json"
+
+
+def _add(tmp, bases, images=None, poses=None, *extra, says=(), image_names=("capture_000_00", "capture_000_01"),
+         size=8) -> Case:
+    run = _session(tmp, bases)
+    poses = _poses(tmp, bases) if poses is None else poses
+    if images is None:
+        images = write_images(tmp / "captures", list(image_names), size=size)
+    inputs = [run, poses] + ([images] if Path(images).exists() else [])
+    return Case(["add", run, "--images", images, "--poses", poses, "--steps", "1", "--device", "cpu", *extra],
+                inputs, says=says)
+
+
+@case
+def add_images_folder_missing(tmp, bases):
+    return _add(tmp, bases, images=tmp / "nope", says=("nope",))
+
+
+@case
+def add_poses_missing(tmp, bases):
+    return _add(tmp, bases, poses=tmp / "nope.json", says=("nope.json",))
+
+
+@case
+def add_poses_invalid_json(tmp, bases):
+    (tmp / "bad.json").write_text("{")
+    return _add(tmp, bases, poses=tmp / "bad.json", says=("bad.json",))
+
+
+@case
+def add_poses_nan(tmp, bases):
+    def change(d):
+        d["frames"][1]["transform_matrix"][1][1] = float("nan")
+    return _add(tmp, bases, poses=_poses(tmp, bases, change=change), says=("poses.json", "frames[1]"))
+
+
+@case
+def add_images_of_another_size(tmp, bases):
+    return _add(tmp, bases, size=6, says=("capture_000_00",))
+
+
+@case
+def add_fewer_images_than_poses(tmp, bases):
+    return _add(tmp, bases, image_names=("capture_000_00",), says=("capture_000_01",))
+
+
+@case
+def add_images_folder_empty(tmp, bases):
+    (tmp / "empty").mkdir()
+    return _add(tmp, bases, images=tmp / "empty", says=("empty",))
+
+
+@case
+def add_image_corrupt(tmp, bases):
+    images = write_images(tmp / "captures", ["capture_000_00", "capture_000_01"])
+    (images / "capture_000_01.png").write_bytes(b"garbage")
+    return _add(tmp, bases, images=images, says=("capture_000_01",))
+
+
+@case
+def add_negative_steps(tmp, bases):
+    """`add` must check --steps before it writes: a refused call changes nothing."""
+    return _add(tmp, bases, None, None, "--steps", "-5", says=("--steps", "-5"))
+
+
+@case
+def add_a_frame_already_in_the_dataset(tmp, bases):
+    return _add(tmp, bases, poses=_poses(tmp, bases, names=("r_0", "r_1")), image_names=("r_0", "r_1"),
+                says=("r_0",))
+
+
+@case
+def add_image_names_with_separators(tmp, bases):
+    poses = _poses(tmp, bases, names=("a b", "c"))
+    return _add(tmp, bases, poses=poses, image_names=("a b", "c"), says=("a b",))
+
+
+@case
+def export_into_a_users_folder(tmp, bases):
+    run = _session(tmp, bases)
+    (tmp / "mine").mkdir()
+    (tmp / "mine" / "transforms.json").write_text("{}")
+    return Case(["export", run, "--out", tmp / "mine"], [run, tmp / "mine"], says=("mine",))
+
+
+@case
+def export_into_the_run_folder(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["export", run, "--out", run], [run], says=(str(run),))
+
+
+@case
+def export_over_the_source_dataset(tmp, bases):
+    run = _session(tmp, bases)
+    source = Path(json.loads((run / "session.json").read_text())["source"]["data_dir"])
+    return Case(["export", run, "--out", source], [run, source], says=(str(source),))
+
+
+@case
+def export_from_a_dataset(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(["export", data, "--out", tmp / "out"], [data, tmp], says=("session.json",))
+
+
+@case
+def export_unknown_format(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["export", run, "--out", tmp / "out", "--format", "colmap"], [run, tmp], says=("colmap",), usage=True)
+

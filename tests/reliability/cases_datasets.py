@@ -1,0 +1,164 @@
+"""Bad datasets: transforms files, frames, images and cameras, read through `nerfaug train`."""
+
+from __future__ import annotations
+
+import json
+
+from cases import case, copy_dataset, edit_json, train_on
+from harness import Case, write_images
+
+
+def _bad_train_json(tmp, bases, change, *says) -> Case:
+    data = copy_dataset(tmp, bases)
+    edit_json(data / "transforms_train.json", change)
+    return Case(train_on(data, tmp).argv, [data], says=("transforms_train.json", *says))
+
+
+@case
+def dataset_folder_missing(tmp, bases):
+    return Case(train_on(tmp / "nope", tmp).argv, says=("nope",))
+
+
+@case
+def dataset_folder_empty(tmp, bases):
+    (tmp / "empty").mkdir()
+    return Case(train_on(tmp / "empty", tmp).argv, [tmp / "empty"], says=("empty",))
+
+
+@case
+def dataset_path_is_a_file(tmp, bases):
+    (tmp / "file.txt").write_text("not a dataset")
+    return Case(train_on(tmp / "file.txt", tmp).argv, [tmp / "file.txt"], says=("file.txt",))
+
+
+@case
+def transforms_invalid_json(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (data / "transforms_train.json").write_text('{"frames": [')
+    return Case(train_on(data, tmp).argv, [data], says=("transforms_train.json", "JSON"))
+
+
+@case
+def transforms_top_level_list(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (data / "transforms_train.json").write_text("[]")
+    return Case(train_on(data, tmp).argv, [data], says=("transforms_train.json",))
+
+
+@case
+def transforms_without_frames(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d.pop("frames"), "frames")
+
+
+@case
+def transforms_frames_empty(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d.update(frames=[]), "frames")
+
+
+@case
+def transforms_frames_not_a_list(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d.update(frames={"a": 1}), "frames")
+
+
+@case
+def frame_without_matrix(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d["frames"][0].pop("transform_matrix"), "frames[0]")
+
+
+@case
+def frame_matrix_3x4(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d["frames"][1].update(transform_matrix=d["frames"][1]
+                                                                         ["transform_matrix"][:3]), "frames[1]")
+
+
+@case
+def frame_matrix_nan(tmp, bases):
+    def change(d):
+        d["frames"][2]["transform_matrix"][0][3] = float("nan")
+    return _bad_train_json(tmp, bases, change, "frames[2]")
+
+
+@case
+def frame_matrix_strings(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d["frames"][0].update(transform_matrix=[["a"] * 4] * 4), "frames[0]")
+
+
+@case
+def frame_matrix_not_rigid(tmp, bases):
+    def change(d):
+        d["frames"][0]["transform_matrix"][0][0] = 5.0
+    return _bad_train_json(tmp, bases, change, "frames[0]")
+
+
+@case
+def frame_without_file_path(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d["frames"][3].pop("file_path"), "frames[3]")
+
+
+@case
+def frame_image_missing(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (data / "train" / "r_4.png").unlink()
+    return Case(train_on(data, tmp).argv, [data], says=("transforms_train.json", "frames[4]"))
+
+
+@case
+def frame_path_escapes_relative(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (tmp / "secret.png").write_bytes((data / "train" / "r_0.png").read_bytes())
+    edit_json(data / "transforms_train.json", lambda d: d["frames"][0].update(file_path="../secret"))
+    return Case(train_on(data, tmp).argv, [data, tmp / "secret.png"], says=("transforms_train.json", "frames[0]"))
+
+
+@case
+def frame_path_escapes_absolute(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (tmp / "secret.png").write_bytes((data / "train" / "r_0.png").read_bytes())
+    edit_json(data / "transforms_train.json", lambda d: d["frames"][1].update(file_path=str(tmp / "secret")))
+    return Case(train_on(data, tmp).argv, [data, tmp / "secret.png"], says=("transforms_train.json", "frames[1]"))
+
+
+@case
+def image_corrupt(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (data / "train" / "r_2.png").write_bytes(b"\x89PNG\r\n\x1a\n garbage")
+    return Case(train_on(data, tmp).argv, [data], says=("r_2",))
+
+
+@case
+def image_of_another_size(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    write_images(data / "train", ["r_5"], size=6)
+    return Case(train_on(data, tmp).argv, [data], says=("r_5",))
+
+
+@case
+def camera_angle_missing(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d.pop("camera_angle_x"), "camera_angle_x")
+
+
+@case
+def camera_angle_negative(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d.update(camera_angle_x=-0.5), "camera_angle_x")
+
+
+@case
+def camera_angle_text(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d.update(camera_angle_x="wide"), "camera_angle_x")
+
+
+@case
+def split_missing(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--split", "nosuch").argv, [data], says=("nosuch",))
+
+
+@case
+def nerfstudio_without_focal_length(tmp, bases):
+    data = tmp / "ns"
+    write_images(data / "images", ["a", "b", "c"])
+    frames = [{"file_path": f"images/{n}.png", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4 + i],
+                                                                       [0, 0, 0, 1]]} for i, n in enumerate("abc")]
+    (data / "transforms.json").write_text(json.dumps({"w": 8, "h": 8, "cx": 4, "cy": 4, "frames": frames}))
+    return Case(train_on(data, tmp).argv, [data], says=("transforms.json", "fl_x"))
+
