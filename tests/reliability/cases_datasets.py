@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from cases import case, copy_dataset, edit_json, train_on
 from harness import Case, write_images
@@ -162,3 +163,84 @@ def nerfstudio_without_focal_length(tmp, bases):
     (data / "transforms.json").write_text(json.dumps({"w": 8, "h": 8, "cx": 4, "cy": 4, "frames": frames}))
     return Case(train_on(data, tmp).argv, [data], says=("transforms.json", "fl_x"))
 
+
+
+def _nerfstudio(tmp, bases, change=None, **top) -> Path:
+    """A nerfstudio-format dataset (transforms.json + images/) of the base dataset's first 4 views."""
+    data = tmp / "ns"
+    write_images(data / "images", ["a", "b", "c", "d"])
+    poses = [f["transform_matrix"] for f in json.loads((bases.dataset / "transforms_train.json").read_text())["frames"]]
+    frames = [{"file_path": f"images/{n}.png", "transform_matrix": poses[i]} for i, n in enumerate("abcd")]
+    meta = {"w": 8, "h": 8, "fl_x": 9.0, "fl_y": 9.0, "cx": 4.0, "cy": 4.0, "frames": frames, **top}
+    if change is not None:
+        change(meta)
+    (data / "transforms.json").write_text(json.dumps(meta))
+    return data
+
+
+@case
+def nerfstudio_negative_focal_length(tmp, bases):
+    data = _nerfstudio(tmp, bases, fl_x=-9.0)
+    return Case(train_on(data, tmp).argv, [data], says=("transforms.json", "fl_x"))
+
+
+@case
+def nerfstudio_image_missing(tmp, bases):
+    data = _nerfstudio(tmp, bases)
+    (data / "images" / "c.png").unlink()
+    return Case(train_on(data, tmp).argv, [data], says=("transforms.json", "frames[2]"))
+
+
+@case
+def nerfstudio_path_escapes(tmp, bases):
+    (tmp / "secret.png").write_bytes(next((bases.dataset / "train").glob("*.png")).read_bytes())
+    data = _nerfstudio(tmp, bases, lambda m: m["frames"][2].update(file_path="../secret.png"))
+    return Case(train_on(data, tmp).argv, [data, tmp / "secret.png"], says=("transforms.json", "frames[2]"))
+
+
+@case
+def camera_angle_zero(tmp, bases):
+    return _bad_train_json(tmp, bases, lambda d: d.update(camera_angle_x=0), "camera_angle_x")
+
+
+@case
+def transforms_file_is_a_folder(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (data / "transforms_train.json").unlink()
+    (data / "transforms_train.json").mkdir()
+    return Case(train_on(data, tmp).argv, [data], says=("transforms_train.json",))
+
+
+@case
+def image_is_a_folder(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (data / "train" / "r_3.png").unlink()
+    (data / "train" / "r_3.png").mkdir()
+    return Case(train_on(data, tmp).argv, [data], says=("transforms_train.json", "frames[3]"))
+
+
+@case
+def image_symlink_leaving_the_folder(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (tmp / "secret.png").write_bytes((data / "train" / "r_6.png").read_bytes())
+    (data / "train" / "r_6.png").unlink()
+    (data / "train" / "r_6.png").symlink_to(tmp / "secret.png")
+    return Case(train_on(data, tmp).argv, [data, tmp / "secret.png"], says=("transforms_train.json", "frames[6]"))
+
+
+@case
+def split_name_leaving_the_folder(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--split", "../x").argv, [data], says=("../x",))
+
+
+@case
+def cameras_looking_the_same_way(tmp, bases):
+    """The hemisphere cannot be estimated from parallel optical axes: say so, and what to give."""
+    def parallel(d):
+        for frame in d["frames"]:
+            m = frame["transform_matrix"]
+            frame["transform_matrix"] = [[1, 0, 0, m[0][3]], [0, 1, 0, m[1][3]], [0, 0, 1, 4], [0, 0, 0, 1]]
+    data = copy_dataset(tmp, bases)
+    edit_json(data / "transforms_train.json", parallel)
+    return Case(train_on(data, tmp).argv, [data], says=("centre", "radius"))
