@@ -353,3 +353,134 @@ def export_unknown_format(tmp, bases):
     run = _session(tmp, bases)
     return Case(["export", run, "--out", tmp / "out", "--format", "colmap"], [run, tmp], says=("colmap",), usage=True)
 
+
+
+@case
+def train_zero_radius(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--radius", "0").argv, [data, tmp], says=("radius", "0"))
+
+
+@case
+def train_steps_not_a_number(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["train", run, "--steps", "many", "--device", "cpu"], [run], says=("many",), usage=True)
+
+
+@case
+def propose_negative_seed(tmp, bases):
+    return _propose_case(tmp, bases, "--seed", "-1", says=("--seed", "-1"))
+
+
+@case
+def propose_candidates_with_a_nan_pose(tmp, bases):
+    test = json.loads((bases.dataset / "transforms_test.json").read_text())
+    test["frames"][1]["transform_matrix"][2][2] = float("nan")
+    (tmp / "reach.json").write_text(json.dumps(test))
+    return _propose_case(tmp, bases, "--candidates", tmp / "reach.json", says=("reach.json", "frames[1]"))
+
+
+@case
+def propose_candidates_all_trained_on(tmp, bases):
+    """Candidates the model already trains on are left out: none remain, so nothing is proposed."""
+    (tmp / "reach.json").write_text((bases.dataset / "transforms_train.json").read_text())
+    return _propose_case(tmp, bases, "--candidates", tmp / "reach.json", "--n", "2",
+                         says=("reach.json", "0 candidates"))
+
+
+@case
+def propose_out_is_the_session_file(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(_propose(run, tmp)[:2] + ["--out", run / "session.json", "--n-candidates", "12", "--device", "cpu"],
+                [run], says=("session.json",))
+
+
+@case
+def session_json_missing(tmp, bases):
+    run = _session(tmp, bases)
+    (run / "session.json").unlink()
+    return Case(_propose(run, tmp), [run], says=("session.json",))
+
+
+@case
+def session_json_not_an_object(tmp, bases):
+    run = _session(tmp, bases)
+    (run / "session.json").write_text("[]")
+    return Case(_propose(run, tmp), [run], says=("session.json",))
+
+
+@case
+def session_json_step_text(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d.update(step="many"), "step", "many")
+
+
+@case
+def session_json_negative_seed(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d.update(seed=-4), "seed", "-4")
+
+
+@case
+def session_json_hemisphere_nan(tmp, bases):
+    return _broken_session(tmp, bases, lambda d: d["hemisphere"].update(radius=float("nan")), "hemisphere", "nan")
+
+
+@case
+def session_dataset_frames_removed(tmp, bases):
+    """The run's dataset was edited outside the session: fewer frames than the checkpoint knows."""
+    run = _session(tmp, bases)
+    edit_json(run / "dataset" / "transforms_train.json", lambda d: d.update(frames=d["frames"][:-1]))
+    return Case(["train", run, "--steps", "1", "--device", "cpu"], [run], says=("transforms_train.json", "9", "10"))
+
+
+@case
+def export_with_an_image_deleted(tmp, bases):
+    run = _session(tmp, bases)
+    (run / "dataset" / "train" / "r_0.png").unlink()
+    return Case(["export", run, "--out", tmp / "out"], [run, tmp], says=("transforms_train.json", "frames[0]"))
+
+
+@case
+def export_inside_the_source_dataset(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["export", run, "--out", bases.dataset / "exported"], [run], says=("exported", "source dataset"))
+
+
+@case
+def add_two_poses_with_one_name(tmp, bases):
+    return _add(tmp, bases, poses=_poses(tmp, bases, names=("cap", "cap")), image_names=("cap",), says=("cap",))
+
+
+@case
+def add_pose_not_rigid(tmp, bases):
+    def change(d):
+        d["frames"][0]["transform_matrix"][0][0] *= 3
+    return _add(tmp, bases, poses=_poses(tmp, bases, change=change), says=("poses.json", "frames[0]"))
+
+
+@case
+def add_to_a_dataset_folder(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    case = _add(tmp, bases)
+    case.argv[1] = data
+    case.inputs.append(data)
+    case.says = ("session.json",)
+    return case
+
+
+def _render_proposals(tmp, bases, *extra, says=()) -> Case:
+    run = _session(tmp, bases)
+    poses = _poses(tmp, bases)
+    return Case(["render-proposals", run, "--poses", poses, "--scene", "lego", "--out", tmp / "renders", *extra],
+                [run, poses], says=says)
+
+
+@case
+def render_proposals_zero_samples(tmp, bases):
+    return _render_proposals(tmp, bases, "--samples", "0", says=("--samples", "0"))
+
+
+@case
+def render_proposals_poses_missing(tmp, bases):
+    case = _render_proposals(tmp, bases, says=("nope.json",))
+    case.argv[3] = tmp / "nope.json"
+    return case
