@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from cases import TINY, case, copy_dataset, edit_json
@@ -195,3 +196,69 @@ def report_on_a_missing_folder(tmp, bases):
 def report_on_a_dataset(tmp, bases):
     data = copy_dataset(tmp, bases)
     return Case(["report", data], [data], says=(str(data),))
+
+
+@case
+def run_selection_setting_out_of_range(tmp, bases):
+    """Refused while the command line is parsed (its usage text, exit 2), before any work."""
+    case = _run(tmp, bases, "--selection.temperature", "0", says=("temperature", "0"), inputs=[tmp])
+    case.usage = True
+    return case
+
+
+@case
+def run_data_in_nerfstudio_format_without_test_split(tmp, bases):
+    data = tmp / "ns"
+    copy(bases.dataset / "train", data / "images")
+    frames = json.loads((bases.dataset / "transforms_train.json").read_text())["frames"]
+    for frame in frames:
+        frame["file_path"] = "images/" + Path(frame["file_path"]).name + ".png"
+    meta = {"w": 8, "h": 8, "fl_x": 9.0, "fl_y": 9.0, "cx": 4.0, "cy": 4.0, "frames": frames}
+    (data / "transforms.json").write_text(json.dumps(meta))
+    return _run(tmp, bases, data=data, says=("transforms_test.json",), inputs=[tmp])
+
+
+@case
+def run_data_is_a_capture_session(tmp, bases):
+    run = copy(bases.session, tmp / "run")
+    return _run(tmp, bases, data=run, says=(str(run),), inputs=[tmp])
+
+
+@case
+def run_out_is_the_dataset(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return _run(tmp, bases, data=data, out=data, says=(str(data),))
+
+
+@case
+def results_sweep_json_without_fingerprint(tmp, bases):
+    results = _results(tmp, bases)
+    (results / "sweep.json").write_text("{}")
+    return _run(tmp, bases, out=results, says=("sweep.json", "--force"), inputs=[results])
+
+
+@case
+def results_changed_selection_setting(tmp, bases):
+    results = _results(tmp, bases)
+    return _run(tmp, bases, "--selection.temperature", "2", out=results,
+                says=("selection.temperature", "1.0", "2.0", "--force"), inputs=[results])
+
+
+@case
+def results_changed_engine(tmp, bases):
+    results = _results(tmp, bases)
+    return _run(tmp, bases, "--engine", "cpu", out=results, says=("engine", "cpu", "--force"), inputs=[results])
+
+
+@case
+def results_changed_resolution(tmp, bases):
+    results = _results(tmp, bases)
+    return _run(tmp, bases, "--resolution", "4", out=results, says=("resolution", "8", "4", "--force"),
+                inputs=[results])
+
+
+@case
+def report_with_sweep_json_corrupt(tmp, bases):
+    results = _results(tmp, bases)
+    (results / "sweep.json").write_text("{")
+    return Case(["report", results], [results], says=("sweep.json",))
