@@ -12,6 +12,8 @@ the pixels do not depend on the thread count).
 from __future__ import annotations
 
 import collections
+import contextlib
+import fcntl
 import hashlib
 import importlib.metadata
 import importlib.util
@@ -289,6 +291,32 @@ def render_scene_dataset(
         return out
     if out.is_dir() and any(out.iterdir()) and not (out / "scene.json").exists():
         raise FileExistsError(f"{out} is not empty and holds no scene.json: refusing to replace it")
+    # Two processes asked for the same folder (e.g. two sweeps, or a sweep and `nerfaug scene
+    # render`) would share one staging folder: the second waits for the first, then finds the
+    # dataset complete. The lock is on the parent folder, so nothing is left behind.
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with exclusive_lock(out.parent):
+        if is_complete(out, manifest):
+            return out
+        return _render_dataset(scene, out, manifest, resolution, pool, test, initial, val, samples, seed,
+                               threads, progress)
+
+
+@contextlib.contextmanager
+def exclusive_lock(folder: Path):
+    """Hold an exclusive advisory lock (`flock`) on the existing folder `folder`; waits while
+    another process holds it."""
+    handle = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(handle)  # releases the lock
+
+
+def _render_dataset(scene, out: Path, manifest: dict, resolution: int, pool: int, test: int, initial: int,
+                    val: int, samples: int, seed: int, threads: int, progress: bool) -> Path:
+    """The body of `render_scene_dataset`, run while holding its lock."""
     staging = out.with_name(f".{out.name}.partial")
     renders = staging / "renders"
     if not (staging / "manifest.json").is_file() or read_json(staging / "manifest.json") != manifest:
