@@ -31,3 +31,20 @@ def test_presets_are_consistent():
         config = preset(name)
         assert 0 < config.add_at_step < config.steps
         assert config.n_new <= config.pool
+
+
+def test_quick_preset_compares_the_main_methods_with_enough_trials_for_significance():
+    from scipy.stats import mannwhitneyu
+
+    from nerfaug.evaluation import Lpips
+    from nerfaug.experiment.config import MAIN_COMPARISON
+
+    config = preset("quick")
+    assert config.methods == MAIN_COMPARISON and len(config.methods) == 4
+    # The smallest p of a two-sided Mann-Whitney test (complete separation), times the 3
+    # comparisons of "ours" with the others, must be able to fall below 0.05.
+    ours, other = list(range(config.trials)), list(range(100, 100 + config.trials))
+    assert 3 * mannwhitneyu(ours, other, alternative="two-sided").pvalue < 0.05
+    assert config.resolution >= Lpips.min_size  # LPIPS is reported
+    assert config.add_at_step == 200 and config.n_initial == config.n_new == 6  # the paper's protocol
+    assert config.engine == "cpu" and config.n_test >= 20

@@ -92,14 +92,18 @@ class ExperimentConfig:
 def preset(name: PresetName) -> ExperimentConfig:
     """The named protocol.
 
-    quick: the default; the built-in lego at 100x100 with the CPU engine, four methods, two trials.
+    quick: the default (`make demo`); the built-in lego at 100x100 with the CPU engine, the four
+        methods of the main comparison, five trials each (the fewest with which Mann-Whitney with
+        a Bonferroni factor of 3 can reach p < 0.05), 800 steps (views added at 200, as in the
+        paper), 100 candidates and 20 test views: about 10 minutes on two cores from a fresh
+        clone (BENCHMARKS.md, "Demo").
     paper: lego/chair/materials at 800x800 (or the data's resolution), 10k steps, 10 trials, the
         paper's learning rates and its main comparison.
     ablation: the paper's Tables I and II (terms; NBV vs sampling) on lego.
     tiny: seconds-long smoke run for tests.
     """
     if name == "quick":
-        return ExperimentConfig(trials=2, steps=1500, pool=150, n_test=30)
+        return ExperimentConfig(trials=5, steps=800, pool=100, n_test=20)
     if name == "paper":
         return ExperimentConfig(
             scenes=("lego", "chair", "materials"), trials=10, engine="paper", resolution=800,
