@@ -5,34 +5,13 @@ import math
 import pytest
 import torch
 
-from nerfaug.cameras import Cameras, image_rays
 from nerfaug.data.views import Views
-from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, pose_from_angles
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.trainer import Trainer, TrainingDiverged, exponential_lr, psnr_from_mse
 
 
-def sphere_views(azimuths, polars, size: int = 12) -> Views:
-    """A unit sphere coloured by its normal, over white, ray-cast analytically."""
-    cameras = Cameras.from_fov(
-        pose_from_angles(torch.tensor(azimuths), torch.tensor(polars)), BLENDER_CAMERA_ANGLE_X, size, size
-    )
-    images, alphas = [], []
-    for i in range(len(cameras)):
-        origins, directions = image_rays(cameras, i)
-        b = (origins * directions).sum(-1)
-        disc = b * b - (origins.square().sum(-1) - 1.0)
-        t = -b - disc.clamp_min(0).sqrt()
-        hit = disc > 0
-        normal = origins + t[:, None] * directions
-        colour = torch.where(hit[:, None], 0.5 + 0.45 * normal, torch.ones(1, 3))
-        images.append(colour.reshape(size, size, 3))
-        alphas.append(hit.float().reshape(size, size))
-    return Views(cameras, torch.stack(images), [f"r_{i}" for i in range(len(cameras))], torch.stack(alphas))
-
-
 @pytest.fixture(scope="module")
-def views() -> Views:
+def views(sphere_views) -> Views:
     return sphere_views([0.0, 1.6, 3.2, 4.8], [0.9, 1.1, 0.9, 1.1])
 
 
@@ -83,7 +62,7 @@ def test_add_views_samples_the_new_pixels_and_keeps_the_optimiser_state(views):
     trainer.train(8)
 
 
-def test_add_views_rejects_another_image_size(views):
+def test_add_views_rejects_another_image_size(views, sphere_views):
     trainer = Trainer(views, NerfConfig.preset("test"), progress=False)
     with pytest.raises(ValueError, match="resize"):
         trainer.add_views(sphere_views([0.5], [1.0], size=8))

@@ -149,6 +149,15 @@ class NerfConfig:
           colour MLP: starting from density 0.01 with two colour layers, the colour MLP's
           sigmoid saturated at 0 within 20 steps (while the faint field asked every object pixel
           for "darker") and never recovered.
+        - "nerfacto-cpu": nerfacto's structure (hash grid, two hash-grid proposal networks with
+          the interlevel and distortion losses, trunc_exp density starting at 0.01, two-layer
+          colour MLP, the paper preset's optimiser) shrunk for one CPU core: 6 hash levels of
+          2^14 entries up to resolution 256, MLP width 32, proposal samples 32/16 (3 levels each),
+          16 colour samples per ray, 512 rays per step. One 100x100 study trial (2000 steps, the
+          "ours" selection, 50 test views) took 117 s of CPU time on one thread, 1.55x the cpu
+          preset's, measured in one run (BENCHMARKS.md, "nerfacto-CPU preset"). Background "fixed":
+          with 12 views, after 500 steps, "last_sample" fitted the training views better (25.5 vs
+          24.2 dB) and 16 held-out views of the training pool worse (21.9 vs 22.6 dB).
         - "test": tiny, for unit tests.
         """
         if name not in PRESETS:
@@ -175,6 +184,12 @@ PRESETS: dict[str, NerfConfig] = {
         average_init_density=1.0, sampler="occupancy", num_samples=64, occupancy_warmup_steps=64,
         batch_size=1024, lr_final=1e-3, lr_decay_steps=5000,
     ),
+    "nerfacto-cpu": NerfConfig(
+        encoding="hash", hash_levels=6, hash_log2_table_size=14, hash_max_resolution=256, hidden_dim=32,
+        color_hidden_dim=32, density_activation="trunc_exp", average_init_density=0.01, sampler="proposal",
+        num_samples=16, proposal_samples=(32, 16), proposal_hash_levels=3, proposal_max_resolutions=(64, 128),
+        proposal_log2_table_size=12, batch_size=512, background_mode="fixed",
+    ),
     "test": NerfConfig(
         encoding="kplanes", plane_resolutions=(16, 32), plane_features=4, hidden_dim=16,
         geo_feat_dim=7, color_hidden_dim=16, color_layers=1, sampler="occupancy", num_samples=16,
@@ -182,3 +197,6 @@ PRESETS: dict[str, NerfConfig] = {
         batch_size=128, render_chunk=4096,
     ),
 }
+
+EnginePreset = Literal[tuple(PRESETS)]  # type: ignore[valid-type]
+"""The preset names as a type, for a CLI (tyro) to offer and check: derived from `PRESETS`."""

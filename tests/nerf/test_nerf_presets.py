@@ -1,0 +1,90 @@
+"""Engine presets: the nerfacto-CPU preset has nerfacto's structure and trains; the study's
+presets are fixed (their values are part of every results fingerprint)."""
+
+import hashlib
+import json
+import math
+
+import torch
+
+from nerfaug.experiment.config import ExperimentConfig
+from nerfaug.experiment.study import default_engines
+from nerfaug.nerf.config import PRESETS, NerfConfig
+from nerfaug.nerf.encoding import HashEncoding
+from nerfaug.nerf.field import DensityField
+from nerfaug.nerf.model import NerfModel
+from nerfaug.nerf.occupancy import OccupancyGrid
+from nerfaug.nerf.trainer import Trainer
+
+# sha256 of each preset's `to_dict()` as sorted JSON, recorded when the study started: a change to
+# any value (or a new NerfConfig field) changes these, and invalidates the study's results.
+FROZEN = {
+    "cpu": "a94e724a8129081a5c3399cdb7d71d5af270d1a90bef9b3dd7f96663777080a7",
+    "paper": "b25af8e90e5cf336aa422f0e883e1c072a2b9b6b898ad1b8b3a677dd736a462a",
+}
+
+
+def proposal_networks(model: NerfModel) -> list[DensityField]:
+    return [m for m in model.modules() if isinstance(m, DensityField)]
+
+
+def preset_digest(name: str) -> str:
+    return hashlib.sha256(json.dumps(PRESETS[name].to_dict(), sort_keys=True).encode()).hexdigest()
+
+
+def test_nerfacto_cpu_has_nerfactos_structure():
+    config, paper = NerfConfig.preset("nerfacto-cpu"), NerfConfig.preset("paper")
+    model = NerfModel(config)
+    assert isinstance(model.field.encoding, HashEncoding)
+    assert not any(isinstance(m, OccupancyGrid) for m in model.modules())
+    assert len(proposal_networks(model)) == 2
+    assert all(isinstance(p.encoding, HashEncoding) for p in proposal_networks(model))
+    # nerfacto's losses, density activation and initial density, as in the full preset.
+    for name in ("density_activation", "average_init_density", "interlevel_loss_mult", "distortion_loss_mult",
+                 "color_layers", "geo_feat_dim", "sh_levels", "hash_features_per_level", "hash_base_resolution"):
+        assert getattr(config, name) == getattr(paper, name), name
+    assert config.interlevel_loss_mult > 0 and config.distortion_loss_mult > 0
+    # Shrunk: fewer levels, smaller tables, fewer samples and rays than the full preset.
+    assert config.hash_levels < paper.hash_levels and config.hash_log2_table_size < paper.hash_log2_table_size
+    assert config.num_samples < paper.num_samples and config.batch_size < paper.batch_size
+    assert sum(config.proposal_samples) < sum(paper.proposal_samples)
+
+
+def test_nerfacto_cpu_starts_at_nerfactos_average_density():
+    torch.manual_seed(0)
+    model = NerfModel(NerfConfig.preset("nerfacto-cpu"))
+    points = (torch.rand(4096, 3, generator=torch.Generator().manual_seed(0)) - 0.5) * 2.0
+    with torch.no_grad():
+        fields = [model.density(points)] + [p(model._unit(points)) for p in proposal_networks(model)]
+    for density in fields:
+        # Nearly constant tables: a constant density, 0.01 * exp(the MLP's output at zero features),
+        # which its random hidden biases move by a factor of about e^(+-0.5), not more.
+        assert density.std() < 1e-3 * density.mean()
+        assert 0.004 < density.mean() < 0.025
+
+
+def test_nerfacto_cpu_trains_with_its_proposal_losses(sphere_views):
+    views = sphere_views([0.0, 1.6, 3.2, 4.8], [0.9, 1.1, 0.9, 1.1])
+    trainer = Trainer(views, NerfConfig.preset("nerfacto-cpu", batch_size=64), seed=0, progress=False)
+    trainer.model.train()
+    trainer.model.before_step(0)
+    origins, directions, _, _ = trainer.sample_batch(torch.Generator().manual_seed(0))
+    auxiliary = float(trainer.model.auxiliary_loss(trainer.model(origins, directions)).detach())
+    assert auxiliary > 0 and math.isfinite(auxiliary)
+    proposal_before = [p.detach().clone() for p in trainer.model.param_groups()["proposal"]]
+    trainer.train(5)
+    assert all(math.isfinite(entry["loss"]) for entry in trainer.history)
+    # The interlevel loss reaches the proposal networks.
+    assert any(not torch.equal(a, b) for a, b in zip(proposal_before, trainer.model.param_groups()["proposal"]))
+
+
+def test_the_study_runs_every_preset_but_the_test_one():
+    engines, left_out = default_engines("cpu")
+    assert "nerfacto-cpu" in engines and "cpu" in engines
+    assert set(left_out) == {"test", "paper"}
+    record = ExperimentConfig(engine="nerfacto-cpu").fingerprinted()
+    assert record["engine"] == "nerfacto-cpu" and record["engine.num_samples"] == 16
+
+
+def test_the_study_presets_are_unchanged():
+    assert {name: preset_digest(name) for name in FROZEN} == FROZEN
