@@ -10,6 +10,10 @@ the test split).
 
     python benchmarks/bench_trial.py --data data/lego100
     python benchmarks/bench_trial.py --data data/lego100 --override occupancy_warmup_steps=32 --holdout 30
+    python benchmarks/bench_trial.py --data data/lego400 --compare-load   # dataset cache vs none
+
+Field points (what `model.field.density` was given) and this process's CPU seconds are reported
+beside wall seconds: on a shared machine they compare settings where wall time cannot.
 """
 
 from __future__ import annotations
@@ -76,6 +80,27 @@ def holdout_psnr(model, views) -> float:
     return sum(values) / len(values)
 
 
+def compare_load(args) -> dict:
+    """Seconds of `load_scene_data` without and with the dataset cache (warm), interleaved
+    `--repeats` times in this one process, and their ratio (median over repeats)."""
+    import statistics
+
+    from nerfaug.experiment.config import ExperimentConfig
+    from nerfaug.experiment.protocol import load_scene_data
+
+    config = ExperimentConfig(n_test=args.n_test, resolution=args.resolution)
+    with tempfile.TemporaryDirectory() as cache:
+        load_scene_data(Path(args.data), config, cache_dir=Path(cache))  # fill the cache
+        times = {"uncached": [], "cached": []}
+        for _ in range(args.repeats):
+            for name, cache_dir in (("uncached", None), ("cached", Path(cache))):
+                start = time.perf_counter()
+                load_scene_data(Path(args.data), config, cache_dir=cache_dir)
+                times[name].append(time.perf_counter() - start)
+    median = {name: statistics.median(values) for name, values in times.items()}
+    return {"load_seconds": times, "median": median, "ratio_uncached_over_cached": median["uncached"] / median["cached"]}
+
+
 def trial(args) -> dict:
     from nerfaug.device import configure_process
     from nerfaug.evaluation import evaluate_views
@@ -86,7 +111,7 @@ def trial(args) -> dict:
     from nerfaug.selection import select_views
 
     configure_process(threads=args.threads)
-    config = ExperimentConfig(steps=args.steps, n_test=args.n_test, device="cpu")
+    config = ExperimentConfig(steps=args.steps, n_test=args.n_test, resolution=args.resolution, device="cpu")
     timing: dict[str, float] = {}
     start = time.perf_counter()
     data = load_scene_data(Path(args.data), config)
@@ -147,7 +172,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--holdout", type=int, default=0, help="held-out pool views to report PSNR on")
     parser.add_argument("--no-lpips", dest="lpips", action="store_false")
     parser.add_argument("--profile", type=Path, help="write cProfile stats here and print the top 25")
+    parser.add_argument("--compare-load", action="store_true",
+                        help="only time loading the dataset without and with the cache, interleaved")
+    parser.add_argument("--resolution", type=int, default=100, help="image width the dataset is downscaled to")
+    parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
+    if args.compare_load:
+        json.dump(compare_load(args), sys.stdout, indent=1)
+        print()
+        return
     if args.profile:
         profiler = cProfile.Profile()
         result = profiler.runcall(trial, args)
