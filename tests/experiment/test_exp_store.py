@@ -4,7 +4,14 @@ import pytest
 
 from nerfaug.experiment.config import ExperimentConfig, preset
 from nerfaug.experiment.store import (
-    IncompatibleResults, RunKey, check_sweep, clear_incomplete, fingerprint, read_result, write_result,
+    IncompatibleResults,
+    RunKey,
+    check_sweep,
+    clear_incomplete,
+    dataset_content_digest,
+    fingerprint,
+    read_result,
+    write_result,
 )
 from nerfaug.experiment.sweep import plan_runs, sweep_record
 
@@ -65,3 +72,25 @@ def test_plan_covers_every_cell():
     keys = plan_runs(config)
     assert len(keys) == 2 * 2 * 3 and len(set(keys)) == len(keys)
     assert RunKey("chair", "uniform", 2) in keys
+
+
+def test_dataset_content_digest_covers_the_images_runs_read_and_nothing_else(tmp_path):
+    import torch
+
+    from nerfaug.cameras import Cameras
+    from nerfaug.data import Views, write_blender_split
+
+    poses = torch.eye(4).repeat(2, 1, 1)
+    poses[:, 2, 3] = torch.tensor([3.0, 4.0])
+    images = torch.rand(2, 4, 4, 3, generator=torch.Generator().manual_seed(0))
+    views = Views(Cameras.from_fov(poses, 0.7, 4, 4), images, ["./a", "./b"])
+    for split in ("train", "test"):
+        write_blender_split(tmp_path, split, views)
+    digest = dataset_content_digest(tmp_path, ("train", "test"))
+    (tmp_path / "notes.txt").write_text("not read by any run")
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / "sweep.json").write_text("{}")
+    assert dataset_content_digest(tmp_path, ("train", "test")) == digest
+    image = next((tmp_path / "test").glob("*.png"))
+    image.write_bytes(image.read_bytes() + b"\0")  # same cameras, other image bytes
+    assert dataset_content_digest(tmp_path, ("train", "test")) != digest

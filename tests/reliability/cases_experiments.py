@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from cases import TINY, case, copy_dataset, edit_json
-from harness import Case, copy, make_dataset
+from harness import Case, copy, make_dataset, write_images
 
 
 def _run(tmp, bases, *extra, data=None, out=None, says=(), inputs=()) -> Case:
@@ -262,3 +262,13 @@ def report_with_sweep_json_corrupt(tmp, bases):
     results = _results(tmp, bases)
     (results / "sweep.json").write_text("{")
     return Case(["report", results], [results], says=("sweep.json",))
+
+
+@case
+def results_of_a_dataset_with_the_same_cameras_and_other_images(tmp, bases):
+    """Same transforms files, one image changed: still another dataset, never mixed in."""
+    results = _results(tmp, bases)
+    other = copy(bases.dataset, tmp / "elsewhere" / bases.dataset.name)
+    write_images(other / "test", ["r_1"])
+    return _run(tmp, bases, data=other, out=results, says=(bases.dataset.name, "different content"),
+                inputs=[results, other])

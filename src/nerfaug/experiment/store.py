@@ -231,7 +231,10 @@ def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> No
             f"{path}: results there were made with a different configuration ({details}). {how}.")
     old_data, new_data = previous.get("datasets") or {}, sweep.get("datasets") or {}
     for scene in sorted(set(old_data) & set(new_data)):
-        if old_data[scene].get("digest") != new_data[scene].get("digest"):
+        old, new = old_data[scene], new_data[scene]
+        # "content" (images too) is compared where both records have it (sweep.json of older versions lack it).
+        same_content = "content" not in old or "content" not in new or old["content"] == new["content"]
+        if old.get("digest") != new.get("digest") or not same_content:
             raise IncompatibleResults(
                 f"{path}, scene '{scene}': its runs were made on the dataset {old_data[scene].get('path')!r}, "
                 f"this sweep uses {new_data[scene].get('path')!r} with different content. {how}.")
@@ -247,4 +250,27 @@ def dataset_digest(folder: Path) -> str:
     digest = hashlib.sha256()
     for path in sorted(Path(folder).glob("transforms*.json")):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def dataset_content_digest(folder: Path, splits: tuple[str, ...]) -> str:
+    """A short hash of what runs read from a Blender-format dataset: the transforms files of
+    `splits` and every image their frames name (relative path and bytes). Other files in the
+    folder (notes, a results folder placed inside it) do not count.
+
+    Raises:
+        DatasetError: a frame's image is missing or lies outside the folder.
+    """
+    from nerfaug.data.frames import resolve_image
+
+    folder = Path(folder)
+    root = folder.resolve()
+    digest = hashlib.sha256()
+    for split in splits:
+        path = folder / f"transforms_{split}.json"
+        text = path.read_bytes()
+        digest.update(path.name.encode() + b"\0" + text)
+        for i, frame in enumerate(json.loads(text)["frames"]):
+            image = resolve_image(folder, frame["file_path"], path, f"frames[{i}].file_path")
+            digest.update(image.relative_to(root).as_posix().encode() + b"\0" + image.read_bytes())
     return digest.hexdigest()[:16]

@@ -25,8 +25,8 @@ from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.store import (
-    IncompatibleResults, RunKey, check_sweep, clear_incomplete, dataset_digest, fingerprint, is_run_folder,
-    read_result,
+    IncompatibleResults, RunKey, check_sweep, clear_incomplete, dataset_content_digest, dataset_digest, fingerprint,
+    is_run_folder, read_result,
 )
 
 Backend = Literal["local", "ray"]
@@ -129,7 +129,9 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
     _need(pool >= config.n_new, "n_new", config.n_new, f"the candidate pool of {folder} holds only {pool} views")
     _need(len(test) >= config.n_test, "n_test", config.n_test,
           f"{folder / 'transforms_test.json'} holds only {len(test)} test views")
-    return {"path": str(Path(folder).resolve()), "digest": dataset_digest(folder), "width": ran,
+    splits = ("train", "test", "initial") if (folder / "transforms_initial.json").exists() else ("train", "test")
+    return {"path": str(Path(folder).resolve()), "digest": dataset_digest(folder),
+            "content": dataset_content_digest(folder, splits), "width": ran,
             "height": height // (width // ran), "initial": initial, "pool": pool, "test": config.n_test}
 
 
