@@ -140,11 +140,16 @@ class SelectionConfig:
         authors_threshold: the 15 of the authors' sampler.
         max_draws: proposals before the rejection sampler gives up.
         fisher_method: "random-sign" (default) or "exact"; see `nerfaug.uncertainty.fisher`.
-        fisher_train_pixels: training pixels H_train is taken over (uniform subsample).
+        fisher_train_pixels: training pixels H_train is taken over (uniform subsample). 4096 and
+            `fisher_resolution` 45: the cheapest setting whose candidate ranking, at step 200 on
+            lego 100x100, stays put when either side's pixels double (mean Spearman >= 0.9 and
+            top-6 overlap >= 4/6 for each of 4 seeds; `benchmarks/bench_fisher.py`, BENCHMARKS.md).
         fisher_train_chunk: rays per squared probe for H_train ("random-sign").
         fisher_train_probes: Rademacher probes per chunk for H_train ("random-sign"; each is
             three backward passes, one per colour channel).
-        fisher_resolution: width in pixels of the candidate renders H_cand is taken over.
+        fisher_resolution: pixels across each candidate H_cand is taken over (a stratified,
+            weighted subsample of its image, `fisher_views`: unbiased for the whole image; the
+            image's width or more takes every pixel).
         fisher_probes: Rademacher probes per candidate ("random-sign"; likewise).
         fisher_lambda: lambda of the FisherRF score.
         fisher_cache_floats: memory bound (floats) on the candidates' Fisher diagonals kept for
@@ -183,10 +188,10 @@ class SelectionConfig:
     authors_threshold: float = AUTHORS_THRESHOLD
     max_draws: int = MAX_DRAWS
     fisher_method: str = DEFAULT_METHOD
-    fisher_train_pixels: int = 1024
+    fisher_train_pixels: int = 4096
     fisher_train_chunk: int = 128
     fisher_train_probes: int = 4
-    fisher_resolution: int = 8
+    fisher_resolution: int = 45
     fisher_probes: int = 1
     fisher_lambda: float = FISHER_LAMBDA
     fisher_cache_floats: int = CACHE_FLOATS
