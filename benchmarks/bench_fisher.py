@@ -1,7 +1,8 @@
 """FisherRF stability benchmark: how much of the candidates' ranking comes from the pixel subsamples.
 
-    python benchmarks/bench_fisher.py --data data/lego100            # 100 pool candidates, 1 thread
-    python benchmarks/bench_fisher.py --data data/lego100 --candidates 300
+    python benchmarks/bench_fisher.py --data data/lego100            # 100 pool candidates, 2 seeds
+    python benchmarks/bench_fisher.py --data data/lego100 --seeds 4 --no-whole --resolutions 45 64 \
+        --train-pixels 4096 8192                                      # around one setting, 4 seeds
 
 Trains the `cpu` engine preset on the dataset's initial views (the protocol's `load_scene_data`
 and `engine_config`, seed 0) to `--steps` (200: where the protocol selects), then computes, with
@@ -10,14 +11,15 @@ the functions `fisherrf_candidates` calls and `SelectionConfig`'s other fisher_*
 - H_train over n training pixels (`sample_pixel_rays`, as the protocol draws them), for n doubling
   from 1024, and over every training pixel once (`stratified_pixel_rays` with one block per pixel);
 - H_cand of each candidate (`fisher_views`) over r x r stratified pixels, the pixel count doubling
-  from 8 x 8 (r = 8, 11, 16, 23, 32, 45, 64, 91) up to the whole image;
+  from 8 x 8 (r = 8, 11, 16, 23, 32, 45, 64) to the whole image;
 
-each for two seeds, and scores every candidate for every pair (sum_k H_cand / (H_train + lambda)).
-A setting S = (r, n) is compared with S at twice the candidate pixels (r -> ~1.41 r, n fixed) and
-with S at twice the training pixels (n -> 2n, r fixed), and with itself at another seed: Spearman
-correlation of the scores (scipy.stats.spearmanr) and overlap of the top 6 (and of FisherRF's greedy
-6). Costs are wall seconds of each part and the same in training steps (seconds of one training
-step of the same model, measured in the same run). Candidates come from the pool (train split)
+each for `--seeds` seeds, and scores every candidate for every pair (sum_k H_cand / (H_train +
+lambda)). A setting S = (r, n) is compared with S at twice the candidate pixels (r -> ~1.41 r, n
+fixed; same H_train), with S at twice the training pixels (n -> 2n, r fixed; same H_cand), and
+with itself at the next seed: Spearman correlation of the scores (scipy.stats.spearmanr) and
+overlap of the top 6 (and of FisherRF's greedy 6), averaged over the seeds. Costs are wall
+seconds of each part and the same in training steps (seconds of one training step of the same
+model, measured in the same run). Candidates come from the pool (train split)
 only; test views are never read for anything but what `load_scene_data` loads.
 
 Writes <out>/bench_fisher.json and prints the tables.
@@ -41,28 +43,34 @@ from nerfaug.experiment.protocol import engine_config, load_scene_data
 from nerfaug.nerf.trainer import Trainer
 from nerfaug.selection import SelectionConfig
 from nerfaug.uncertainty.fisher import (
-    fisher_diagonal, fisher_views, fisherrf_greedy, fisherrf_scores, sample_pixel_rays, stratified_pixel_rays,
+    fisher_diagonal,
+    fisher_views,
+    fisherrf_greedy,
+    fisherrf_scores,
+    sample_pixel_rays,
+    stratified_pixel_rays,
 )
 
 TOP = 6
-CANDIDATE_RESOLUTIONS = (8, 11, 16, 23, 32, 45, 64, 91)  # r x r pixels, doubling from 64
+CANDIDATE_RESOLUTIONS = (8, 11, 16, 23, 32, 45, 64)  # r x r pixels, doubling from 64
 TRAIN_PIXELS = (1024, 2048, 4096, 8192, 16384, 32768)
 WHOLE = "whole"
 
 
-def timed(fn):
+def timed(fn, *args):
+    """(seconds, fn(*args))."""
     start = time.perf_counter()
-    value = fn()
+    value = fn(*args)
     return time.perf_counter() - start, value
 
 
 def trained(data, config: ExperimentConfig, steps: int, checkpoint: Path) -> tuple[Trainer, float]:
-    """The protocol's trainer after `steps` steps (reloaded from `checkpoint` if there), and the
-    seconds of one training step, timed over the last half of the steps in this process."""
+    """The protocol's trainer after `steps` steps (saved to `checkpoint`), and the seconds of one
+    training step, timed over the last half of the steps in this process."""
     engine = engine_config(config, "lego")
     trainer = Trainer(data.initial, engine, seed=config.seed, device="cpu", progress=False)
     trainer.train(steps // 2)
-    seconds, _ = timed(lambda: trainer.train(steps))
+    seconds, _ = timed(trainer.train, steps)
     per_step = seconds / (steps - steps // 2)
     trainer.save_checkpoint(checkpoint)
     return trainer, per_step
@@ -86,7 +94,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--resolutions", type=int, nargs="*", default=list(CANDIDATE_RESOLUTIONS))
     parser.add_argument("--train-pixels", type=int, nargs="*", default=list(TRAIN_PIXELS))
-    parser.add_argument("--seeds", type=int, default=2, help="seeds of every estimate; comparisons are averaged over them")
+    parser.add_argument("--seeds", type=int, default=2, help="seeds of every estimate; comparisons average them")
     parser.add_argument("--no-whole", action="store_true", help="skip the whole-image settings (the costliest)")
     parser.add_argument("--out", type=Path, default=Path("data/bench_fisher"))
     args = parser.parse_args()
@@ -117,10 +125,10 @@ def main() -> None:
             else:
                 origins, directions = sample_pixel_rays(train_cameras, n, generator)
                 weights = None
-            seconds, h = timed(lambda: fisher_diagonal(
-                model, origins, directions, selection.fisher_method, selection.fisher_train_probes, generator,
-                selection.fisher_train_chunk, background, weights,
-            ))
+            seconds, h = timed(
+                fisher_diagonal, model, origins, directions, selection.fisher_method,
+                selection.fisher_train_probes, generator, selection.fisher_train_chunk, background, weights,
+            )
             h_train[n, seed] = h
             cost[f"train {n}"] = seconds if seed == 0 else cost[f"train {n}"]
             print(f"H_train n={n} seed={seed}: {seconds:.1f} s", flush=True)
@@ -131,10 +139,10 @@ def main() -> None:
         resolution = width if r == WHOLE else r
         for seed in seeds:
             generator = torch.Generator().manual_seed(2000 + seed)
-            seconds, h_cand = timed(lambda: fisher_views(
-                model, candidates, resolution, selection.fisher_method, selection.fisher_probes, generator,
-                background=background,
-            ))
+            seconds, h_cand = timed(
+                fisher_views, model, candidates, resolution, selection.fisher_method, selection.fisher_probes,
+                generator, 1024, background,
+            )
             if seed == 0:
                 cost[f"cand {r}"] = seconds
             print(f"H_cand r={r} seed={seed}: {seconds:.1f} s", flush=True)
