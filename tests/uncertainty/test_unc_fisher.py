@@ -310,3 +310,26 @@ def test_random_sign_with_weights_is_unbiased_for_the_weighted_sum():
     estimate = fisher_diagonal(model, origins, directions, method="random-sign", n_probes=2000, chunk=6,
                                weights=weights, generator=torch.Generator().manual_seed(0))
     assert (estimate - expected).norm() / expected.norm() < 0.1
+
+
+def test_fisherrf_training_sum_is_on_the_candidates_whole_image_scale():
+    """H_train in `fisherrf_candidates` estimates the sum over every pixel of the training views,
+    the scale of the whole-image H_cand the greedy batch adds to it (not a subsample's sum)."""
+    from nerfaug.selection.methods import SelectionConfig, fisherrf_candidates
+
+    model = TinyNerf()
+    train, candidates = cameras(2).resized(6, 5), cameras(3, seed=1).resized(6, 5)
+    expected = full_image_diagonals(model, train).sum(dim=0)
+    config = SelectionConfig(fisher_method="exact", fisher_train_pixels=10**6, fisher_resolution=6)
+    h_train, scores, h_of = fisherrf_candidates(model, train, candidates, config, torch.Generator().manual_seed(0))
+    assert torch.allclose(h_train, expected, rtol=1e-4, atol=1e-6)
+    # Subsampled (12 of 60 pixels), it is still an estimate of the same sum, not of a fifth of it.
+    estimates = torch.stack([
+        fisherrf_candidates(model, train, candidates, SelectionConfig(fisher_method="exact", fisher_train_pixels=12,
+                                                                      fisher_resolution=6),
+                            torch.Generator().manual_seed(seed))[0]
+        for seed in range(60)
+    ])
+    ratio = estimates.mean(dim=0).sum() / expected.sum()
+    assert 0.8 < ratio < 1.25, ratio
+    assert torch.allclose(h_of(0), full_image_diagonals(model, candidates)[0], rtol=1e-4, atol=1e-6)

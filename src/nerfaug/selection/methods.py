@@ -32,7 +32,7 @@ from nerfaug.uncertainty.combined import NORMALISATIONS
 from nerfaug.uncertainty.entropy import ENTROPY_MODES
 from nerfaug.uncertainty.fisher import (
     CACHE_FLOATS, DEFAULT_METHOD, FISHER_LAMBDA, FISHER_METHODS, fisher_diagonal, fisherrf_view_scores,
-    sample_pixel_rays,
+    stratified_pixel_rays,
 )
 
 # What the authors' code (Agaggar/nerfstudio-low-data) does where the paper is silent, as
@@ -406,8 +406,8 @@ def fisherrf_candidates(
     model: nn.Module, train_cameras: Cameras, candidates: Cameras, config: SelectionConfig | None = None,
     generator: torch.Generator | None = None,
 ) -> tuple[Tensor, Tensor, Callable[[int], Tensor]]:
-    """FisherRF's ingredients: H_train over `config.fisher_train_pixels` pixels drawn uniformly
-    from the training views, every candidate's score at `config.fisher_resolution`, and H_cand
+    """FisherRF's ingredients: H_train over about `config.fisher_train_pixels` pixels spread
+    evenly over the training views and weighted to estimate the sum over all their pixels, every candidate's score at `config.fisher_resolution`, and H_cand
     on demand (kept within `config.fisher_cache_floats`, else recomputed) for the greedy selection.
 
     Returns:
@@ -416,11 +416,13 @@ def fisherrf_candidates(
         h_of: candidate index -> H_cand, Tensor with shape (P,).
     """
     config = config or SelectionConfig()
-    origins, directions = sample_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
+    # Stratified pixels with weights: H_train estimates the sum over every pixel of the training
+    # images, the scale of each candidate's whole-image H_cand that the greedy batch adds to it.
+    origins, directions, weights = stratified_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
     background = _background(config)
     h_train = fisher_diagonal(
         model, origins, directions, config.fisher_method, config.fisher_train_probes, generator,
-        config.fisher_train_chunk, background,
+        config.fisher_train_chunk, background, weights=weights,
     )
     scores, h_of = fisherrf_view_scores(
         model, candidates, h_train, config.fisher_lambda, config.fisher_cache_floats,
