@@ -1,6 +1,9 @@
 """Benchmark the NeRF engine: speed, learning curve and memory of one CPU trial, the ceiling
 with every pool view, and encodings / presets compared as time ratios within one run.
 
+Variants are built through the engine's registries (`nerfaug.nerf.registry`): every registered
+encoding at each preset's sizes, and fields passed to the trainer (the naive hash grid below).
+
 A trial: 12 training views (the 6 of `transforms_initial.json` plus 6 spread over the
 `transforms_train.json` pool by farthest-point sampling), trained with a preset and evaluated
 (mean PSNR over the test views) at each checkpoint iteration.
@@ -24,13 +27,13 @@ from pathlib import Path
 import torch
 from torch import Tensor, nn
 
-from nerfaug.device import configure_process
 from nerfaug.cameras import Cameras, image_rays
 from nerfaug.data import Views, load_dataset, write_blender_split
+from nerfaug.device import configure_process
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, pose_from_angles
-from nerfaug.nerf import field as field_module
 from nerfaug.nerf.config import NerfConfig
-from nerfaug.nerf.encoding import HashEncoding, KPlanesEncoding, hash_grid_indices, hash_resolutions
+from nerfaug.nerf.encoding import hash_grid_indices, hash_resolutions
+from nerfaug.nerf.registry import ENCODINGS, build_field
 from nerfaug.nerf.trainer import Trainer, psnr_from_mse
 
 SPHERES = (  # centre, radius, colour of the analytic scene
@@ -162,17 +165,19 @@ class NaiveHashEncoding(nn.Module):
         return torch.cat(out, dim=-1)
 
 
+def naive_hash_encoding(config: NerfConfig) -> NaiveHashEncoding:
+    return NaiveHashEncoding(config.hash_levels, config.hash_features_per_level, config.hash_log2_table_size,
+                             config.hash_base_resolution, config.hash_max_resolution)
+
+
 def time_encodings(points: int = 32768, repeats: int = 5) -> dict:
-    """Seconds per forward+backward of `points` points, interleaved over the encodings."""
-    paper = NerfConfig.preset("paper")
-    cpu = NerfConfig.preset("cpu")
-    hash_args = (paper.hash_levels, paper.hash_features_per_level, paper.hash_log2_table_size,
-                 paper.hash_base_resolution, paper.hash_max_resolution)
-    encodings = {
-        "kplanes (cpu preset)": KPlanesEncoding(cpu.plane_resolutions, cpu.plane_features),
-        "hash, vectorised (paper preset)": HashEncoding(*hash_args),
-        "hash, naive per-level loop": NaiveHashEncoding(*hash_args),
-    }
+    """Seconds per forward+backward of `points` points, interleaved over every registered
+    encoding at the sizes of each preset that uses it, and the naive hash grid."""
+    encodings = {}
+    for preset in ("cpu", "nerfacto-cpu", "paper"):
+        config = NerfConfig.preset(preset)
+        encodings[f"{config.encoding} ({preset} preset)"] = ENCODINGS[config.encoding](config)
+    encodings["hash, naive per-level loop (paper preset)"] = naive_hash_encoding(NerfConfig.preset("paper"))
     x = torch.rand(points, 3, generator=torch.Generator().manual_seed(0))
     times: dict[str, list[float]] = {name: [] for name in encodings}
     for round_ in range(repeats + 1):
@@ -186,23 +191,21 @@ def time_encodings(points: int = 32768, repeats: int = 5) -> dict:
 
 
 def time_steps(train_views: Views, steps: int = 3) -> dict:
-    """Seconds per training step from step 0, interleaved over presets. The cpu preset is
-    still in its occupancy warm-up here (every sample evaluated): its steady state is faster,
-    see the trial."""
-    variants = {
-        "cpu preset": (NerfConfig.preset("cpu"), False),
-        "paper preset (hash + proposal, 4096 rays)": (NerfConfig.preset("paper"), False),
-        "paper preset with naive hash grid": (NerfConfig.preset("paper"), True),
+    """Seconds per training step from step 0, interleaved over presets and over fields passed
+    to the trainer. The cpu preset is still in its occupancy warm-up here (every sample
+    evaluated): its steady state is faster, see the trial."""
+    paper = NerfConfig.preset("paper")
+    trainers = {
+        "cpu preset": Trainer(train_views, NerfConfig.preset("cpu"), progress=False),
+        "nerfacto-cpu preset": Trainer(train_views, NerfConfig.preset("nerfacto-cpu"), progress=False),
+        "paper preset (hash + proposal, 4096 rays)": Trainer(train_views, paper, progress=False),
+        "paper preset, kplanes encoding": Trainer(
+            train_views, paper, progress=False, field=build_field(paper, encoding=ENCODINGS["kplanes"](paper))
+        ),
+        "paper preset with naive hash grid": Trainer(
+            train_views, paper, progress=False, field=build_field(paper, encoding=naive_hash_encoding(paper))
+        ),
     }
-    trainers = {}
-    for name, (config, naive) in variants.items():
-        original = field_module.HashEncoding
-        if naive:  # swap the class the field builds, so the optimiser sees the naive tables
-            field_module.HashEncoding = NaiveHashEncoding
-        try:
-            trainers[name] = Trainer(train_views, config, progress=False)
-        finally:
-            field_module.HashEncoding = original
     times: dict[str, list[float]] = {name: [] for name in trainers}
     for round_ in range(steps + 1):
         for name, trainer in trainers.items():

@@ -6,7 +6,12 @@ import pytest
 import torch
 
 from nerfaug.nerf.encoding import (
-    HASH_PRIMES, HashEncoding, KPlanesEncoding, hash_grid_indices, hash_resolutions, spherical_harmonics,
+    HASH_PRIMES,
+    HashEncoding,
+    KPlanesEncoding,
+    hash_grid_indices,
+    hash_resolutions,
+    spherical_harmonics,
 )
 from nerfaug.nerf.field import density_activation, trunc_exp
 

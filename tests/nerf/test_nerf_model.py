@@ -104,7 +104,7 @@ def test_occupancy_grid_marks_the_cells_that_hold_density(generator):
 def test_skipped_samples_have_zero_weight(generator):
     torch.manual_seed(0)
     model = NerfModel(NerfConfig.preset("test"))
-    model.occupancy.occupied.zero_()
+    model.sampler.grid.occupied.zero_()
     model.eval()
     out = model(*rays_at_origin(10, generator))
     assert out.weights.abs().max() == 0 and torch.allclose(out.rgb, torch.ones(10, 3))
@@ -115,12 +115,12 @@ def test_proposal_losses_reach_the_proposal_networks(generator):
     model = NerfModel(NerfConfig.preset("test", **TINY_PROPOSAL))
     model.train()
     model.before_step(500, generator)
-    assert 0 < model.anneal.item() < 1
+    assert 0 < model.sampler.anneal.item() < 1
     out = model(*rays_at_origin(32, generator), generator=generator)
     loss = model.auxiliary_loss(out)
     assert torch.isfinite(loss)
     (out.rgb.sum() + loss).backward()
-    for proposal in model.proposals:
+    for proposal in model.sampler.networks:
         assert proposal.encoding.table.grad is not None and proposal.encoding.table.grad.abs().sum() > 0
 
 

@@ -33,7 +33,7 @@ def test_a_tiny_scene_is_learned(views):
     assert trainer.step == 300 and len(trainer.history) == 300
     assert views_psnr(trainer, views) > max(blank + 8.0, 20.0)
     # The occupancy grid has left warm-up and culled empty space.
-    assert 0 < trainer.model.occupancy.occupied.float().mean() < 0.9
+    assert 0 < trainer.model.sampler.grid.occupied.float().mean() < 0.9
 
 
 def test_add_views_samples_the_new_pixels_and_keeps_the_optimiser_state(views):

@@ -19,8 +19,9 @@ class NerfConfig:
         box_half_size: the scene is the axis-aligned box [-h, h]^3; density is 0 outside.
 
     Field:
-        encoding: "hash" (multiresolution hash grid, as nerfacto) or "kplanes" (factorised
-            multi-scale tri-plane grid, much faster on a CPU).
+        encoding: a name in `nerfaug.nerf.registry.ENCODINGS`: "hash" (multiresolution hash
+            grid, as nerfacto) or "kplanes" (factorised multi-scale tri-plane grid, much faster
+            on a CPU).
         hash_*: levels, features per level, log2 of the table size per level, coarsest and
             finest grid resolution.
         plane_resolutions, plane_features: one tri-plane per resolution, `plane_features`
@@ -33,8 +34,9 @@ class NerfConfig:
         average_init_density: the density of a freshly initialised field, on average.
 
     Sampler:
-        sampler: "occupancy" (stratified samples; empty cells of an occupancy grid are skipped)
-            or "proposal" (nerfacto's two proposal density networks).
+        sampler: a name in `nerfaug.nerf.registry.SAMPLERS`: "occupancy" (stratified samples;
+            empty cells of an occupancy grid are skipped) or "proposal" (nerfacto's proposal
+            density networks).
         num_samples: colour samples per ray.
         occupancy_*: grid cells per axis, steps between updates, warm-up steps (all cells on),
             EMA decay of the cell opacities, opacity threshold below which a cell is empty,
@@ -73,7 +75,7 @@ class NerfConfig:
     far: float = 6.0
     box_half_size: float = 1.5
 
-    encoding: Literal["hash", "kplanes"] = "kplanes"
+    encoding: str = "kplanes"
     hash_levels: int = 16
     hash_features_per_level: int = 2
     hash_log2_table_size: int = 19
@@ -89,7 +91,7 @@ class NerfConfig:
     density_activation: Literal["trunc_exp", "softplus"] = "trunc_exp"
     average_init_density: float = 0.01
 
-    sampler: Literal["occupancy", "proposal"] = "occupancy"
+    sampler: str = "occupancy"
     num_samples: int = 48
     occupancy_resolution: int = 64
     occupancy_update_every: int = 16
@@ -128,15 +130,17 @@ class NerfConfig:
                 f"proposal_samples {self.proposal_samples} and proposal_max_resolutions "
                 f"{self.proposal_max_resolutions} must have one entry per proposal network"
             )
-        if self.encoding not in ("hash", "kplanes"):
-            raise ValueError(f"encoding must be 'hash' or 'kplanes', got {self.encoding!r}")
         if self.background_mode not in ("fixed", "last_sample"):
             raise ValueError(f"background_mode must be 'fixed' or 'last_sample', got {self.background_mode!r}")
-        if self.sampler not in ("occupancy", "proposal"):
-            raise ValueError(f"sampler must be 'occupancy' or 'proposal', got {self.sampler!r}")
+        # Names are checked against the registries where they enter. Imported here: the
+        # registry's modules import this one.
+        from nerfaug.nerf.registry import ENCODINGS, SAMPLERS, choose
+
+        choose(ENCODINGS, "encoding", self.encoding)
+        choose(SAMPLERS, "sampler", self.sampler)
 
     @classmethod
-    def preset(cls, name: str, **overrides) -> "NerfConfig":
+    def preset(cls, name: str, **overrides) -> NerfConfig:
         """A named configuration, optionally with some fields overridden.
 
         - "paper": nerfacto's defaults as the paper ran them (16-level hash grid, 2 features per
@@ -168,7 +172,7 @@ class NerfConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, data: dict) -> "NerfConfig":
+    def from_dict(cls, data: dict) -> NerfConfig:
         """The inverse of `to_dict` (lists, e.g. from JSON, become tuples)."""
         known = {f.name for f in fields(cls)}
         unknown = set(data) - known

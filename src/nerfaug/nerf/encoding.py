@@ -1,7 +1,9 @@
 """Encodings of positions and directions: multiresolution hash grid, K-planes tri-planes, and
 real spherical harmonics.
 
-Positions enter every position encoding normalised to the unit cube [0, 1]^3.
+A position encoding is an `nn.Module` mapping points (n, 3) in the unit cube [0, 1]^3 to features
+(n, output_dim), with an `output_dim` attribute and a `from_config(NerfConfig)` constructor; the
+registry (`nerfaug.nerf.registry.ENCODINGS`) names them.
 """
 
 from __future__ import annotations
@@ -91,6 +93,14 @@ class HashEncoding(nn.Module):
             torch.empty(num_levels * self.table_size, features_per_level).uniform_(-init_scale, init_scale)
         )
 
+    @classmethod
+    def from_config(cls, config) -> HashEncoding:
+        """The field's hash grid as a `NerfConfig`'s hash_* fields describe it."""
+        return cls(
+            config.hash_levels, config.hash_features_per_level, config.hash_log2_table_size,
+            config.hash_base_resolution, config.hash_max_resolution,
+        )
+
     @property
     def output_dim(self) -> int:
         return self.num_levels * self.features_per_level
@@ -160,6 +170,11 @@ class KPlanesEncoding(nn.Module):
         self.planes = nn.ParameterList(
             [nn.Parameter(torch.empty(3, features, r, r).uniform_(0.1, 0.5)) for r in resolutions]
         )
+
+    @classmethod
+    def from_config(cls, config) -> KPlanesEncoding:
+        """The field's tri-planes as a `NerfConfig`'s plane_* fields describe them."""
+        return cls(config.plane_resolutions, config.plane_features)
 
     @property
     def output_dim(self) -> int:

@@ -13,7 +13,7 @@ import torch
 from torch import Tensor, nn
 
 from nerfaug.nerf.config import NerfConfig
-from nerfaug.nerf.encoding import HashEncoding, KPlanesEncoding, spherical_harmonics
+from nerfaug.nerf.encoding import HashEncoding, spherical_harmonics
 
 
 class _TruncExp(torch.autograd.Function):
@@ -64,28 +64,26 @@ def mlp(in_dim: int, hidden_dim: int, out_dim: int, hidden_layers: int) -> nn.Se
     return nn.Sequential(*layers)
 
 
-def position_encoding(config: NerfConfig) -> nn.Module:
-    """The position encoding `config.encoding` names."""
-    if config.encoding == "hash":
-        return HashEncoding(
-            config.hash_levels, config.hash_features_per_level, config.hash_log2_table_size,
-            config.hash_base_resolution, config.hash_max_resolution,
-        )
-    return KPlanesEncoding(config.plane_resolutions, config.plane_features)
-
-
 class NerfField(nn.Module):
     """Density from position; colour from a geometry feature and the viewing direction.
 
     position -> encoding -> density MLP -> (density, geometry feature)
     (SH(direction), geometry feature) -> colour MLP -> sigmoid -> rgb
+
+    The interface the model renders with (any field passed to `NerfModel` has it):
+    `density(x) -> (density, geometry)` and `color(geometry, directions) -> rgb`.
+
+    Args:
+        config: the MLP widths, direction encoding and density activation.
+        encoding: the position encoding, built before the field (see
+            `nerfaug.nerf.registry.build_field`): points (n, 3) in [0, 1]^3 -> (n, output_dim).
     """
 
-    def __init__(self, config: NerfConfig):
+    def __init__(self, config: NerfConfig, encoding: nn.Module):
         super().__init__()
         self.density_kind, self.average_init_density = config.density_activation, config.average_init_density
         self.sh_levels, self.geo_feat_dim = config.sh_levels, config.geo_feat_dim
-        self.encoding = position_encoding(config)
+        self.encoding = encoding
         self.density_mlp = mlp(self.encoding.output_dim, config.hidden_dim, 1 + config.geo_feat_dim, 1)
         self.color_mlp = mlp(
             config.sh_levels**2 + config.geo_feat_dim, config.color_hidden_dim, 3, config.color_layers

@@ -1,5 +1,4 @@
-"""`NerfModel`: a field, a sampler (occupancy grid or proposal networks) and volume rendering,
-from rays to colours.
+"""`NerfModel`: a field, a sampler and volume rendering, from rays to colours.
 
 Rays are in world space (unit directions). The scene is the box [-h, h]^3 with h =
 `config.box_half_size`, seen between `near` and `far` along each ray; nothing outside it has
@@ -9,7 +8,6 @@ rendering is deterministic and still differentiable with respect to every field 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 
 import torch
@@ -17,58 +15,52 @@ from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras, image_rays
 from nerfaug.nerf.config import NerfConfig
-from nerfaug.nerf.field import DensityField, NerfField
-from nerfaug.nerf.occupancy import OccupancyGrid
-from nerfaug.nerf.proposal import ProposalSchedule, distortion_loss, interlevel_loss, proposal_anneal
-from nerfaug.nerf.sampling import ray_box_span, sample_pdf, stratified_edges
+from nerfaug.nerf.registry import build_field, build_sampler
+from nerfaug.nerf.sampling import ray_box_span, unit_cube
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
+
+# State-dict prefixes of models saved before samplers were modules of their own.
+_RENAMED_KEYS = (("occupancy.", "sampler.grid."), ("proposals.", "sampler.networks."), ("anneal", "sampler.anneal"))
 
 
 class NerfModel(nn.Module):
     """A NeRF: `forward(origins, directions)` renders rays differentiably.
 
+    Args:
+        config: the hyperparameters.
+        background: the colour behind the scene when none is passed (with
+            `config.background_mode == "fixed"`).
+        field: the radiance field (`density(x) -> (density, geometry)`,
+            `color(geometry, directions) -> rgb`, points in [0, 1]^3); None builds the registry's
+            default from `config` (`nerfaug.nerf.registry.build_field`).
+
     Attributes:
         config: the hyperparameters.
-        field: the `NerfField` (density and colour).
-        occupancy: the `OccupancyGrid` (sampler "occupancy"), else None.
-        proposals: the proposal `DensityField`s (sampler "proposal"), else empty.
-        background: buffer with shape (3,), the colour behind the scene when none is passed
-            (with `config.background_mode == "fixed"`).
+        field: the field (density and colour).
+        sampler: the `Sampler` named by `config.sampler` (occupancy grid or proposal networks).
+        background: buffer with shape (3,).
     """
 
-    def __init__(self, config: NerfConfig, background=(1.0, 1.0, 1.0)):
+    def __init__(self, config: NerfConfig, background=(1.0, 1.0, 1.0), field: nn.Module | None = None):
         super().__init__()
         self.config = config
-        self.field = NerfField(config)
-        self.occupancy = None
-        self.proposals = nn.ModuleList()
-        if config.sampler == "occupancy":
-            self.occupancy = OccupancyGrid(
-                config.box_half_size, config.occupancy_resolution, config.occupancy_update_every,
-                config.occupancy_warmup_steps, config.occupancy_ema_decay, config.occupancy_threshold,
-                config.occupancy_update_fraction,
-            )
-        else:
-            self.proposals.extend(DensityField(config, r) for r in config.proposal_max_resolutions)
+        self.field = build_field(config) if field is None else field
+        self.sampler = build_sampler(config)
         self.register_buffer("background", torch.as_tensor(background, dtype=torch.float32).reshape(3))
-        if len(self.proposals):
-            # Exponent of the proposal weights, annealed from 0 to 1 by `before_step`.
-            self.register_buffer("anneal", torch.tensor(1.0))
-            self.proposal_schedule = ProposalSchedule(config.proposal_update_every, config.proposal_warmup_steps)
-            # Whether this training step's proposal evaluations build a graph (set by `before_step`).
-            self.update_proposals = True
+        self.register_load_state_dict_pre_hook(_rename_old_keys)
 
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
-        """Trainable parameters by optimiser group: "field" and, if any, "proposal"."""
+        """Trainable parameters by optimiser group: "field" and, if the sampler has any
+        (proposal networks), "proposal"."""
         groups = {"field": list(self.field.parameters())}
-        if len(self.proposals):
-            groups["proposal"] = list(self.proposals.parameters())
+        sampler_params = list(self.sampler.parameters())
+        if sampler_params:
+            groups["proposal"] = sampler_params
         return groups
 
     def _unit(self, points: Tensor) -> Tensor:
-        """World points (n, 3) -> the field's unit cube [0, 1]^3 (clamped against round-off)."""
-        h = self.config.box_half_size
-        return ((points + h) / (2.0 * h)).clamp(0.0, 1.0)
+        """World points (n, 3) -> the field's unit cube [0, 1]^3."""
+        return unit_cube(points, self.config.box_half_size)
 
     def density(self, points: Tensor) -> Tensor:
         """Density of the field at world points (n, 3) -> (n,); 0 outside the box."""
@@ -77,16 +69,9 @@ class NerfModel(nn.Module):
         return self.field.density(self._unit(points))[0] * inside
 
     def before_step(self, step: int, generator: torch.Generator | None = None) -> None:
-        """Sampler bookkeeping before training step `step`: refresh the occupancy grid, or
-        anneal the proposal weights."""
-        if self.occupancy is not None:
-            # Opacity is judged over the longest sample spacing (the box diagonal's).
-            step_size = 2.0 * math.sqrt(3.0) * self.config.box_half_size / self.config.num_samples
-            self.occupancy.update(step, self.density, step_size, generator)
-        else:
-            config = self.config
-            self.anneal.fill_(proposal_anneal(step, config.proposal_anneal_steps, config.proposal_anneal_slope))
-            self.update_proposals = self.proposal_schedule.updates(step)
+        """The sampler's bookkeeping before training step `step` (refresh the occupancy grid,
+        anneal the proposal weights)."""
+        self.sampler.before_step(step, self.density, generator)
 
     def forward(
         self, origins: Tensor, directions: Tensor, background: Tensor | None = None,
@@ -102,8 +87,8 @@ class NerfModel(nn.Module):
             generator: source of the sample jitter in training mode (None: global RNG).
 
         Returns:
-            RenderOutput with n_samples = config.num_samples; in `extras` the proposal
-            histograms (sampler "proposal") for `auxiliary_loss`.
+            RenderOutput with n_samples = config.num_samples; in `extras` what the sampler's
+            `auxiliary_loss` needs (the proposal histograms).
         """
         edges, extras = self._sample(origins, directions, generator)
         t_starts, t_ends = edges[:, :-1], edges[:, 1:]
@@ -117,25 +102,10 @@ class NerfModel(nn.Module):
     def _sample(
         self, origins: Tensor, directions: Tensor, generator: torch.Generator | None
     ) -> tuple[Tensor, dict]:
-        """Edges (n_rays, num_samples + 1) of the final samples, and the proposal histograms
-        (as `extras`; empty for the occupancy sampler, which culls samples in `_densities`)."""
+        """Edges (n_rays, num_samples + 1) of the final samples, and the sampler's extras."""
         config = self.config
-        jitter = self.training
         t_min, t_max = ray_box_span(origins, directions, config.box_half_size, config.near, config.far)
-        if self.occupancy is not None:
-            return stratified_edges(t_min, t_max, config.num_samples, jitter, generator), {}
-        edges = stratified_edges(t_min, t_max, config.proposal_samples[0], jitter, generator)
-        proposal_edges, proposal_weights = [], []
-        targets = list(config.proposal_samples[1:]) + [config.num_samples]
-        # Samples are placed without gradient, so outside training (e.g. a Fisher information
-        # pass in eval mode) and on steps that do not update them the proposal networks need no graph.
-        with torch.set_grad_enabled(torch.is_grad_enabled() and self.training and self.update_proposals):
-            for proposal, n_next in zip(self.proposals, targets):
-                weights = self._proposal_weights(proposal, origins, directions, edges)
-                proposal_edges.append(edges)
-                proposal_weights.append(weights)
-                edges = sample_pdf(edges, weights.detach() ** self.anneal, n_next, jitter, generator)
-        return edges, {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
+        return self.sampler.sample(origins, directions, t_min, t_max, generator)
 
     def _last_sample_colour(self, origins: Tensor, directions: Tensor, t_far: Tensor) -> Tensor:
         """The field's colour at the far end of each ray, nerfacto's "last_sample" background.
@@ -143,20 +113,13 @@ class NerfModel(nn.Module):
         _, geometry = self.field.density(self._unit(origins + directions * t_far[:, None]))
         return self.field.color(geometry, directions)
 
-    def _proposal_weights(self, proposal: DensityField, origins: Tensor, directions: Tensor, edges: Tensor) -> Tensor:
-        """Volume-rendering weights of one proposal network on intervals `edges` (n_rays, n + 1)."""
-        mids = 0.5 * (edges[:, 1:] + edges[:, :-1])
-        points = origins[:, None, :] + directions[:, None, :] * mids[..., None]
-        sigma = proposal(self._unit(points.reshape(-1, 3))).reshape(mids.shape)
-        return render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
-
     def _densities(
         self, origins: Tensor, directions: Tensor, t_starts: Tensor, t_ends: Tensor
     ) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Weights of the final samples, from the field's density where it may matter.
 
-        The field sees only samples inside a non-empty interval and, with the occupancy sampler,
-        in an occupied cell; the rest keep density 0. They are gathered out of the dense
+        The field sees only samples inside a non-empty interval that the sampler calls live
+        (e.g. in an occupied cell of the occupancy grid); the rest keep density 0. They are gathered out of the dense
         (n_rays, n) layout and their densities scattered back.
 
         Returns:
@@ -168,8 +131,9 @@ class NerfModel(nn.Module):
         mids = 0.5 * (t_starts + t_ends)
         points = (origins[:, None, :] + directions[:, None, :] * mids[..., None]).reshape(-1, 3)
         live = (t_ends > t_starts).reshape(-1)
-        if self.occupancy is not None:
-            live = live & self.occupancy.query(points)
+        sampler_live = self.sampler.live(points)
+        if sampler_live is not None:
+            live = live & sampler_live
         index = live.nonzero().squeeze(-1)
         density, geometry = self.field.density(self._unit(points[index]))
         sigma = density.new_zeros(n_rays * n).index_put((index,), density).reshape(n_rays, n)
@@ -188,18 +152,9 @@ class NerfModel(nn.Module):
         return weights, rgbs
 
     def auxiliary_loss(self, output: RenderOutput) -> Tensor:
-        """Losses besides photometric error: the proposal sampler's interlevel and distortion
-        losses (weighted by the config); 0 for the occupancy sampler."""
-        if self.occupancy is not None:
-            return output.rgb.new_zeros(())
-        edges = torch.cat([output.t_starts, output.t_ends[:, -1:]], dim=-1)
-        extras = output.extras or {}
-        loss = self.config.distortion_loss_mult * distortion_loss(edges, output.weights)
-        if "proposal_edges" in extras:
-            loss = loss + self.config.interlevel_loss_mult * interlevel_loss(
-                edges, output.weights, extras["proposal_edges"], extras["proposal_weights"]
-            )
-        return loss
+        """Losses besides photometric error: the sampler's (the proposal sampler's interlevel
+        and distortion losses; 0 for the occupancy sampler)."""
+        return self.sampler.auxiliary_loss(output)
 
     def _eval_slices(
         self, origins: Tensor, directions: Tensor, chunk: int | None
@@ -276,3 +231,14 @@ class NerfModel(nn.Module):
             "accumulation": torch.cat(parts["accumulation"]).reshape(height, width),
             "depth": torch.cat(parts["depth"]).reshape(height, width),
         }
+
+
+def _rename_old_keys(module, state_dict, prefix, *args) -> None:
+    """Load-state-dict pre-hook: rename the keys of a model saved before samplers were modules
+    of their own (e.g. a capture session's checkpoint) to today's."""
+    for key in [k for k in state_dict if k.startswith(prefix)]:
+        local = key[len(prefix):]
+        for old, new in _RENAMED_KEYS:
+            if local.startswith(old):
+                state_dict[prefix + new + local[len(old):]] = state_dict.pop(key)
+                break

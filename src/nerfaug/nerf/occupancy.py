@@ -1,5 +1,6 @@
-"""Occupancy grid: which cells of the scene box may hold density, so that samples in empty
-space are never sent through the field (nerfacc's OccGridEstimator, for fixed samples per ray).
+"""Occupancy grid and its sampler: which cells of the scene box may hold density, so that samples
+in empty space are never sent through the field (nerfacc's OccGridEstimator, for fixed samples
+per ray).
 
 Each cell keeps an exponential moving maximum of its opacity, density * step_size, measured at
 a random point in the cell every `update_every` steps; a cell is occupied while that opacity is
@@ -16,10 +17,15 @@ gain in PSNR).
 
 from __future__ import annotations
 
-from typing import Callable
+import math
+from collections.abc import Callable
 
 import torch
 from torch import Tensor, nn
+
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.sampler import Sampler
+from nerfaug.nerf.sampling import stratified_edges
 
 
 class OccupancyGrid(nn.Module):
@@ -99,3 +105,36 @@ class OccupancyGrid(nn.Module):
         # its densest cells.
         threshold = self.opacity.mean().clamp(max=self.threshold)
         self.occupied.copy_(self.opacity > threshold)
+
+
+class OccupancySampler(Sampler):
+    """`num_samples` stratified samples per ray; those in cells of `grid` that are empty are
+    not evaluated (`live`).
+
+    Attributes:
+        grid: the `OccupancyGrid`, refreshed from the field by `before_step`.
+    """
+
+    def __init__(self, grid: OccupancyGrid, num_samples: int):
+        super().__init__()
+        self.grid, self.num_samples = grid, num_samples
+        # Opacity is judged over the longest sample spacing (the box diagonal's).
+        self.step_size = 2.0 * math.sqrt(3.0) * grid.half_size / num_samples
+
+    @classmethod
+    def from_config(cls, config: NerfConfig) -> OccupancySampler:
+        grid = OccupancyGrid(
+            config.box_half_size, config.occupancy_resolution, config.occupancy_update_every,
+            config.occupancy_warmup_steps, config.occupancy_ema_decay, config.occupancy_threshold,
+            config.occupancy_update_fraction,
+        )
+        return cls(grid, config.num_samples)
+
+    def sample(self, origins, directions, t_min, t_max, generator=None) -> tuple[Tensor, dict]:
+        return stratified_edges(t_min, t_max, self.num_samples, self.training, generator), {}
+
+    def live(self, points: Tensor) -> Tensor:
+        return self.grid.query(points)
+
+    def before_step(self, step, density_fn, generator=None) -> None:
+        self.grid.update(step, density_fn, self.step_size, generator)

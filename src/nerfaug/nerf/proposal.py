@@ -1,6 +1,7 @@
-"""Losses and schedule of nerfacto's proposal sampler (mip-NeRF 360): the histogram
-(interlevel) loss that makes proposal weights bound the final ones, the distortion loss, and the
-annealing of proposal weights early in training.
+"""nerfacto's proposal sampler (mip-NeRF 360): small density networks whose weights place the
+next level's samples, the histogram (interlevel) loss that makes proposal weights bound the final
+ones, the distortion loss, the annealing of proposal weights early in training, and the schedule
+of the steps that update them.
 
 Histograms are (edges (n_rays, n + 1), weights (n_rays, n)) along the same rays.
 """
@@ -8,7 +9,13 @@ Histograms are (edges (n_rays, n + 1), weights (n_rays, n)) along the same rays.
 from __future__ import annotations
 
 import torch
-from torch import Tensor
+from torch import Tensor, nn
+
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.field import DensityField
+from nerfaug.nerf.sampler import Sampler
+from nerfaug.nerf.sampling import sample_pdf, stratified_edges, unit_cube
+from nerfaug.nerf.volrend import RenderOutput, render_weights
 
 _EPS = 1e-7
 
@@ -120,3 +127,79 @@ class ProposalSchedule:
         while self._step < step:
             updated = self._advance()
         return updated
+
+
+class ProposalSampler(Sampler):
+    """Stratified samples for the first proposal network; each network's weights (raised to the
+    annealing exponent) place the next level's samples by inverse CDF, the last network's the
+    `num_samples` final ones.
+
+    Attributes:
+        networks: the proposal `DensityField`s, coarse to fine.
+        anneal: buffer, exponent of the proposal weights, annealed from 0 to 1 by `before_step`.
+        update_networks: whether this training step's proposal evaluations build a graph
+            (set by `before_step` from `schedule`).
+    """
+
+    def __init__(
+        self, networks: list[DensityField], samples: tuple[int, ...], num_samples: int, half_size: float,
+        schedule: ProposalSchedule, anneal_steps: int, anneal_slope: float,
+        interlevel_loss_mult: float, distortion_loss_mult: float,
+    ):
+        super().__init__()
+        self.networks = nn.ModuleList(networks)
+        self.samples, self.num_samples, self.half_size = tuple(samples), num_samples, half_size
+        self.schedule, self.anneal_steps, self.anneal_slope = schedule, anneal_steps, anneal_slope
+        self.interlevel_loss_mult, self.distortion_loss_mult = interlevel_loss_mult, distortion_loss_mult
+        self.register_buffer("anneal", torch.tensor(1.0))
+        self.update_networks = True
+
+    @classmethod
+    def from_config(cls, config: NerfConfig) -> ProposalSampler:
+        return cls(
+            [DensityField(config, r) for r in config.proposal_max_resolutions], config.proposal_samples,
+            config.num_samples, config.box_half_size,
+            ProposalSchedule(config.proposal_update_every, config.proposal_warmup_steps),
+            config.proposal_anneal_steps, config.proposal_anneal_slope,
+            config.interlevel_loss_mult, config.distortion_loss_mult,
+        )
+
+    def sample(self, origins, directions, t_min, t_max, generator=None) -> tuple[Tensor, dict]:
+        """See `Sampler.sample`; `extras` holds each network's histogram ("proposal_edges",
+        "proposal_weights") for the interlevel loss."""
+        jitter = self.training
+        edges = stratified_edges(t_min, t_max, self.samples[0], jitter, generator)
+        proposal_edges, proposal_weights = [], []
+        targets = list(self.samples[1:]) + [self.num_samples]
+        # Samples are placed without gradient, so outside training (e.g. a Fisher information
+        # pass in eval mode) and on steps that do not update them the networks need no graph.
+        with torch.set_grad_enabled(torch.is_grad_enabled() and self.training and self.update_networks):
+            for network, n_next in zip(self.networks, targets):
+                weights = self._weights(network, origins, directions, edges)
+                proposal_edges.append(edges)
+                proposal_weights.append(weights)
+                edges = sample_pdf(edges, weights.detach() ** self.anneal, n_next, jitter, generator)
+        return edges, {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
+
+    def _weights(self, network: DensityField, origins: Tensor, directions: Tensor, edges: Tensor) -> Tensor:
+        """Volume-rendering weights of one network on intervals `edges` (n_rays, n + 1)."""
+        mids = 0.5 * (edges[:, 1:] + edges[:, :-1])
+        points = origins[:, None, :] + directions[:, None, :] * mids[..., None]
+        sigma = network(unit_cube(points.reshape(-1, 3), self.half_size)).reshape(mids.shape)
+        return render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
+
+    def before_step(self, step, density_fn, generator=None) -> None:
+        self.anneal.fill_(proposal_anneal(step, self.anneal_steps, self.anneal_slope))
+        self.update_networks = self.schedule.updates(step)
+
+    def auxiliary_loss(self, output: RenderOutput) -> Tensor:
+        """The distortion loss of the final weights and, when the pass kept the proposal
+        histograms, the interlevel loss, weighted by the config's multipliers."""
+        edges = torch.cat([output.t_starts, output.t_ends[:, -1:]], dim=-1)
+        extras = output.extras or {}
+        loss = self.distortion_loss_mult * distortion_loss(edges, output.weights)
+        if "proposal_edges" in extras:
+            loss = loss + self.interlevel_loss_mult * interlevel_loss(
+                edges, output.weights, extras["proposal_edges"], extras["proposal_weights"]
+            )
+        return loss

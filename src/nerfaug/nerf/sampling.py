@@ -1,5 +1,6 @@
 """Where along each ray to sample: the ray's span inside the scene box, stratified intervals in
-it, and intervals drawn from a histogram of weights (the proposal sampler's inverse CDF).
+it, and intervals drawn from a histogram of weights (the proposal sampler's inverse CDF); and
+the map from the scene box to the fields' unit cube.
 
 Intervals are given by their edges, a Tensor with shape (n_rays, n_samples + 1), increasing along
 each ray; sample i covers [edges[:, i], edges[:, i + 1]] and sits at its midpoint.
@@ -35,6 +36,17 @@ def ray_box_span(
     t_enter = torch.minimum(t_low, t_high).amax(dim=-1).clamp(near, far)
     t_exit = torch.maximum(t_low, t_high).amin(dim=-1).clamp(near, far)
     return t_enter, torch.maximum(t_exit, t_enter)
+
+
+def unit_cube(points: Tensor, half_size: float) -> Tensor:
+    """World points in the box [-half_size, half_size]^3 -> the fields' unit cube [0, 1]^3
+    (clamped against round-off). Any shape (..., 3).
+
+    Example:
+        >>> unit_cube(torch.tensor([[-1.5, 0.0, 1.5]]), 1.5).tolist()
+        [[0.0, 0.5, 1.0]]
+    """
+    return ((points + half_size) / (2.0 * half_size)).clamp(0.0, 1.0)
 
 
 def _uniform(shape: tuple[int, ...], generator: torch.Generator | None, device) -> Tensor:

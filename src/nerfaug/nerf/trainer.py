@@ -15,13 +15,14 @@ import tempfile
 from pathlib import Path
 
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras, generate_rays
 from nerfaug.data.views import Views
 from nerfaug.device import autocast_dtype, resolve_device
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.model import NerfModel
+from nerfaug.nerf.registry import DEFAULT_FIELD, build_field
 
 CHECKPOINT_FORMAT = 1
 
@@ -64,9 +65,12 @@ class Trainer:
     def __init__(
         self, views: Views, config: NerfConfig, seed: int = 0, device="cpu",
         background=(1.0, 1.0, 1.0), progress: bool = True, precision: str = "auto",
+        field: str | nn.Module = DEFAULT_FIELD,
     ):
         # device: "cpu", "cuda", "auto" (cuda when available); precision: "auto" (fp16 autocast
         # on cuda, fp32 on the CPU), "fp32", "fp16" or "bf16" (`nerfaug.device.autocast_dtype`).
+        # field: a name in `nerfaug.nerf.registry.FIELDS`, built here from the seed, or a field
+        # module built by the caller (a checkpoint then restores into the default field).
         self.config, self.seed, self.device = config, seed, resolve_device(device)
         self._autocast = autocast_dtype(self.device, precision)
         # float16 gradients underflow without loss scaling; bfloat16 has float32's range.
@@ -80,7 +84,9 @@ class Trainer:
         self._checkpoint_path: Path | None = None
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(int(torch.randint(2**62, (1,), generator=self.generator)))
-            self.model = NerfModel(config, self.background).to(self.device)
+            self.field_name = field if isinstance(field, str) else None
+            built = build_field(config, field) if isinstance(field, str) else field
+            self.model = NerfModel(config, self.background, built).to(self.device)
         groups = self.model.param_groups()
         self.optimizer = torch.optim.Adam(
             [
@@ -227,6 +233,7 @@ class Trainer:
         return {
             "format": CHECKPOINT_FORMAT,
             "config": self.config.to_dict(),
+            "field": self.field_name,
             "seed": self.seed,
             "background": list(self.background),
             "step": self.step,
@@ -260,7 +267,7 @@ class Trainer:
     @classmethod
     def load_checkpoint(
         cls, path: str | Path, device="cpu", progress: bool = True, precision: str = "auto"
-    ) -> "Trainer":
+    ) -> Trainer:
         """A trainer restored from `save_checkpoint` (on any device); training continues exactly
         as it would have on the device it is restored to."""
         state = torch.load(path, map_location="cpu", weights_only=True)
@@ -270,7 +277,8 @@ class Trainer:
         cameras = Cameras(v["camera_to_world"], v["fx"], v["fy"], v["cx"], v["cy"], v["width"], v["height"])
         views = Views(cameras, v["images"], list(v["names"]), v["alphas"])
         config = NerfConfig.from_dict(state["config"])
-        trainer = cls(views, config, state["seed"], device, state["background"], progress, precision=precision)
+        trainer = cls(views, config, state["seed"], device, state["background"], progress, precision=precision,
+                      field=state.get("field") or DEFAULT_FIELD)
         trainer.model.load_state_dict(state["model"])
         trainer.optimizer.load_state_dict(state["optimizer"])
         trainer.generator.set_state(state["generator"])

@@ -1,0 +1,57 @@
+"""`Sampler`: the interface of what decides where along each ray the field is evaluated (an
+occupancy grid, proposal networks), in the manner of nerfacc's estimators.
+
+A sampler owns its state (grid, networks, schedules) and receives the field as a function, so
+the model never branches on which sampler it holds. Intervals are edges with shape
+(n_rays, n_samples + 1) as in `nerfaug.nerf.sampling`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+
+import torch
+from torch import Tensor, nn
+
+from nerfaug.nerf.volrend import RenderOutput
+
+
+class Sampler(nn.Module, ABC):
+    """Where to sample, and what that costs besides photometric error.
+
+    Samples are jittered in training mode (`self.training`, which follows the model's mode)
+    and deterministic in eval mode.
+    """
+
+    @abstractmethod
+    def sample(
+        self, origins: Tensor, directions: Tensor, t_min: Tensor, t_max: Tensor,
+        generator: torch.Generator | None = None,
+    ) -> tuple[Tensor, dict]:
+        """The final samples along each ray.
+
+        Args:
+            origins, directions: Tensors with shape (n_rays, 3), world space, unit directions.
+            t_min, t_max: Tensors with shape (n_rays,), the ray's span inside the scene.
+            generator: source of the jitter in training mode (None: global RNG).
+
+        Returns:
+            edges: Tensor with shape (n_rays, n_samples + 1).
+            extras: what `auxiliary_loss` needs of this pass (put in `RenderOutput.extras`).
+        """
+
+    def live(self, points: Tensor) -> Tensor | None:
+        """Which final samples may hold density: bool Tensor with shape (n,) for world points
+        (n, 3), or None when every sample may (the field then sees all of them)."""
+        return None
+
+    def before_step(
+        self, step: int, density_fn: Callable[[Tensor], Tensor], generator: torch.Generator | None = None
+    ) -> None:
+        """Bookkeeping before training step `step`; `density_fn` maps world points (n, 3) to
+        the field's densities (n,)."""
+
+    def auxiliary_loss(self, output: RenderOutput) -> Tensor:
+        """The sampler's losses for one rendered batch (a scalar Tensor; 0 by default)."""
+        return output.rgb.new_zeros(())
