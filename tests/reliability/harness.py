@@ -138,9 +138,12 @@ class Case:
 
 
 def classify(case: Case, outcome: Outcome, before: dict, after: dict) -> str:
-    """clear, traceback, silent, unclear, or lost (an input folder changed)."""
-    if any(before[k] != after[k] for k in before):
+    """lost (a file of an input folder deleted or changed), wrote (files added to an input
+    folder), traceback, silent (exit 0), unclear, or clear."""
+    if any(after[k].get(rel) != digest for k in before for rel, digest in before[k].items()):
         return "lost"
+    if any(before[k] != after[k] for k in before):
+        return "wrote"
     if outcome.traceback:
         return "traceback"
     if outcome.code == 0:
