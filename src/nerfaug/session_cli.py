@@ -167,6 +167,13 @@ def train(
     if (path / SESSION_FILE).exists():
         if out is not None:
             raise SystemExit(f"{path} is already a session folder; drop --out to train it further")
+        given = {"preset": preset != "cpu", "seed": seed != 0, "split": split != "train", "downscale": downscale != 1,
+                 "centre": centre is not None, "radius": radius is not None, "up": tuple(up) != (0.0, 0.0, 1.0),
+                 "estimate-up": estimate_up}
+        if any(given.values()):
+            options = ", ".join(f"--{name}" for name, set_ in given.items() if set_)
+            raise ValueError(f"{options}: only for a new session; {path / SESSION_FILE} keeps this session's "
+                             "settings, so drop them (or start a new session with `nerfaug train DATA --out NEW_RUN`)")
         session = _open(path, device)
     else:
         if out is None:

@@ -484,3 +484,11 @@ def render_proposals_poses_missing(tmp, bases):
     case = _render_proposals(tmp, bases, says=("nope.json",))
     case.argv[3] = tmp / "nope.json"
     return case
+
+
+@case
+def train_session_with_new_session_options(tmp, bases):
+    """Options that only shape a new session are refused, not silently ignored, on an existing one."""
+    run = _session(tmp, bases)
+    return Case(["train", run, "--preset", "paper", "--seed", "3", "--steps", "1", "--device", "cpu"], [run],
+                says=("--preset", "--seed", "session.json"))
