@@ -244,3 +244,25 @@ def cameras_looking_the_same_way(tmp, bases):
     data = copy_dataset(tmp, bases)
     edit_json(data / "transforms_train.json", parallel)
     return Case(train_on(data, tmp).argv, [data], says=("centre", "radius"))
+
+
+def _scene_render(tmp, *extra, says=()) -> Case:
+    return Case(["scene", "render", "lego", "--out", tmp / "lego", "--res", "8", "--pool", "2", "--test", "1",
+                 "--initial", "1", "--samples", "1", *extra], [tmp], says=says)
+
+
+@case
+def scene_render_zero_resolution(tmp, bases):
+    return _scene_render(tmp, "--res", "0", says=("resolution", "0"))
+
+
+@case
+def scene_render_zero_samples(tmp, bases):
+    return _scene_render(tmp, "--samples", "0", says=("samples", "0"))
+
+
+@case
+def scene_render_over_a_users_folder(tmp, bases):
+    (tmp / "lego").mkdir()
+    (tmp / "lego" / "thesis.tex").write_text("keep me")
+    return _scene_render(tmp, says=(str(tmp / "lego"),))
