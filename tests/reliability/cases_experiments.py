@@ -272,3 +272,10 @@ def results_of_a_dataset_with_the_same_cameras_and_other_images(tmp, bases):
     write_images(other / "test", ["r_1"])
     return _run(tmp, bases, data=other, out=results, says=(bases.dataset.name, "different content"),
                 inputs=[results, other])
+
+
+@case
+def run_builtin_scene_above_its_source_size(tmp, bases):
+    case = _run(tmp, bases, "--resolution", "8000", says=("--resolution", "8000", "800"), inputs=[tmp])
+    case.argv[1:3] = ["--scenes", "lego"]
+    return case

@@ -30,6 +30,9 @@ from nerfaug.experiment.store import (
 )
 
 Backend = Literal["local", "ray"]
+# Built-in scenes stand in for the NeRF-synthetic scenes, whose images are 800 px across: the most
+# `--resolution` renders them at (a larger one is a typo costing hours; `nerfaug scene render` takes any).
+BUILTIN_MAX_RESOLUTION = 800
 PROGRESS_FILE = FILES.progress
 console = Console(stderr=True)
 
@@ -94,6 +97,9 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
     for scene in config.scenes:
         name, folder = scene_name(scene), scene_folder(scene)
         _need(name not in datasets, "scenes", scene, f"another scene is also named {name!r} in results; rename a folder")
+        _need(folder is not None or config.resolution <= BUILTIN_MAX_RESOLUTION, "resolution", config.resolution,
+              f"built-in scenes are rendered at most {BUILTIN_MAX_RESOLUTION} px across; for more, render one with "
+              "`nerfaug scene render SCENE --res N --out DIR` and pass --data DIR")
         datasets[name] = ({"builtin": scene, "digest": builtin_dataset_digest(scene, config)} if folder is None
                           else _check_user_dataset(folder, config))
     return datasets
