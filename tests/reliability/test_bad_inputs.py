@@ -11,6 +11,7 @@ CASES = all_cases()
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_bad_input_is_refused_clearly_and_changes_nothing(name, bases, tmp_path):
     case = CASES[name](tmp_path, bases)
+    assert case.says, f"{name}: a case names the file, field or value its message must name"
     guarded = [*case.inputs, bases.dataset, bases.session, bases.results]
     before = {str(p): tree_hash(p) for p in guarded}
     outcome = run_cli(case.argv, cwd=case.cwd)
