@@ -13,12 +13,16 @@ import pytest
 import torch
 
 from nerfaug.cameras import Cameras, image_rays
+from nerfaug.capture import (
+    CaptureSession,
+    Hemisphere,
+    estimate_centre,
+    estimate_hemisphere,
+    read_poses,
+)
 from nerfaug.data import DatasetError, Views, load_blender_split, load_dataset, load_nerfstudio, write_blender_split
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, pose_from_angles, sample_uniform_poses
 from nerfaug.selection import SelectionConfig
-from nerfaug.capture import (
-    CaptureSession, Hemisphere, estimate_centre, estimate_hemisphere, read_poses,
-)
 
 SIZE = 16
 CENTRE = (0.5, -0.3, 0.2)

@@ -44,7 +44,8 @@ def load_blender_split(
                            field="camera_angle_x", value=angle)
     frames = require(meta, "frames", json_path)
     if not isinstance(frames, list) or not frames:
-        raise DatasetError(json_path, "frames must be a non-empty list", field="frames", value=frames if not isinstance(frames, list) else [])
+        raise DatasetError(json_path, "frames must be a non-empty list", field="frames",
+                           value=frames if not isinstance(frames, list) else [])
     return load_frames(root, json_path, frames, background, downscale, lazy, lambda w, h, i: (float(angle), None))
 
 

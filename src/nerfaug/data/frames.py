@@ -128,7 +128,9 @@ def _first_line(error: BaseException) -> str:
     return (text[0] if text else type(error).__name__)[:300]
 
 
-def read_image(path: Path, background: Tensor, downscale: int, json_path: Path, field: str) -> tuple[Tensor, Tensor | None]:
+def read_image(
+    path: Path, background: Tensor, downscale: int, json_path: Path, field: str
+) -> tuple[Tensor, Tensor | None]:
     """An image composited over `background`, as float32 (h, w, 3) in [0, 1], and its alpha (h, w).
 
     Args:
@@ -140,7 +142,8 @@ def read_image(path: Path, background: Tensor, downscale: int, json_path: Path, 
     except Exception as error:  # noqa: BLE001 -- imageio's plugins raise many types; all mean "cannot read"
         raise DatasetError(json_path, f"cannot read image {path}: {_first_line(error)}", field=field) from None
     if array.ndim != 3 or array.shape[-1] not in (3, 4):
-        raise DatasetError(json_path, f"image {path} must be an RGB or RGBA image (one frame)", field=field, value=f"shape {array.shape}")
+        raise DatasetError(json_path, f"image {path} must be an RGB or RGBA image (one frame)", field=field,
+                           value=f"shape {array.shape}")
     if min(array.shape[:2]) < downscale:
         raise DatasetError(json_path, f"image {path} is smaller than the downscale factor {downscale}",
                            field=field, value=f"{array.shape[1]}x{array.shape[0]}")
@@ -153,14 +156,18 @@ def read_image(path: Path, background: Tensor, downscale: int, json_path: Path, 
             raise DatasetError(json_path, f"image {path} has non-finite pixel values", field=field)
         image = torch.from_numpy(array.astype(np.float32)).clamp(0, 1)
     else:
-        raise DatasetError(json_path, f"image {path} has an unsupported pixel type", field=field, value=str(array.dtype))
+        raise DatasetError(json_path, f"image {path} has an unsupported pixel type", field=field,
+                           value=str(array.dtype))
     alpha = image[..., 3] if image.shape[-1] == 4 else None
     rgb = image[..., :3]
     if alpha is not None:
         rgb = rgb * alpha[..., None]  # premultiply so downscaling does not bleed background colour
     if downscale > 1:
         h, w = rgb.shape[0] // downscale * downscale, rgb.shape[1] // downscale * downscale
-        pool = lambda x: x[:h, :w].reshape(h // downscale, downscale, w // downscale, downscale, -1).mean((1, 3))
+
+        def pool(x):
+            return x[:h, :w].reshape(h // downscale, downscale, w // downscale, downscale, -1).mean((1, 3))
+
         rgb = pool(rgb)
         if alpha is not None:
             alpha = pool(alpha[..., None])[..., 0]
@@ -213,7 +220,8 @@ def load_frames(
         if not isinstance(frame, dict):
             raise DatasetError(json_path, "each frame must be an object", field=field, value=frame)
         file_path = require(frame, "file_path", json_path, f" in {field}")
-        poses.append(check_pose(require(frame, "transform_matrix", json_path, f" in {field}"), json_path, f"{field}.transform_matrix"))
+        matrix = require(frame, "transform_matrix", json_path, f" in {field}")
+        poses.append(check_pose(matrix, json_path, f"{field}.transform_matrix"))
         paths.append(resolve_image(root, file_path, json_path, f"{field}.file_path"))
         names.append(file_path)
 

@@ -30,12 +30,18 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
     meta = read_json(json_path)
     frames = require(meta, "frames", json_path)
     if not isinstance(frames, list) or not frames:
-        raise DatasetError(json_path, "frames must be a non-empty list", field="frames", value=frames if not isinstance(frames, list) else [])
+        raise DatasetError(json_path, "frames must be a non-empty list", field="frames",
+                           value=frames if not isinstance(frames, list) else [])
 
     def intrinsics_of(width: int, height: int, i: int):
         frame = frames[i]
-        get = lambda key: frame.get(key, meta.get(key))
-        field = lambda key: f"frames[{i}].{key}" if key in frame else key
+
+        def get(key):
+            return frame.get(key, meta.get(key))
+
+        def field(key):
+            return f"frames[{i}].{key}" if key in frame else key
+
         if get("fl_x") is None:
             if get("camera_angle_x") is None:
                 raise DatasetError(json_path, "missing intrinsics: need fl_x (and fl_y, cx, cy) or camera_angle_x",
