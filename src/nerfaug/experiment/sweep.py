@@ -11,7 +11,6 @@ import concurrent.futures as futures
 import multiprocessing
 import platform
 import sys
-import time
 import traceback
 from dataclasses import asdict, dataclass, field
 from importlib import metadata
@@ -25,8 +24,15 @@ from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.store import (
-    IncompatibleResults, RunKey, check_sweep, clear_incomplete, dataset_content_digest, dataset_digest, fingerprint,
-    is_run_folder, read_result,
+    IncompatibleResults,
+    RunKey,
+    check_sweep,
+    clear_incomplete,
+    dataset_content_digest,
+    dataset_digest,
+    fingerprint,
+    is_run_folder,
+    read_result,
 )
 
 Backend = Literal["local", "ray"]
@@ -96,7 +102,8 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
     datasets: dict[str, dict] = {}
     for scene in config.scenes:
         name, folder = scene_name(scene), scene_folder(scene)
-        _need(name not in datasets, "scenes", scene, f"another scene is also named {name!r} in results; rename a folder")
+        _need(name not in datasets, "scenes", scene,
+              f"another scene is also named {name!r} in results; rename a folder")
         _need(folder is not None or config.resolution <= BUILTIN_MAX_RESOLUTION, "resolution", config.resolution,
               f"built-in scenes are rendered at most {BUILTIN_MAX_RESOLUTION} px across; for more, render one with "
               "`nerfaug scene render SCENE --res N --out DIR` and pass --data DIR")
