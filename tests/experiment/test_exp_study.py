@@ -171,3 +171,13 @@ def test_a_study_run_in_sittings_keeps_every_engine_and_scene(tmp_path):
     assert merged["commands"] == [first["command"], second["command"]]
     path.write_text("{not json")
     assert merged_record(path, second) == second  # an unreadable plan is replaced, never merged
+
+
+def test_bad_study_options_are_refused_before_any_dataset_is_rendered(tmp_path):
+    from nerfaug.cli import main
+
+    out = tmp_path / "study"
+    with pytest.raises(SystemExit) as refused:
+        main(["study", "--out", str(out), "--engines", "test", "--scenes", "lego", "--trials", "0", "--device", "cpu"])
+    assert refused.value.code == 2
+    assert not (out / "datasets").exists()

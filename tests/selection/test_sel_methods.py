@@ -132,6 +132,15 @@ def test_too_many_views_and_bad_config_are_refused(scene):
         SelectionConfig(entropy_mode="nats")
 
 
+@pytest.mark.parametrize("name, value", [
+    ("chunk", 0), ("max_draws", 0), ("fisher_train_pixels", 0), ("fisher_resolution", -1), ("fisher_probes", 0),
+    ("fisher_cache_floats", 0), ("fisher_lambda", 0.0), ("scale_m", -1.0), ("authors_threshold", -0.5),
+])
+def test_counts_and_scales_out_of_range_are_refused_by_name(name, value):
+    with pytest.raises(ValueError, match=f"SelectionConfig.{name}="):
+        SelectionConfig(**{name: value})
+
+
 def test_selection_round_trips_through_json(scene):
     _, train, candidates = scene
     selection = select_views("distance", None, train, candidates, 3, torch.Generator().manual_seed(0))

@@ -290,6 +290,11 @@ def make_plan(out: Path, engines, scenes, methods, trials, resolution: int, step
         **({"steps": steps} if steps is not None else {}),
     )
     scenes = tuple(scenes) if scenes else BUILTIN_SCENES
+    # Every setting checked before any dataset is rendered (a bad --trials costs nothing).
+    from nerfaug.experiment.sweep import check_config
+
+    for engine in chosen:
+        check_config(config.replace(scenes=scenes, engine=engine))
     datasets = prepare_datasets(out, scenes, config, progress=progress)
     return StudyPlan(Path(out), config, chosen, left_out, list(datasets), datasets,
                      command or ["nerfaug", *sys.argv[1:]])

@@ -225,6 +225,12 @@ class SelectionConfig:
             ("batch_entropy_sigma", self.batch_entropy_sigma is None or self.batch_entropy_sigma > 0, "> 0"),
             ("entropy_weight", self.entropy_weight >= 0, ">= 0"),
             ("distance_weight", self.distance_weight >= 0, ">= 0"),
+            ("authors_threshold", self.authors_threshold >= 0, ">= 0"),
+            ("scale_m", self.scale_m is None or self.scale_m > 0, "> 0"),
+            *[(name, getattr(self, name) >= 1, ">= 1") for name in (
+                "max_draws", "chunk", "fisher_train_pixels", "fisher_train_chunk", "fisher_train_probes",
+                "fisher_resolution", "fisher_probes", "fisher_cache_floats")],
+            ("fisher_lambda", self.fisher_lambda > 0, "> 0"),
         ]:
             if not ok:
                 raise ValueError(f"SelectionConfig.{name}={getattr(self, name)!r} must be {rule}")
