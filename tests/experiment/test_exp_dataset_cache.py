@@ -109,3 +109,13 @@ def test_scene_data_is_the_same_with_and_without_the_cache(tmp_path, monkeypatch
         assert_same_views(views.pool, plain.pool)
         assert_same_views(views.test, plain.test)
     assert plain.test.images.shape == (3, 16, 16, 3)
+
+
+def test_a_damaged_entry_is_rebuilt(tmp_path):
+    data = write_dataset(tmp_path / "data")
+    cache = tmp_path / "cache"
+    load_split_cached(data, "train", 2, cache)
+    (entry,) = cache.glob("*.pt")
+    entry.write_bytes(entry.read_bytes()[:100])  # truncated
+    assert_same_views(load_split_cached(data, "train", 2, cache), load_dataset(data, "train", downscale=2))
+    assert torch.load(entry, weights_only=True)["images"].shape == (10, 8, 8, 3)  # rewritten whole

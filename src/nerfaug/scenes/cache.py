@@ -66,9 +66,14 @@ def load_split_cached(folder: str | Path, split: str, downscale: int, cache_dir:
     path = cache_path(cache_dir, digest, split, downscale)
     if path.exists():
         lazy = load_dataset(folder, split, downscale=downscale, lazy=True)
-        entry = torch.load(path, weights_only=True)
-        if entry["images"].shape[0] == len(lazy):
-            return Views(lazy.cameras, entry["images"], list(lazy.names), entry["alphas"])
+        try:
+            entry = torch.load(path, weights_only=True)
+            images, alphas = entry["images"], entry["alphas"]
+        except Exception:  # noqa: BLE001 -- an unreadable entry (a damaged disk, a foreign file) is rebuilt
+            images = None
+        expected = (len(lazy), lazy.cameras.height, lazy.cameras.width, 3)
+        if images is not None and tuple(images.shape) == expected:
+            return Views(lazy.cameras, images, list(lazy.names), alphas)
     views = load_dataset(folder, split, downscale=downscale)
     path.parent.mkdir(parents=True, exist_ok=True)
     handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
