@@ -21,6 +21,8 @@ from typing import Literal
 
 import tyro
 
+from nerfaug.experiment.config import PresetName
+from nerfaug.nerf.config import EnginePreset
 from nerfaug.selection.methods import SelectionConfig
 
 Positional = tyro.conf.Positional
@@ -70,13 +72,13 @@ def scene_render(
 
 def run(
     out: Path = Path("results/quick"),
-    preset: Literal["quick", "paper", "ablation", "tiny"] = "quick",
+    preset: PresetName = "quick",
     scenes: tuple[str, ...] | None = None,
     data: Path | None = None,
     methods: tuple[str, ...] | None = None,
     trials: int | None = None,
     steps: int | None = None,
-    engine: Literal["cpu", "paper", "test"] | None = None,
+    engine: EnginePreset | None = None,
     resolution: int | None = None,
     seed: int | None = None,
     backend: Literal["local", "ray"] = "local",

@@ -16,6 +16,7 @@ from typing import Annotated, Literal
 import tyro
 
 from nerfaug.capture.state import SESSION_FILE, SessionState
+from nerfaug.nerf.config import EnginePreset
 from nerfaug.selection.methods import SelectionConfig
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
@@ -131,7 +132,7 @@ def train(
     path: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="DATA|RUN")],
     out: Path | None = None,
     steps: int = 1000,
-    preset: Literal["cpu", "paper", "test"] = "cpu",
+    preset: EnginePreset = "cpu",
     seed: int = 0,
     split: str = "train",
     downscale: int = 1,
