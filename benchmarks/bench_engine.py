@@ -37,8 +37,10 @@ from nerfaug.nerf.registry import ENCODINGS, build_field
 from nerfaug.nerf.trainer import Trainer, psnr_from_mse
 
 SPHERES = (  # centre, radius, colour of the analytic scene
-    ((0.0, 0.0, 0.0), 0.8, (0.9, 0.2, 0.2)), ((0.7, 0.6, 0.3), 0.4, (0.2, 0.7, 0.3)),
-    ((-0.6, 0.5, -0.2), 0.45, (0.2, 0.3, 0.9)), ((0.2, -0.8, 0.5), 0.35, (0.9, 0.8, 0.1)),
+    ((0.0, 0.0, 0.0), 0.8, (0.9, 0.2, 0.2)),
+    ((0.7, 0.6, 0.3), 0.4, (0.2, 0.7, 0.3)),
+    ((-0.6, 0.5, -0.2), 0.45, (0.2, 0.3, 0.9)),
+    ((0.2, -0.8, 0.5), 0.35, (0.9, 0.8, 0.1)),
 )
 
 
@@ -122,12 +124,15 @@ def run_trial(train_views: Views, test_views: Views, config: NerfConfig, checkpo
         psnr = mean_psnr(trainer, test_views)
         render_seconds = time.perf_counter() - start
         curve.append({"step": step, "train_seconds": train_seconds, "psnr": psnr, "render_seconds": render_seconds})
-        print(f"  step {step:5d}  train {train_seconds:6.1f} s  test PSNR {psnr:5.2f} dB  "
-              f"render {render_seconds:5.1f} s", flush=True)
+        print(
+            f"  step {step:5d}  train {train_seconds:6.1f} s  test PSNR {psnr:5.2f} dB  render {render_seconds:5.1f} s",
+            flush=True,
+        )
     best = max(point["psnr"] for point in curve)
     plateau = next(point for point in curve if point["psnr"] >= best - 0.5)
     return {
-        "views": len(train_views), "curve": curve,
+        "views": len(train_views),
+        "curve": curve,
         "seconds_per_iteration": train_seconds / checkpoints[-1],
         "plateau": {"step": plateau["step"], "train_seconds": plateau["train_seconds"], "psnr": plateau["psnr"]},
         "max_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
@@ -138,15 +143,24 @@ class NaiveHashEncoding(nn.Module):
     """The textbook hash grid: one table and one Python iteration per level, 8 gathers each.
     Only here, as the baseline the vectorised `HashEncoding` is measured against."""
 
-    def __init__(self, num_levels=16, features_per_level=2, log2_table_size=19, base_resolution=16,
-                 max_resolution=2048, init_scale=1e-4):
+    def __init__(
+        self,
+        num_levels=16,
+        features_per_level=2,
+        log2_table_size=19,
+        base_resolution=16,
+        max_resolution=2048,
+        init_scale=1e-4,
+    ):
         super().__init__()
         self.table_size = 2**log2_table_size
         self.resolutions = hash_resolutions(num_levels, base_resolution, max_resolution)
-        self.tables = nn.ParameterList([
-            nn.Parameter(torch.empty(self.table_size, features_per_level).uniform_(-init_scale, init_scale))
-            for _ in self.resolutions
-        ])
+        self.tables = nn.ParameterList(
+            [
+                nn.Parameter(torch.empty(self.table_size, features_per_level).uniform_(-init_scale, init_scale))
+                for _ in self.resolutions
+            ]
+        )
         self.output_dim = num_levels * features_per_level
 
     def forward(self, x: Tensor) -> Tensor:
@@ -166,8 +180,13 @@ class NaiveHashEncoding(nn.Module):
 
 
 def naive_hash_encoding(config: NerfConfig) -> NaiveHashEncoding:
-    return NaiveHashEncoding(config.hash_levels, config.hash_features_per_level, config.hash_log2_table_size,
-                             config.hash_base_resolution, config.hash_max_resolution)
+    return NaiveHashEncoding(
+        config.hash_levels,
+        config.hash_features_per_level,
+        config.hash_log2_table_size,
+        config.hash_base_resolution,
+        config.hash_max_resolution,
+    )
 
 
 def time_encodings(points: int = 32768, repeats: int = 5) -> dict:
@@ -261,8 +280,13 @@ def main() -> None:
     config = NerfConfig.preset(args.preset)
     blank = statistics.fmean(psnr_from_mse(float((im - 1.0).square().mean())) for im in test.images)
     report = {
-        "data": str(root), "resolution": args.resolution, "threads": args.threads, "preset": args.preset,
-        "config": config.to_dict(), "test_views": len(test), "blank_white_psnr": blank,
+        "data": str(root),
+        "resolution": args.resolution,
+        "threads": args.threads,
+        "preset": args.preset,
+        "config": config.to_dict(),
+        "test_views": len(test),
+        "blank_white_psnr": blank,
     }
     print(f"{root}: {len(train)} training views, {len(test)} test views, white image PSNR {blank:.2f} dB")
 
@@ -284,7 +308,8 @@ def main() -> None:
             print_table(
                 f"{name}: {r['views']} views, {r['seconds_per_iteration'] * 1e3:.1f} ms/iteration, plateau at step "
                 f"{r['plateau']['step']} ({r['plateau']['train_seconds']:.0f} s), peak RSS {r['max_rss_mib']:.0f} MiB",
-                rows, ("step", "train s", "test PSNR", f"render {len(test)} views s"),
+                rows,
+                ("step", "train s", "test PSNR", f"render {len(test)} views s"),
             )
     for key in ("encoding_seconds_per_32k_points", "seconds_per_step_from_step_0"):
         if key in report:

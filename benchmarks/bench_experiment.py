@@ -54,15 +54,20 @@ def main() -> None:
 
     local_seconds, results = timed_sweep(config, args.out / "local", "local")
     report = {
-        "preset": args.preset, "runs": len(results), "scene_render_seconds": render_seconds,
-        "local_sweep_seconds": local_seconds, "per_trial_median_seconds": phase_medians(results),
+        "preset": args.preset,
+        "runs": len(results),
+        "scene_render_seconds": render_seconds,
+        "local_sweep_seconds": local_seconds,
+        "per_trial_median_seconds": phase_medians(results),
     }
     if args.ray:
         ray_seconds, ray_results = timed_sweep(config, args.out / "ray", "ray")
-        same = sorted((r["method"], r["trial"], r["metrics"]["psnr"]) for r in results) == \
-            sorted((r["method"], r["trial"], r["metrics"]["psnr"]) for r in ray_results)
-        report.update(ray_sweep_seconds=ray_seconds, ray_over_local=ray_seconds / local_seconds,
-                      ray_identical_metrics=same)
+        same = sorted((r["method"], r["trial"], r["metrics"]["psnr"]) for r in results) == sorted(
+            (r["method"], r["trial"], r["metrics"]["psnr"]) for r in ray_results
+        )
+        report.update(
+            ray_sweep_seconds=ray_seconds, ray_over_local=ray_seconds / local_seconds, ray_identical_metrics=same
+        )
     print(json.dumps(report, indent=2))
     (args.out / "bench_experiment.json").write_text(json.dumps(report, indent=2))
 

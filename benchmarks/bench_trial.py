@@ -63,8 +63,11 @@ def chunk_times(trainer, until: int, chunk: int, counter: list[int]) -> list[tup
         start, cpu, points = time.perf_counter(), time.process_time(), counter[0]
         trainer.train(target)
         times.append((target, time.perf_counter() - start, time.process_time() - cpu, counter[0] - points))
-        print(f"step {target}: {times[-1][1]:.2f} s wall, {times[-1][2]:.2f} s cpu, {times[-1][3]} points",
-              file=sys.stderr, flush=True)
+        print(
+            f"step {target}: {times[-1][1]:.2f} s wall, {times[-1][2]:.2f} s cpu, {times[-1][3]} points",
+            file=sys.stderr,
+            flush=True,
+        )
     return times
 
 
@@ -98,7 +101,11 @@ def compare_load(args) -> dict:
                 load_scene_data(Path(args.data), config, cache_dir=cache_dir)
                 times[name].append(time.perf_counter() - start)
     median = {name: statistics.median(values) for name, values in times.items()}
-    return {"load_seconds": times, "median": median, "ratio_uncached_over_cached": median["uncached"] / median["cached"]}
+    return {
+        "load_seconds": times,
+        "median": median,
+        "ratio_uncached_over_cached": median["uncached"] / median["cached"],
+    }
 
 
 def trial(args) -> dict:
@@ -135,8 +142,15 @@ def trial(args) -> dict:
     timing["train_before"] = sum(c[1] for c in before)
     start = time.perf_counter()
     generator = torch.Generator().manual_seed(args.seed)
-    selection = select_views(args.method, trainer.model, trainer.train_views.cameras, data.pool.cameras,
-                             config.n_new, generator, config.selection)
+    selection = select_views(
+        args.method,
+        trainer.model,
+        trainer.train_views.cameras,
+        data.pool.cameras,
+        config.n_new,
+        generator,
+        config.selection,
+    )
     timing["selection"] = time.perf_counter() - start
     chosen = [int(i) for i in selection.indices]
     trainer.add_views(data.pool.subset(chosen))
@@ -145,22 +159,39 @@ def trial(args) -> dict:
     lpips = cached_lpips() if args.lpips else None
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        evaluation = evaluate_views(lambda cameras, i: trainer.model.render_image(cameras, i)["rgb"], data.test,
-                                    lpips=lpips, save_dir=Path(tmp) / "renders", save_count=3, progress=False)
+        evaluation = evaluate_views(
+            lambda cameras, i: trainer.model.render_image(cameras, i)["rgb"],
+            data.test,
+            lpips=lpips,
+            save_dir=Path(tmp) / "renders",
+            save_count=3,
+            progress=False,
+        )
         timing["evaluation"] = time.perf_counter() - start
         start = time.perf_counter()
-        plot_hemisphere_map(data.pool.cameras.camera_to_world, selection.scores,
-                            data.initial.cameras.camera_to_world, data.pool.cameras.camera_to_world[chosen],
-                            path=Path(tmp) / "map.png", title="lego")
+        plot_hemisphere_map(
+            data.pool.cameras.camera_to_world,
+            selection.scores,
+            data.initial.cameras.camera_to_world,
+            data.pool.cameras.camera_to_world[chosen],
+            path=Path(tmp) / "map.png",
+            title="lego",
+        )
         timing["map"] = time.perf_counter() - start
     rest = sum(v for k, v in timing.items() if k not in ("load", "load_cached"))
     timing["total"] = timing["load"] + rest
     if args.before_after:
         timing["total_cached"] = timing["load_cached"] + rest
-    result = {"timing": timing, "metrics": evaluation.mean, "chosen": chosen, "overrides": args.override,
-              "before_chunks": before, "after_chunks": after,
-              "cpu": {"train_before": sum(c[2] for c in before), "train_after": sum(c[2] for c in after)},
-              "field_points": {"train_before": sum(c[3] for c in before), "train_after": sum(c[3] for c in after)}}
+    result = {
+        "timing": timing,
+        "metrics": evaluation.mean,
+        "chosen": chosen,
+        "overrides": args.override,
+        "before_chunks": before,
+        "after_chunks": after,
+        "cpu": {"train_before": sum(c[2] for c in before), "train_after": sum(c[2] for c in after)},
+        "field_points": {"train_before": sum(c[3] for c in before), "train_after": sum(c[3] for c in after)},
+    }
     if args.holdout:
         # Pool views that are neither chosen nor initial: quality checks that never see the test split.
         rest = [i for i in range(len(data.pool)) if i not in set(chosen)]
@@ -185,10 +216,16 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--holdout", type=int, default=0, help="held-out pool views to report PSNR on")
     parser.add_argument("--no-lpips", dest="lpips", action="store_false")
     parser.add_argument("--profile", type=Path, help="write cProfile stats here and print the top 25")
-    parser.add_argument("--before-after", action="store_true",
-                        help="also time a warm cached load: the trial's total without and with the dataset cache")
-    parser.add_argument("--compare-load", action="store_true",
-                        help="only time loading the dataset without and with the cache, interleaved")
+    parser.add_argument(
+        "--before-after",
+        action="store_true",
+        help="also time a warm cached load: the trial's total without and with the dataset cache",
+    )
+    parser.add_argument(
+        "--compare-load",
+        action="store_true",
+        help="only time loading the dataset without and with the cache, interleaved",
+    )
     parser.add_argument("--resolution", type=int, default=100, help="image width the dataset is downscaled to")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)

@@ -32,34 +32,98 @@ QUICK: dict[str, dict] = {
     "bench_engine": {
         "always": ["--synthetic", "{work}/synthetic", "--threads", "1", "--out", "{out}/bench_engine.json"],
         # --no-compare: the preset comparison times paper-preset steps, ~10 s each on a CPU.
-        "small": ["--resolution", "50", "--iterations", "100,200", "--test-views", "5", "--no-ceiling",
-                  "--no-compare"],
+        "small": ["--resolution", "50", "--iterations", "100,200", "--test-views", "5", "--no-ceiling", "--no-compare"],
     },
     "bench_selection": {
         "always": ["--threads", "1", "--out", "{work}/selection"],
-        "small": ["--steps", "20", "--resolution", "50", "--candidates", "50", "--entropy-resolution", "10",
-                  "--methods", "ours", "fisherrf", "uniform"],
+        "small": [
+            "--steps",
+            "20",
+            "--resolution",
+            "50",
+            "--candidates",
+            "50",
+            "--entropy-resolution",
+            "10",
+            "--methods",
+            "ours",
+            "fisherrf",
+            "uniform",
+        ],
     },
     "bench_propose": {
         "always": ["{work}/synthetic", "--threads", "1", "--device", "cpu", "--out", "{work}/propose"],
-        "small": ["--split", "initial", "--steps", "30", "--candidates", "50", "--entropy-resolution", "10",
-                  "--repeat", "1"],
+        "small": [
+            "--split",
+            "initial",
+            "--steps",
+            "30",
+            "--candidates",
+            "50",
+            "--entropy-resolution",
+            "10",
+            "--repeat",
+            "1",
+        ],
         "needs": "{work}/synthetic/transforms_initial.json",
     },
     "bench_experiment": {
         "always": ["--out", "{work}/experiment"],
         "small": ["--preset", "tiny"],
     },
-    "bench_fisher": {"always": [], "small": None},  # runs only through its own --quick
+    "bench_fisher": {
+        "always": ["--data", "{work}/synthetic", "--threads", "1", "--out", "{work}/fisher"],
+        "small": [
+            "--steps",
+            "30",
+            "--candidates",
+            "12",
+            "--resolutions",
+            "8",
+            "--train-pixels",
+            "256",
+            "--seeds",
+            "1",
+            "--no-whole",
+        ],
+        "needs": "{work}/synthetic/transforms_initial.json",
+    },
+    "bench_trial": {
+        "always": ["--data", "{work}/synthetic", "--threads", "1"],
+        "small": ["--steps", "240", "--n-test", "3", "--no-lpips"],
+        "needs": "{work}/synthetic/transforms_initial.json",
+    },
 }
 # bench_gpu is two commands: pack the shared analytic dataset, then a quick trial on any device.
 GPU_STEPS = [
     ["pack", "--from", "{work}/synthetic", "--out", "{work}/gpu/toy.npz", "--max-test", "5", "--no-lpips"],
-    ["trial", "--quick", "--data", "{work}/gpu/toy.npz", "--unpack-to", "{work}/gpu/toy", "--device", "auto",
-     "--threads", "1", "--out", "{work}/gpu/trial", "--json", "{out}/bench_gpu.json"],
+    [
+        "trial",
+        "--quick",
+        "--data",
+        "{work}/gpu/toy.npz",
+        "--unpack-to",
+        "{work}/gpu/toy",
+        "--device",
+        "auto",
+        "--threads",
+        "1",
+        "--out",
+        "{work}/gpu/trial",
+        "--json",
+        "{out}/bench_gpu.json",
+    ],
 ]
 # Run first: the others read the dataset it writes.
-ORDER = ["bench_engine", "bench_selection", "bench_propose", "bench_gpu", "bench_experiment"]
+ORDER = [
+    "bench_engine",
+    "bench_selection",
+    "bench_propose",
+    "bench_fisher",
+    "bench_trial",
+    "bench_gpu",
+    "bench_experiment",
+]
 
 
 def has_quick(script: Path) -> bool:
@@ -100,8 +164,14 @@ def run_one(name: str, commands: list[list[str]], log: Path, timeout: float) -> 
             handle.flush()
             left = timeout - (time.perf_counter() - start)
             try:
-                result = subprocess.run(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                        timeout=max(1.0, left), env=env)
+                result = subprocess.run(
+                    command,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.STDOUT,
+                    text=True,
+                    timeout=max(1.0, left),
+                    env=env,
+                )
             except subprocess.TimeoutExpired as expired:
                 output = expired.stdout or ""
                 output = output.decode() if isinstance(output, bytes) else output
@@ -114,16 +184,26 @@ def run_one(name: str, commands: list[list[str]], log: Path, timeout: float) -> 
             if result.returncode != 0:
                 status = f"failed (exit {result.returncode})"
                 break
-    record.update(status=status, wall_s=round(time.perf_counter() - start, 1), load_after=loadavg(),
-                  tail=[line for line in lines if line.strip()][-TAIL_LINES:], log=str(log))
+    record.update(
+        status=status,
+        wall_s=round(time.perf_counter() - start, 1),
+        load_after=loadavg(),
+        tail=[line for line in lines if line.strip()][-TAIL_LINES:],
+        log=str(log),
+    )
     return record
 
 
 def write_summary(records: list[dict], out: Path) -> Path:
     (out / "summary.json").write_text(json.dumps(records, indent=2))
-    lines = ["# make bench: quick modes", "",
-             "CPU smoke figures (shared machine; see BENCHMARKS.md for the recorded full runs).", "",
-             "| benchmark | status | wall | load avg before -> after |", "|---|---|---|---|"]
+    lines = [
+        "# make bench: quick modes",
+        "",
+        "CPU smoke figures (shared machine; see BENCHMARKS.md for the recorded full runs).",
+        "",
+        "| benchmark | status | wall | load avg before -> after |",
+        "|---|---|---|---|",
+    ]
     for r in records:
         load = f"{r.get('load_before')} -> {r.get('load_after')}" if r.get("load_before") is not None else ""
         wall = f"{r['wall_s']} s" if "wall_s" in r else ""

@@ -52,8 +52,11 @@ def main(
 
         render_scene_dataset(scene, data, resolution=100, pool=200, test=20, initial=6)
 
-    session = CaptureSession.open(run) if (run / "session.json").exists() else \
-        CaptureSession.create(data, run, preset=preset, seed=seed, split=split, progress=True)
+    session = (
+        CaptureSession.open(run)
+        if (run / "session.json").exists()
+        else CaptureSession.create(data, run, preset=preset, seed=seed, split=split, progress=True)
+    )
     print(f"{len(session.trainer.train_views)} views; hemisphere {session.hemisphere}")
 
     if capture == "pool":
@@ -73,15 +76,17 @@ def main(
         session.train(steps_per_round)
         proposal = session.propose(views_per_round, method="ours", candidates=reachable)
         print(f"proposal {proposal.number}: map {proposal.map_path}")
-        proposal.write(run / f"poses_{proposal.number:03d}.json")    # what a real robot would get
-        images = robot.capture(proposal.poses, proposal.names)        # ... and what it brings back
+        proposal.write(run / f"poses_{proposal.number:03d}.json")  # what a real robot would get
+        images = robot.capture(proposal.poses, proposal.names)  # ... and what it brings back
         session.add_views(images, proposal)
         session.save()
 
     session.train(steps_per_round)
     session.save()
-    print(f"step {session.step}, {len(session.trainer.train_views)} views; exported to "
-          f"{session.export(run / 'export', format='nerfstudio')}")
+    print(
+        f"step {session.step}, {len(session.trainer.train_views)} views; exported to "
+        f"{session.export(run / 'export', format='nerfstudio')}"
+    )
 
 
 if __name__ == "__main__":

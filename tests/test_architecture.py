@@ -44,8 +44,10 @@ def top_level_imports(path: Path, modules: set[str]) -> set[str]:
 
 def import_graph() -> dict[str, set[str]]:
     modules = {module_name(p): p for p in PACKAGE.rglob("*.py")}
-    return {name: {m for m in top_level_imports(path, set(modules)) if m in modules and m != name}
-            for name, path in modules.items()}
+    return {
+        name: {m for m in top_level_imports(path, set(modules)) if m in modules and m != name}
+        for name, path in modules.items()
+    }
 
 
 def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
@@ -57,7 +59,7 @@ def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
         stack.append(node)
         for nxt in sorted(graph[node]):
             if state.get(nxt) == "open":
-                return stack[stack.index(nxt):] + [nxt]
+                return stack[stack.index(nxt) :] + [nxt]
             if nxt not in state and (cycle := visit(nxt)):
                 return cycle
         stack.pop()
@@ -87,7 +89,9 @@ def test_no_module_over_600_lines(path):
 
 
 def test_light_modules_do_not_import_torch():
-    code = ("import sys; import nerfaug.jsonio, nerfaug.metrics, nerfaug.errors, nerfaug.owned; "
-            "print('torch' in sys.modules)")
+    code = (
+        "import sys; import nerfaug.jsonio, nerfaug.metrics, nerfaug.errors, nerfaug.owned; "
+        "print('torch' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"

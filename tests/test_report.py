@@ -10,7 +10,14 @@ import torch
 
 from nerfaug.experiment.config import preset
 from nerfaug.experiment.runfolder import (
-    FILES, read_selection, write_config, write_error, write_history, write_metrics, write_progress, write_selection,
+    FILES,
+    read_selection,
+    write_config,
+    write_error,
+    write_history,
+    write_metrics,
+    write_progress,
+    write_selection,
 )
 from nerfaug.experiment.store import RunKey, write_result
 from nerfaug.experiment.sweep import sweep_record
@@ -24,9 +31,11 @@ METHODS = ("ours", "uniform", "entropy")
 #   lego uniform [12, 15, 14]: median 14, IQR 1.5. lego entropy [16, 19, 17.5]: median 17.5, IQR 1.5.
 #   chair ours [25.5, 24, 26]: median 25.5, q1 24.75, q3 25.75, IQR 1.0.
 PSNR = {
-    ("lego", "ours"): [20.0, 21.0, 23.0], ("lego", "uniform"): [12.0, 15.0, 14.0],
+    ("lego", "ours"): [20.0, 21.0, 23.0],
+    ("lego", "uniform"): [12.0, 15.0, 14.0],
     ("lego", "entropy"): [16.0, 19.0, 17.5],
-    ("chair", "ours"): [25.5, 24.0, 26.0], ("chair", "uniform"): [18.0, 19.5, 21.0],
+    ("chair", "ours"): [25.5, 24.0, 26.0],
+    ("chair", "uniform"): [18.0, 19.5, 21.0],
     ("chair", "entropy"): [22.0, 22.5, 23.5],
 }
 SSIM = {"ours": [0.84, 0.83, 0.86], "uniform": [0.70, 0.72, 0.71], "entropy": [0.80, 0.79, 0.81]}
@@ -56,21 +65,40 @@ def write_run(root, record, scene, method, trial, psnr, lpips_available=True, ge
     iio.imwrite(renders / "0000_render_vs_gt.png", np.concatenate([render, np.full_like(render, 200)], axis=1))
     ssim = SSIM.get(method, SSIM["ours"])[trial % 3]
     lpips = LPIPS.get(method, LPIPS["ours"])[trial % 3] if lpips_available else None
-    write_metrics(folder, {
-        "per_view": [{"index": 0, "name": "r_0", "psnr": psnr, "ssim": ssim, "lpips": lpips}],
-        "mean": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
-        "lpips_status": "available: test" if lpips_available else LPIPS_MISSING,
-    })
+    write_metrics(
+        folder,
+        {
+            "per_view": [{"index": 0, "name": "r_0", "psnr": psnr, "ssim": ssim, "lpips": lpips}],
+            "mean": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
+            "lpips_status": "available: test" if lpips_available else LPIPS_MISSING,
+        },
+    )
     write_history(folder, [{"step": step, "loss": 1.0 / step, "psnr": psnr * step / 60} for step in range(1, 61)])
     write_config(folder, record["config"], {})
-    write_result(folder, {
-        "scene": scene, "method": method, "trial": trial, "seed": trial,
-        "fingerprint": record["fingerprint"], "metrics": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
-        "lpips_status": "available: test" if lpips_available else LPIPS_MISSING, "chosen": chosen,
-        "timing": {"setup": 1.0, "train_before": 2.0, "selection": 3.0 + trial, "oracle": 0.1,
-                   "train_after": 30.0, "evaluation": 4.0, "total": 40.1 + trial},
-        "host": "testhost", "torch": torch.__version__,
-    })
+    write_result(
+        folder,
+        {
+            "scene": scene,
+            "method": method,
+            "trial": trial,
+            "seed": trial,
+            "fingerprint": record["fingerprint"],
+            "metrics": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
+            "lpips_status": "available: test" if lpips_available else LPIPS_MISSING,
+            "chosen": chosen,
+            "timing": {
+                "setup": 1.0,
+                "train_before": 2.0,
+                "selection": 3.0 + trial,
+                "oracle": 0.1,
+                "train_after": 30.0,
+                "evaluation": 4.0,
+                "total": 40.1 + trial,
+            },
+            "host": "testhost",
+            "torch": torch.__version__,
+        },
+    )
     return folder
 
 
@@ -205,10 +233,13 @@ def test_not_a_results_folder(tmp_path):
         write_report(tmp_path)
 
 
-@pytest.mark.parametrize("history", [
-    [{"step": s, "loss": 1.0, "psnr": float(s)} for s in (1, 2, 3)],
-    {"step": [1, 2, 3], "psnr": [1.0, 2.0, 3.0]},
-])
+@pytest.mark.parametrize(
+    "history",
+    [
+        [{"step": s, "loss": 1.0, "psnr": float(s)} for s in (1, 2, 3)],
+        {"step": [1, 2, 3], "psnr": [1.0, 2.0, 3.0]},
+    ],
+)
 def test_history_series_reads_both_layouts(history):
     key, steps, values = history_series(history)
     assert key == "psnr" and steps.tolist() == [1, 2, 3] and values.tolist() == [1.0, 2.0, 3.0]
@@ -226,14 +257,22 @@ def test_interrupted_run_shows_its_last_progress(tmp_path):
     from nerfaug.report import why_not_valid
 
     write_progress(tmp_path, 150)
-    assert why_not_valid(tmp_path, "abc") == "no result.json (interrupted, failed or still running, last progress at step 150)"
+    assert (
+        why_not_valid(tmp_path, "abc")
+        == "no result.json (interrupted, failed or still running, last progress at step 150)"
+    )
 
 
 def test_selection_round_trips_through_the_contract(tmp_path):
     candidates = sample_uniform_poses(5, torch.Generator().manual_seed(3))
     initial = half_hemisphere_poses(2)
-    write_selection(tmp_path, {"method": "ours", "indices": [4, 1], "scores": [0.1, 0.2, 0.3, 0.4, 0.5]},
-                    ["r_4", "r_1"], candidates, initial)
+    write_selection(
+        tmp_path,
+        {"method": "ours", "indices": [4, 1], "scores": [0.1, 0.2, 0.3, 0.4, 0.5]},
+        ["r_4", "r_1"],
+        candidates,
+        initial,
+    )
     record = read_selection(tmp_path)
     assert record.method == "ours" and record.indices == [4, 1]
     assert np.allclose(record.chosen_poses, candidates[[4, 1]].numpy(), atol=1e-6)

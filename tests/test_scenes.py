@@ -14,7 +14,12 @@ from nerfaug.data import load_dataset
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, angles_from_pose, in_azimuth_window, pose_from_angles
 from nerfaug.scenes import BUILTIN_SCENES, render
 from nerfaug.scenes.render import (
-    BlenderNotAvailable, RenderError, dataset_poses, render_poses, render_scene_dataset, render_views,
+    BlenderNotAvailable,
+    RenderError,
+    dataset_poses,
+    render_poses,
+    render_scene_dataset,
+    render_views,
 )
 
 # Never import bpy here: it must not share a process with torch. Only check that it exists.
@@ -32,8 +37,10 @@ def alpha_stats(alpha: torch.Tensor) -> tuple[float, torch.Tensor]:
 
 
 def test_importing_the_package_imports_neither_bpy_nor_torch():
-    code = ("import sys, nerfaug.scenes, nerfaug.scenes.worker; "
-            "assert not {'bpy', 'torch'} & set(sys.modules), sorted({'bpy', 'torch'} & set(sys.modules))")
+    code = (
+        "import sys, nerfaug.scenes, nerfaug.scenes.worker; "
+        "assert not {'bpy', 'torch'} & set(sys.modules), sorted({'bpy', 'torch'} & set(sys.modules))"
+    )
     subprocess.run([sys.executable, "-c", code], check=True)
 
 

@@ -26,15 +26,16 @@ from nerfaug.selection import SelectionConfig
 
 SIZE = 16
 CENTRE = (0.5, -0.3, 0.2)
-RADIUS = 2.0           # camera distance; the sphere's radius is a quarter of it
+RADIUS = 2.0  # camera distance; the sphere's radius is a quarter of it
 FAST = SelectionConfig(entropy_resolution=6)
 PROPOSE = dict(n_candidates=40, config=FAST, map=False)
 
 
 def render_sphere(poses, size: int = SIZE, centre=CENTRE, radius: float = RADIUS / 4) -> Views:
     """Exact renders of a sphere coloured by its normal, with alpha (1 on the sphere, 0 off)."""
-    cameras = Cameras.from_fov(torch.as_tensor(poses, dtype=torch.float32).reshape(-1, 4, 4),
-                               BLENDER_CAMERA_ANGLE_X, size, size)
+    cameras = Cameras.from_fov(
+        torch.as_tensor(poses, dtype=torch.float32).reshape(-1, 4, 4), BLENDER_CAMERA_ANGLE_X, size, size
+    )
     c = torch.tensor(centre)
     images, alphas = [], []
     for i in range(len(cameras)):
@@ -68,6 +69,7 @@ def new_session(dataset: Path, run: Path, **kwargs) -> CaptureSession:
 
 
 # ---- the hemisphere ----------------------------------------------------------------------------
+
 
 def test_estimate_hemisphere_recovers_known_centre_and_radius(generator):
     poses = sample_uniform_poses(12, generator, radius=2.5, centre=(0.3, -1.2, 0.7))
@@ -107,6 +109,7 @@ def test_engine_frame_round_trip_and_angles():
 
 
 # ---- the loop ----------------------------------------------------------------------------------
+
 
 def test_propose_add_train_propose_round_trip(dataset, tmp_path):
     session = new_session(dataset, tmp_path / "run")
@@ -203,6 +206,7 @@ def test_resume_after_save_gives_the_same_next_proposal(dataset, tmp_path):
 
 # ---- adding images from any source, and refusing bad ones ----------------------------------------
 
+
 def test_add_accepts_files_folders_arrays_tensors_and_views(dataset, tmp_path):
     session = new_session(dataset, tmp_path / "run")
     poses = half_hemisphere_poses(6, azimuth_start=-math.pi / 2, radius=RADIUS, centre=CENTRE)
@@ -213,18 +217,24 @@ def test_add_accepts_files_folders_arrays_tensors_and_views(dataset, tmp_path):
     folder.mkdir()
     for i in range(2):
         iio.imwrite(folder / f"shot_{i}.png", uint8[i])
-    assert session.add_views(folder, poses[:2]) == ["shot_0", "shot_1"]         # a folder
+    assert session.add_views(folder, poses[:2]) == ["shot_0", "shot_1"]  # a folder
     assert session.add_views([folder / "shot_1.png"], poses[2:3], names=["again"]) == ["again"]  # files
-    session.add_views(uint8[3:4], poses[3:4])                                     # uint8 array
-    session.add_views(torch.from_numpy(rgba[4:5]), poses[4])                      # float tensor, one pose
+    session.add_views(uint8[3:4], poses[3:4])  # uint8 array
+    session.add_views(torch.from_numpy(rgba[4:5]), poses[4])  # float tensor, one pose
     # Views hold images composited over the background; stored with their alpha, they must load
     # back as the same composited pixels (here half-transparent: 0.5 * colour + 0.5 * white).
     half = torch.full((1, SIZE, SIZE), 0.5)
     composited = 0.5 * views.images[[5]] + 0.5
     session.add_views(Views(views.cameras[[5]], composited, ["./x/from_views"], half))
     grown = load_dataset(session.dataset_dir)
-    assert grown.names[8:] == ["./train/shot_0", "./train/shot_1", "./train/again", "./train/view_0011",
-                               "./train/view_0012", "./train/from_views"]
+    assert grown.names[8:] == [
+        "./train/shot_0",
+        "./train/shot_1",
+        "./train/again",
+        "./train/view_0011",
+        "./train/view_0012",
+        "./train/from_views",
+    ]
     assert (session.dataset_dir / "train" / "shot_0.png").read_bytes() == (folder / "shot_0.png").read_bytes()
     expected = torch.cat([views.images[:2], views.images[1:2], views.images[3:5], composited])
     assert torch.allclose(grown.images[8:], expected, atol=1 / 255)
@@ -240,8 +250,14 @@ def test_bad_adds_fail_clearly_and_leave_the_dataset_untouched(dataset, tmp_path
     (tmp_path / "broken.png").write_bytes(b"not a png at all")
     iio.imwrite(tmp_path / "ok.png", good[0])
     proposal_json = tmp_path / "poses.json"
-    proposal_json.write_text(json.dumps({"camera_angle_x": BLENDER_CAMERA_ANGLE_X, "frames": [
-        {"file_path": "./capture_000_00", "transform_matrix": poses[0].tolist()}]}))
+    proposal_json.write_text(
+        json.dumps(
+            {
+                "camera_angle_x": BLENDER_CAMERA_ANGLE_X,
+                "frames": [{"file_path": "./capture_000_00", "transform_matrix": poses[0].tolist()}],
+            }
+        )
+    )
     cases = [
         (good[:1], poses, "got 1 images but 2 poses"),
         (np.zeros((2, 8, 8, 3), np.uint8), poses, r"images\[0\].*8x8 pixels but the dataset's camera is 16x16"),
@@ -268,6 +284,7 @@ def test_bad_adds_fail_clearly_and_leave_the_dataset_untouched(dataset, tmp_path
 
 # ---- formats -----------------------------------------------------------------------------------
 
+
 def test_nerfstudio_source_with_its_own_intrinsics(tmp_path):
     from nerfaug.data import write_nerfstudio
 
@@ -290,6 +307,7 @@ def test_nerfstudio_source_with_its_own_intrinsics(tmp_path):
 
 # ---- the CLI -----------------------------------------------------------------------------------
 
+
 def test_cli_train_propose_add_export(dataset, tmp_path, capsys):
     from nerfaug.cli import main
 
@@ -297,8 +315,22 @@ def test_cli_train_propose_add_export(dataset, tmp_path, capsys):
     main(["train", str(dataset), "--out", str(run), "--steps", "2", "--preset", "test", "--seed", "1"])
     main(["train", str(run), "--steps", "1"])
     assert json.loads((run / "session.json").read_text())["step"] == 3
-    main(["propose", str(run), "--n", "2", "--method", "ours", "--out", str(poses_json),
-          "--n-candidates", "30", "--selection.entropy-resolution", "6"])
+    main(
+        [
+            "propose",
+            str(run),
+            "--n",
+            "2",
+            "--method",
+            "ours",
+            "--out",
+            str(poses_json),
+            "--n-candidates",
+            "30",
+            "--selection.entropy-resolution",
+            "6",
+        ]
+    )
     assert poses_json.with_suffix(".png").exists()
     poses, names = read_poses(poses_json)
     captures.mkdir()
@@ -327,6 +359,7 @@ def test_cli_train_propose_add_export(dataset, tmp_path, capsys):
 
 # ---- a real render ----------------------------------------------------------------------------
 
+
 @pytest.mark.slow
 @pytest.mark.blender
 @pytest.mark.skipif(importlib.util.find_spec("bpy") is None, reason="needs bpy")
@@ -353,8 +386,19 @@ def test_blender_render_of_a_proposed_pose_shows_the_object_centred(tmp_path):
 
     session.save()
     second = session.propose(1, "uniform", n_candidates=40, map=False).write(tmp_path / "poses.json")
-    main(["render-proposals", str(session.run_dir), "--poses", str(second), "--scene", "chair",
-          "--out", str(tmp_path / "renders"), "--samples", "4"])
-    main(["add", str(session.run_dir), "--images", str(tmp_path / "renders"), "--poses", str(second),
-          "--steps", "0"])
+    main(
+        [
+            "render-proposals",
+            str(session.run_dir),
+            "--poses",
+            str(second),
+            "--scene",
+            "chair",
+            "--out",
+            str(tmp_path / "renders"),
+            "--samples",
+            "4",
+        ]
+    )
+    main(["add", str(session.run_dir), "--images", str(tmp_path / "renders"), "--poses", str(second), "--steps", "0"])
     assert len(load_dataset(session.dataset_dir)) == 9

@@ -7,8 +7,16 @@ from scipy import stats
 
 from nerfaug.hemisphere import half_hemisphere_poses, pose_from_angles
 from nerfaug.statistics import (
-    bootstrap_median_difference, compare, markdown_table, mean_pairwise_angle, min_attainable_p, seen_half_start,
-    summarise, summary_table, unseen_half_share, view_coverage,
+    bootstrap_median_difference,
+    compare,
+    markdown_table,
+    mean_pairwise_angle,
+    min_attainable_p,
+    seen_half_start,
+    summarise,
+    summary_table,
+    unseen_half_share,
+    view_coverage,
 )
 
 
@@ -16,7 +24,13 @@ def test_summarise_by_hand():
     s = summarise([3, 1, 4, 1, 5, 9, 2, 6, 5, 3])
     # sorted: 1 1 2 3 3 4 5 5 6 9; linear interpolation at positions 2.25, 4.5, 6.75
     assert s == {
-        "n": 10, "median": 3.5, "q1": 2.25, "q3": 5.0, "iqr": 2.75, "mean": 3.9, "min": 1.0,
+        "n": 10,
+        "median": 3.5,
+        "q1": 2.25,
+        "q3": 5.0,
+        "iqr": 2.75,
+        "mean": 3.9,
+        "min": 1.0,
         "max": 9.0,
     }
     assert summarise([1, 2, 3, 4])["iqr"] == pytest.approx(1.5)
@@ -100,9 +114,7 @@ def test_ties_use_an_exact_permutation_test_or_the_normal_approximation():
     big_ours, big_baseline = list(np.arange(30) // 2), list(np.arange(30) // 2 + 3)
     c = compare(big_ours, big_baseline)
     assert c["test_method"].startswith("asymptotic")
-    assert c["p_value"] == pytest.approx(
-        stats.mannwhitneyu(big_ours, big_baseline, method="asymptotic").pvalue
-    )
+    assert c["p_value"] == pytest.approx(stats.mannwhitneyu(big_ours, big_baseline, method="asymptotic").pvalue)
 
 
 def _records():
@@ -112,8 +124,7 @@ def _records():
     for method, by_scene in (("ours", ours), ("uniform", uniform)):
         for scene, values in by_scene.items():
             for trial, value in enumerate(values):
-                records.append({"scene": scene, "method": method, "trial": trial, "psnr": value,
-                                "lpips": None})
+                records.append({"scene": scene, "method": method, "trial": trial, "psnr": value, "lpips": None})
     records.append({"scene": "lego", "method": "extra", "trial": 0, "psnr": 15.0})
     records.append({"scene": "lego", "method": "fisherrf", "trial": 0, "psnr": None})
     return records, ours, uniform
@@ -123,8 +134,12 @@ def test_summary_table_rows_and_comparisons():
     records, ours, uniform = _records()
     rows = summary_table(records, "psnr", ours="ours", baselines=["fisherrf", "uniform"])
     assert [(r["scene"], r["method"], r["role"]) for r in rows] == [
-        ("lego", "ours", "ours"), ("lego", "fisherrf", "baseline"), ("lego", "uniform", "baseline"),
-        ("lego", "extra", "other"), ("chair", "ours", "ours"), ("chair", "uniform", "baseline"),
+        ("lego", "ours", "ours"),
+        ("lego", "fisherrf", "baseline"),
+        ("lego", "uniform", "baseline"),
+        ("lego", "extra", "other"),
+        ("chair", "ours", "ours"),
+        ("chair", "uniform", "baseline"),
     ]
     lego_ours, lego_fisher, lego_uniform, lego_extra, _, chair_uniform = rows
     assert lego_ours["median"] == pytest.approx(20.1) and lego_ours["iqr"] == pytest.approx(0.2)
@@ -170,6 +185,7 @@ def test_markdown_table():
 
 # ---- bootstrap CI of a difference of medians ---------------------------------------------------
 
+
 def test_bootstrap_ci_equals_a_direct_percentile_computation():
     x = np.array([20.1, 21.4, 19.8, 22.0, 20.9, 21.1])
     y = np.array([18.0, 19.2, 18.7, 20.5, 17.9])
@@ -196,17 +212,21 @@ def test_bootstrap_ci_is_seeded_and_degenerate_cases_are_exact():
 
 # ---- coverage of the chosen views --------------------------------------------------------------
 
+
 def test_seen_half_is_centred_on_the_initial_views():
     # Initial views at azimuth 90..180 degrees: their mean direction is 135, the seen half 45..225.
     assert seen_half_start(np.radians([90.0, 180.0])) == pytest.approx(math.radians(45.0))
     assert math.isnan(seen_half_start(np.radians([0.0, 90.0, 180.0, 270.0])))  # surrounding views
 
 
-@pytest.mark.parametrize(("chosen_deg", "share"), [
-    ([0.0, 10.0, 350.0], 1.0),            # all opposite the initial views at 180
-    ([180.0, 150.0, 210.0], 0.0),         # all beside them
-    ([0.0, 180.0, 60.0, 300.0], 0.75),    # 0, 60 and 300 lie within 90 of 0: unseen
-])
+@pytest.mark.parametrize(
+    ("chosen_deg", "share"),
+    [
+        ([0.0, 10.0, 350.0], 1.0),  # all opposite the initial views at 180
+        ([180.0, 150.0, 210.0], 0.0),  # all beside them
+        ([0.0, 180.0, 60.0, 300.0], 0.75),  # 0, 60 and 300 lie within 90 of 0: unseen
+    ],
+)
 def test_unseen_half_share_analytic(chosen_deg, share):
     initial = np.radians([170.0, 180.0, 190.0])  # mean direction 180: the unseen half is centred on 0
     assert unseen_half_share(np.radians(chosen_deg), initial) == pytest.approx(share)
@@ -227,7 +247,8 @@ def test_view_coverage_of_poses():
     assert coverage["unseen_share"] == 1.0
     # Two cameras at polar 60 degrees, 20 degrees apart in azimuth: the angle between their
     # directions is arccos(sin^2 60 cos 20 + cos^2 60).
-    expected = math.degrees(math.acos(math.sin(math.radians(60)) ** 2 * math.cos(math.radians(20))
-                                      + math.cos(math.radians(60)) ** 2))
+    expected = math.degrees(
+        math.acos(math.sin(math.radians(60)) ** 2 * math.cos(math.radians(20)) + math.cos(math.radians(60)) ** 2)
+    )
     assert coverage["spread_deg"] == pytest.approx(expected, abs=1e-4)
     assert view_coverage(initial, initial)["unseen_share"] == 0.0

@@ -49,9 +49,7 @@ class Cameras:
         self.width, self.height = int(self.width), int(self.height)
 
     @classmethod
-    def from_fov(
-        cls, camera_to_world: Tensor, camera_angle_x: float, width: int, height: int
-    ) -> "Cameras":
+    def from_fov(cls, camera_to_world: Tensor, camera_angle_x: float, width: int, height: int) -> Cameras:
         """Cameras from a horizontal field of view (NeRF-synthetic's `camera_angle_x`, radians)."""
         focal = 0.5 * width / math.tan(0.5 * camera_angle_x)
         return cls(camera_to_world, focal, focal, width / 2.0, height / 2.0, width, height)
@@ -59,12 +57,17 @@ class Cameras:
     def __len__(self) -> int:
         return self.camera_to_world.shape[0]
 
-    def __getitem__(self, index) -> "Cameras":
+    def __getitem__(self, index) -> Cameras:
         if isinstance(index, int):
             index = [index]
         return Cameras(
-            self.camera_to_world[index], self.fx[index], self.fy[index], self.cx[index],
-            self.cy[index], self.width, self.height,
+            self.camera_to_world[index],
+            self.fx[index],
+            self.fy[index],
+            self.cx[index],
+            self.cy[index],
+            self.width,
+            self.height,
         )
 
     @property
@@ -82,37 +85,49 @@ class Cameras:
         """Camera-to-world rotations. Shape (n_cameras, 3, 3)."""
         return self.camera_to_world[:, :3, :3]
 
-    def resized(self, width: int, height: int) -> "Cameras":
+    def resized(self, width: int, height: int) -> Cameras:
         """The same cameras rendering an image of another size (intrinsics scaled to match)."""
         sx, sy = width / self.width, height / self.height
         return Cameras(
-            self.camera_to_world, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
-            width, height,
+            self.camera_to_world,
+            self.fx * sx,
+            self.fy * sy,
+            self.cx * sx,
+            self.cy * sy,
+            width,
+            height,
         )
 
-    def to(self, device) -> "Cameras":
+    def to(self, device) -> Cameras:
         return Cameras(
-            self.camera_to_world.to(device), self.fx.to(device), self.fy.to(device),
-            self.cx.to(device), self.cy.to(device), self.width, self.height,
+            self.camera_to_world.to(device),
+            self.fx.to(device),
+            self.fy.to(device),
+            self.cx.to(device),
+            self.cy.to(device),
+            self.width,
+            self.height,
         )
 
     @staticmethod
-    def cat(cameras: list["Cameras"]) -> "Cameras":
+    def cat(cameras: list[Cameras]) -> Cameras:
         """Concatenate batches of cameras of the same image size."""
         sizes = {(c.width, c.height) for c in cameras}
         if len(sizes) != 1:
             raise ValueError(f"cannot concatenate cameras of different image sizes: {sorted(sizes)}")
         width, height = sizes.pop()
         return Cameras(
-            torch.cat([c.camera_to_world for c in cameras]), torch.cat([c.fx for c in cameras]),
-            torch.cat([c.fy for c in cameras]), torch.cat([c.cx for c in cameras]),
-            torch.cat([c.cy for c in cameras]), width, height,
+            torch.cat([c.camera_to_world for c in cameras]),
+            torch.cat([c.fx for c in cameras]),
+            torch.cat([c.fy for c in cameras]),
+            torch.cat([c.cx for c in cameras]),
+            torch.cat([c.cy for c in cameras]),
+            width,
+            height,
         )
 
 
-def generate_rays(
-    cameras: Cameras, camera_indices: Tensor, pixel_x: Tensor, pixel_y: Tensor
-) -> tuple[Tensor, Tensor]:
+def generate_rays(cameras: Cameras, camera_indices: Tensor, pixel_x: Tensor, pixel_y: Tensor) -> tuple[Tensor, Tensor]:
     """Rays through pixel centres for any subset of pixels of any cameras.
 
     Args:
@@ -157,7 +172,8 @@ def image_rays(cameras: Cameras, index: int) -> tuple[Tensor, Tensor]:
     """
     device = cameras.camera_to_world.device
     ys, xs = torch.meshgrid(
-        torch.arange(cameras.height, device=device), torch.arange(cameras.width, device=device),
+        torch.arange(cameras.height, device=device),
+        torch.arange(cameras.width, device=device),
         indexing="ij",
     )
     indices = torch.full((cameras.height * cameras.width,), index, device=device)

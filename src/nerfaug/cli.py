@@ -1,14 +1,14 @@
 """The `nerfaug` command: scenes, experiments, reports, and the active-capture loop.
 
-    nerfaug scene render lego --out data/lego      render a built-in scene as a Blender dataset
-    nerfaug run --preset quick --out results/quick  the paper's experiment, then its report
-    nerfaug report results/quick                    (re)write report.md and report.html
-    nerfaug study --out results/study               which method wins where (issue 9's study)
-    nerfaug methods                                 list the view-selection methods
-    nerfaug train DATA --out RUN                    active capture: train on what you have,
-    nerfaug propose RUN --n 6 --out poses.json      ask where to look next,
-    nerfaug add RUN --images DIR --poses poses.json add what you captured, and go on training
-    nerfaug export RUN --format nerfstudio --out DIR
+nerfaug scene render lego --out data/lego      render a built-in scene as a Blender dataset
+nerfaug run --preset quick --out results/quick  the paper's experiment, then its report
+nerfaug report results/quick                    (re)write report.md and report.html
+nerfaug study --out results/study               which method wins where (issue 9's study)
+nerfaug methods                                 list the view-selection methods
+nerfaug train DATA --out RUN                    active capture: train on what you have,
+nerfaug propose RUN --n 6 --out poses.json      ask where to look next,
+nerfaug add RUN --images DIR --poses poses.json add what you captured, and go on training
+nerfaug export RUN --format nerfstudio --out DIR
 """
 
 from __future__ import annotations
@@ -65,8 +65,9 @@ def scene_render(
     """
     from nerfaug.scenes import render_scene_dataset
 
-    path = render_scene_dataset(scene, out, resolution=res, pool=pool, test=test, initial=initial,
-                                samples=samples, seed=seed, progress=True)
+    path = render_scene_dataset(
+        scene, out, resolution=res, pool=pool, test=test, initial=initial, samples=samples, seed=seed, progress=True
+    )
     print(f"dataset written to {path}")
 
 
@@ -126,8 +127,13 @@ def run(
     from nerfaug.experiment.sweep import run_sweep
 
     config = make_preset(preset)
-    changes = {k: v for k, v in dict(methods=methods, trials=trials, steps=steps, engine=engine,
-                                      resolution=resolution, seed=seed).items() if v is not None}
+    changes = {
+        k: v
+        for k, v in dict(
+            methods=methods, trials=trials, steps=steps, engine=engine, resolution=resolution, seed=seed
+        ).items()
+        if v is not None
+    }
     if data is not None:  # a path, never taken for a built-in scene of the same name
         changes["scenes"] = (str(data) if data.is_absolute() else os.path.join(".", data),)
     elif scenes is not None:
@@ -143,14 +149,23 @@ def run(
         # One run per core on a CPU; on a GPU one run at a time (each holds its own CUDA context).
         workers = 1 if config.device == "cuda" else max(1, (os.cpu_count() or 1) // config.threads_per_run)
     try:
-        outcome = run_sweep(config, out, backend=backend, workers=workers, address=address, force=force,
-                            command=["nerfaug", *sys.argv[1:]])
+        outcome = run_sweep(
+            config,
+            out,
+            backend=backend,
+            workers=workers,
+            address=address,
+            force=force,
+            command=["nerfaug", *sys.argv[1:]],
+        )
     except KeyboardInterrupt:
         from nerfaug.errors import Interrupted
         from nerfaug.experiment.store import finished_runs
 
-        raise Interrupted(f"{out}: interrupted; its {len(finished_runs(out))} finished run(s) are kept; re-run the "
-                          "same command to resume") from None
+        raise Interrupted(
+            f"{out}: interrupted; its {len(finished_runs(out))} finished run(s) are kept; re-run the "
+            "same command to resume"
+        ) from None
     if report:
         from nerfaug.report import write_report
 
@@ -232,8 +247,7 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         if debug:
             raise
-        print("nerfaug: interrupted; files already written are kept (finished runs, saved sessions)",
-              file=sys.stderr)
+        print("nerfaug: interrupted; files already written are kept (finished runs, saved sessions)", file=sys.stderr)
         raise SystemExit(130) from None
     except Exception as error:
         if debug:
@@ -246,7 +260,10 @@ def _dispatch(argv: list[str]) -> None:
     from nerfaug.experiment.study import study
 
     commands = {
-        "run": run, "report": report, "methods": methods, "study": study,
+        "run": run,
+        "report": report,
+        "methods": methods,
+        "study": study,
     }
     from nerfaug import session_cli
 
@@ -259,7 +276,9 @@ def _dispatch(argv: list[str]) -> None:
         print(__doc__.strip())
         print()
     tyro.extras.subcommand_cli_from_dict(
-        commands, args=argv, prog="nerfaug",
+        commands,
+        args=argv,
+        prog="nerfaug",
         description="Choose which views to add when a NeRF has too little data. " + descriptions["scene"],
     )
 

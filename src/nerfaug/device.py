@@ -48,7 +48,7 @@ def resolve_device(device: str | torch.device | None = "auto") -> torch.device:
 
 
 def device_kind(device: str | torch.device | None = "auto") -> str:
-    """"cpu" or "cuda" (the device type, no index): what decides a run's numbers. "auto" is
+    """ "cpu" or "cuda" (the device type, no index): what decides a run's numbers. "auto" is
     resolved here; a named device is not checked for availability (a driver may describe runs
     that execute on other machines)."""
     if device is None or (isinstance(device, str) and device.strip().lower() == "auto"):
@@ -116,4 +116,3 @@ def configure_process(threads: int | None = None) -> None:
     torch.set_flush_denormal(True)
     if threads is not None:
         torch.set_num_threads(threads)
-

@@ -92,10 +92,13 @@ def ssim(pred: Tensor, target: Tensor) -> Tensor:
     # float64 convolutions are ~10x slower on CPU; float32 is what nerfstudio uses.
     dtype = torch.float64 if pred.dtype == torch.float64 else torch.float32
     value = structural_similarity_index_measure(
-        pred.to(dtype).permute(0, 3, 1, 2), target.to(dtype).permute(0, 3, 1, 2),
-        data_range=1.0, reduction="none",
+        pred.to(dtype).permute(0, 3, 1, 2),
+        target.to(dtype).permute(0, 3, 1, 2),
+        data_range=1.0,
+        reduction="none",
     )
     return value[0] if single else value
+
 
 @dataclass
 class EvaluationResult:

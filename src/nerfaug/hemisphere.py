@@ -18,9 +18,7 @@ BLENDER_RADIUS = 4.031128857175551
 BLENDER_CAMERA_ANGLE_X = 0.6911112070083618
 
 
-def pose_from_angles(
-    azimuth: Tensor, polar: Tensor, radius: float = BLENDER_RADIUS, centre=(0.0, 0.0, 0.0)
-) -> Tensor:
+def pose_from_angles(azimuth: Tensor, polar: Tensor, radius: float = BLENDER_RADIUS, centre=(0.0, 0.0, 0.0)) -> Tensor:
     """Camera-to-world poses on the hemisphere looking at `centre`.
 
     Args:
@@ -64,7 +62,9 @@ def angles_from_pose(camera_to_world: Tensor, centre=(0.0, 0.0, 0.0)) -> tuple[T
 
 
 def sample_uniform_angles(
-    n: int, generator: torch.Generator | None = None, azimuth_range=(0.0, 2 * math.pi),
+    n: int,
+    generator: torch.Generator | None = None,
+    azimuth_range=(0.0, 2 * math.pi),
     polar_range=(0.0, math.pi / 2),
 ) -> tuple[Tensor, Tensor]:
     """Angles of `n` points uniform in area on a band of the sphere.
@@ -83,8 +83,12 @@ def sample_uniform_angles(
 
 
 def sample_uniform_poses(
-    n: int, generator: torch.Generator | None = None, radius: float = BLENDER_RADIUS,
-    centre=(0.0, 0.0, 0.0), azimuth_range=(0.0, 2 * math.pi), polar_range=(0.0, math.pi / 2),
+    n: int,
+    generator: torch.Generator | None = None,
+    radius: float = BLENDER_RADIUS,
+    centre=(0.0, 0.0, 0.0),
+    azimuth_range=(0.0, 2 * math.pi),
+    polar_range=(0.0, math.pi / 2),
 ) -> Tensor:
     """`n` poses uniform on (a band of) the hemisphere. Shape (n, 4, 4)."""
     azimuth, polar = sample_uniform_angles(n, generator, azimuth_range, polar_range)
@@ -92,8 +96,11 @@ def sample_uniform_poses(
 
 
 def half_hemisphere_poses(
-    n: int, azimuth_start: float = math.pi / 2, polar_range=(math.radians(20), math.radians(80)),
-    radius: float = BLENDER_RADIUS, centre=(0.0, 0.0, 0.0),
+    n: int,
+    azimuth_start: float = math.pi / 2,
+    polar_range=(math.radians(20), math.radians(80)),
+    radius: float = BLENDER_RADIUS,
+    centre=(0.0, 0.0, 0.0),
 ) -> Tensor:
     """`n` fixed poses spread over one half of the hemisphere (azimuth in [start, start + pi)).
 

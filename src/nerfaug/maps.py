@@ -91,8 +91,13 @@ def _draw(ax: Axes, candidate_c2w, scores, train_c2w, chosen_c2w, projection, ce
     grid = _interpolate(xy, values, gx, gy)
     grid = np.ma.masked_where(gx**2 + gy**2 > 1.0, grid)
     image = ax.imshow(
-        grid, origin="lower", extent=(-1, 1, -1, 1), cmap=_CMAP, interpolation="bilinear",
-        vmin=vmin, vmax=vmax,
+        grid,
+        origin="lower",
+        extent=(-1, 1, -1, 1),
+        cmap=_CMAP,
+        interpolation="bilinear",
+        vmin=vmin,
+        vmax=vmax,
     )
     ax.scatter(xy[:, 0], xy[:, 1], s=1.5, c="white", alpha=0.25, linewidths=0)
 
@@ -101,20 +106,45 @@ def _draw(ax: Axes, candidate_c2w, scores, train_c2w, chosen_c2w, projection, ce
         r = _disk_radius(np.radians(polar_deg), projection)
         ax.plot(r * np.cos(theta), r * np.sin(theta), color="0.6", lw=0.6 if polar_deg < 90 else 1.0)
         if polar_deg < 90:  # polar-angle rings; the rim (90 degrees) is the horizon
-            ax.text(r * math.cos(math.radians(112)), r * math.sin(math.radians(112)), f"{polar_deg}°",
-                    color="0.8", fontsize=6, ha="center", va="bottom")
+            ax.text(
+                r * math.cos(math.radians(112)),
+                r * math.sin(math.radians(112)),
+                f"{polar_deg}°",
+                color="0.8",
+                fontsize=6,
+                ha="center",
+                va="bottom",
+            )
     for az_deg in range(0, 360, 90):
         a = math.radians(az_deg)
         ax.plot([0, math.cos(a)], [0, math.sin(a)], color="0.6", lw=0.4)
         ax.text(1.09 * math.cos(a), 1.09 * math.sin(a), f"{az_deg}°", ha="center", va="center", fontsize=7)
 
     train = hemisphere_xy(train_c2w, projection, centre)
-    ax.scatter(train[:, 0], train[:, 1], marker="^", s=70, c="#29b6f6", edgecolors="black",
-               linewidths=0.8, label="training views", zorder=3)
+    ax.scatter(
+        train[:, 0],
+        train[:, 1],
+        marker="^",
+        s=70,
+        c="#29b6f6",
+        edgecolors="black",
+        linewidths=0.8,
+        label="training views",
+        zorder=3,
+    )
     if chosen_c2w is not None:
         chosen = hemisphere_xy(chosen_c2w, projection, centre)
-        ax.scatter(chosen[:, 0], chosen[:, 1], marker="*", s=160, c="#00e676", edgecolors="black",
-                   linewidths=0.8, label="chosen views", zorder=4)
+        ax.scatter(
+            chosen[:, 0],
+            chosen[:, 1],
+            marker="*",
+            s=160,
+            c="#00e676",
+            edgecolors="black",
+            linewidths=0.8,
+            label="chosen views",
+            zorder=4,
+        )
     ax.set_xlim(-1.18, 1.18)
     ax.set_ylim(-1.18, 1.18)
     ax.set_aspect("equal")

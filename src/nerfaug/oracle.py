@@ -39,8 +39,9 @@ class PoolOracle:
         self.tolerance = tolerance
 
     @classmethod
-    def from_dataset(cls, root: str | Path, split: str = "train", background=(1.0, 1.0, 1.0),
-                     tolerance: float = 1e-3) -> "PoolOracle":
+    def from_dataset(
+        cls, root: str | Path, split: str = "train", background=(1.0, 1.0, 1.0), tolerance: float = 1e-3
+    ) -> PoolOracle:
         """The pool of one split of a dataset folder, composited over `background`."""
         return cls(load_dataset(root, split, background=background), tolerance)
 
@@ -98,9 +99,18 @@ class BlenderOracle:
         progress: show a progress bar while rendering.
     """
 
-    def __init__(self, scene_or_blend: str | Path, width: int, height: int,
-                 camera_angle_x: float = BLENDER_CAMERA_ANGLE_X, samples: int = 16, seed: int = 0,
-                 background=(1.0, 1.0, 1.0), threads: int = 2, progress: bool = True):
+    def __init__(
+        self,
+        scene_or_blend: str | Path,
+        width: int,
+        height: int,
+        camera_angle_x: float = BLENDER_CAMERA_ANGLE_X,
+        samples: int = 16,
+        seed: int = 0,
+        background=(1.0, 1.0, 1.0),
+        threads: int = 2,
+        progress: bool = True,
+    ):
         require_bpy()
         scene_spec(scene_or_blend)  # fail now, not at the first capture, on an unknown scene
         self.scene = scene_or_blend
@@ -116,8 +126,17 @@ class BlenderOracle:
         if names is None:
             names = [f"capture_{self.captured + i}" for i in range(len(poses))]
         views = render_views(
-            self.scene, poses, self.width, self.height, self.camera_angle_x, self.samples,
-            self.seed, self.background, names, self.threads, self.progress,
+            self.scene,
+            poses,
+            self.width,
+            self.height,
+            self.camera_angle_x,
+            self.samples,
+            self.seed,
+            self.background,
+            names,
+            self.threads,
+            self.progress,
         )
         self.captured += len(poses)
         return views

@@ -55,8 +55,10 @@ def remove_owned(folder: Path, kind: str, what_to_do: str) -> bool:
     if not folder.exists():
         return False
     if not marked(folder, kind):
-        raise FolderRefused(f"{folder}: not written by nerfaug (no {MARKER} marker of kind '{kind}'), so it is "
-                            f"left untouched; {what_to_do}")
+        raise FolderRefused(
+            f"{folder}: not written by nerfaug (no {MARKER} marker of kind '{kind}'), so it is "
+            f"left untouched; {what_to_do}"
+        )
     shutil.rmtree(folder)
     return True
 

@@ -21,7 +21,20 @@ from nerfaug.capture import (
 )
 
 __all__ = [
-    "CHECKPOINT_FILE", "DATASET_DIR", "ENGINE_RADIUS", "PROPOSALS_DIR", "SESSION_FILE", "SESSION_FORMAT",
-    "CaptureSession", "Hemisphere", "Proposal", "SessionError", "SessionState", "estimate_centre",
-    "estimate_hemisphere", "estimate_up", "proposal_seed", "read_poses",
+    "CHECKPOINT_FILE",
+    "DATASET_DIR",
+    "ENGINE_RADIUS",
+    "PROPOSALS_DIR",
+    "SESSION_FILE",
+    "SESSION_FORMAT",
+    "CaptureSession",
+    "Hemisphere",
+    "Proposal",
+    "SessionError",
+    "SessionState",
+    "estimate_centre",
+    "estimate_hemisphere",
+    "estimate_up",
+    "proposal_seed",
+    "read_poses",
 ]

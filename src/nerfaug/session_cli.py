@@ -82,8 +82,14 @@ def _train(session, steps: int) -> dict:
     show, session.trainer.progress = session.trainer.progress, False  # one bar over the chunks
     target, saved, last = session.step + steps, session.step, {"step": session.step}
     previous = signal.signal(signal.SIGINT, stop)
-    bar = Progress(TextColumn("training"), BarColumn(), MofNCompleteColumn(),
-                   TextColumn("psnr {task.fields[psnr]:.2f} dB"), TimeRemainingColumn(), disable=not show)
+    bar = Progress(
+        TextColumn("training"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("psnr {task.fields[psnr]:.2f} dB"),
+        TimeRemainingColumn(),
+        disable=not show,
+    )
     try:
         with bar:
             task = bar.add_task("training", total=steps, psnr=float("nan"))
@@ -95,14 +101,18 @@ def _train(session, steps: int) -> dict:
                     saved = session.step
         session.save()
     except KeyboardInterrupt:
-        raise Interrupted(f"{session.run_dir}: interrupted at step {session.step}; the session saved at step {saved} "
-                          f"is kept (`nerfaug train {session.run_dir}` goes on from there)") from None
+        raise Interrupted(
+            f"{session.run_dir}: interrupted at step {session.step}; the session saved at step {saved} "
+            f"is kept (`nerfaug train {session.run_dir}` goes on from there)"
+        ) from None
     finally:
         signal.signal(signal.SIGINT, previous)
         session.trainer.progress = show
     if asked:
-        raise Interrupted(f"{session.run_dir}: interrupted; the session is saved at step {session.step} "
-                          f"(`nerfaug train {session.run_dir}` goes on from there)")
+        raise Interrupted(
+            f"{session.run_dir}: interrupted; the session is saved at step {session.step} "
+            f"(`nerfaug train {session.run_dir}` goes on from there)"
+        )
     return last
 
 
@@ -119,13 +129,15 @@ def _check_poses_out(out: Path) -> None:
         except (OSError, ValueError, AttributeError):
             ours = False
         if not ours:
-            raise FolderRefused(f"{out}: exists and is not a poses file nerfaug wrote, so it is not overwritten; "
-                                "choose another --out")
+            raise FolderRefused(
+                f"{out}: exists and is not a poses file nerfaug wrote, so it is not overwritten; choose another --out"
+            )
     if out.exists() and not out.is_file():
         raise FolderRefused(f"{out}: not a file; give --out a .json file name")
     if out.with_suffix(".png").exists() and not ours:
-        raise FolderRefused(f"{out.with_suffix('.png')}: exists and would be overwritten by the proposal's map; "
-                            "choose another --out")
+        raise FolderRefused(
+            f"{out.with_suffix('.png')}: exists and would be overwritten by the proposal's map; choose another --out"
+        )
 
 
 def train(
@@ -168,24 +180,44 @@ def train(
     if (path / SESSION_FILE).exists():
         if out is not None:
             raise SystemExit(f"{path} is already a session folder; drop --out to train it further")
-        given = {"preset": preset != "cpu", "seed": seed != 0, "split": split != "train", "downscale": downscale != 1,
-                 "centre": centre is not None, "radius": radius is not None, "up": tuple(up) != (0.0, 0.0, 1.0),
-                 "estimate-up": estimate_up}
+        given = {
+            "preset": preset != "cpu",
+            "seed": seed != 0,
+            "split": split != "train",
+            "downscale": downscale != 1,
+            "centre": centre is not None,
+            "radius": radius is not None,
+            "up": tuple(up) != (0.0, 0.0, 1.0),
+            "estimate-up": estimate_up,
+        }
         if any(given.values()):
             options = ", ".join(f"--{name}" for name, set_ in given.items() if set_)
-            raise ValueError(f"{options}: only for a new session; {path / SESSION_FILE} keeps this session's "
-                             "settings, so drop them (or start a new session with `nerfaug train DATA --out NEW_RUN`)")
+            raise ValueError(
+                f"{options}: only for a new session; {path / SESSION_FILE} keeps this session's "
+                "settings, so drop them (or start a new session with `nerfaug train DATA --out NEW_RUN`)"
+            )
         session = _open(path, device)
     else:
         if out is None:
             raise SystemExit(f"{path} is a dataset: give the run folder to create with --out RUN")
         session = CaptureSession.create(
-            path, out, preset=preset, seed=seed, split=split, centre=centre, radius=radius,
-            up="estimate" if estimate_up else up, downscale=downscale, device=_device(device), progress=True,
+            path,
+            out,
+            preset=preset,
+            seed=seed,
+            split=split,
+            centre=centre,
+            radius=radius,
+            up="estimate" if estimate_up else up,
+            downscale=downscale,
+            device=_device(device),
+            progress=True,
         )
         h = session.hemisphere
-        print(f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
-              f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}")
+        print(
+            f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
+            f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}"
+        )
     last = _train(session, steps)
     psnr = f", training PSNR {last['psnr']:.2f} dB" if "psnr" in last else ""
     print(f"{session.run_dir}: step {session.step}{psnr}")
@@ -233,12 +265,13 @@ def propose(
         raise ValueError(f"--seed {seed}: must be >= 0")
     _check_poses_out(out)
     session = _open(run, device)
-    proposal = session.propose(n, method, candidates=candidates, n_candidates=n_candidates, seed=seed,
-                               config=selection)
+    proposal = session.propose(n, method, candidates=candidates, n_candidates=n_candidates, seed=seed, config=selection)
     path = proposal.write(out)
     session.save()
-    print(f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path}, map "
-          f"{path.with_suffix('.png')}")
+    print(
+        f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path}, map "
+        f"{path.with_suffix('.png')}"
+    )
     for name, a, p in zip(proposal.names, proposal.azimuth.tolist(), proposal.polar.tolist()):
         print(f"  {name}: azimuth {a * 57.29578:6.1f} deg, polar {p * 57.29578:5.1f} deg")
 
@@ -268,8 +301,9 @@ def add(
     session = _open(run, device)
     names = session.add_views(images, poses)
     session.save()  # the addition's record is kept even if training is stopped at once
-    print(f"added {len(names)} views ({', '.join(names)}); the dataset now has "
-          f"{len(session.trainer.train_views)} views")
+    print(
+        f"added {len(names)} views ({', '.join(names)}); the dataset now has {len(session.trainer.train_views)} views"
+    )
     last = _train(session, steps)
     if steps:
         print(f"step {session.step}, training PSNR {last['psnr']:.2f} dB")

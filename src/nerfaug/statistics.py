@@ -20,7 +20,6 @@ _EXACT_MAX_N = 50
 _PERMUTATION_MAX_ARRANGEMENTS = 20_000
 
 
-
 def _values(values: Iterable[float], what: str) -> np.ndarray:
     array = np.asarray(list(values), dtype=np.float64).reshape(-1)
     if array.size == 0:
@@ -46,9 +45,14 @@ def summarise(values: Iterable[float]) -> dict:
     x = _values(values, "summarise")
     q1, median, q3 = np.percentile(x, [25, 50, 75], method="linear")
     return {
-        "n": int(x.size), "median": float(median), "q1": float(q1), "q3": float(q3),
-        "iqr": float(q3 - q1), "mean": float(x.mean()),
-        "min": float(x.min()), "max": float(x.max()),
+        "n": int(x.size),
+        "median": float(median),
+        "q1": float(q1),
+        "q3": float(q3),
+        "iqr": float(q3 - q1),
+        "mean": float(x.mean()),
+        "min": float(x.min()),
+        "max": float(x.max()),
     }
 
 
@@ -164,8 +168,14 @@ def compare(
 
 
 _COMPARISON_KEYS = (
-    "median_change", "iqr_reduction", "better", "p_value", "p_bonferroni", "significant",
-    "too_small", "note",
+    "median_change",
+    "iqr_reduction",
+    "better",
+    "p_value",
+    "p_bonferroni",
+    "significant",
+    "too_small",
+    "note",
 )
 
 
@@ -219,9 +229,7 @@ def summary_table(
         if "trial" in record:
             trial = (*key, record["trial"])
             if trial in seen_trials:
-                raise ValueError(
-                    f"two records for scene {key[0]!r}, method {key[1]!r}, trial {trial[2]!r}"
-                )
+                raise ValueError(f"two records for scene {key[0]!r}, method {key[1]!r}, trial {trial[2]!r}")
             seen_trials.add(trial)
         groups.setdefault(key, [])
         missing.setdefault(key, 0)
@@ -243,8 +251,14 @@ def summary_table(
                 continue
             values = groups[(scene, method)]
             role = "ours" if method == ours else "baseline" if method in baselines else "other"
-            row = {"scene": scene, "method": method, "metric": metric, "role": role,
-                   "n": len(values), "n_missing": missing[(scene, method)]}
+            row = {
+                "scene": scene,
+                "method": method,
+                "metric": metric,
+                "role": role,
+                "n": len(values),
+                "n_missing": missing[(scene, method)],
+            }
             if values:
                 row.update({k: v for k, v in summarise(values).items() if k != "n"})
             else:
@@ -263,7 +277,11 @@ def _median_difference(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarr
 
 
 def bootstrap_median_difference(
-    x: Iterable[float], y: Iterable[float], confidence: float = 0.95, n_resamples: int = 9999, seed: int = 0,
+    x: Iterable[float],
+    y: Iterable[float],
+    confidence: float = 0.95,
+    n_resamples: int = 9999,
+    seed: int = 0,
 ) -> dict:
     """median(x) - median(y) for two independent samples, with a percentile bootstrap confidence
     interval (`scipy.stats.bootstrap`, each sample resampled on its own, seeded).
@@ -285,12 +303,24 @@ def bootstrap_median_difference(
     low = high = math.nan
     if x.size >= 2 and y.size >= 2:
         result = stats.bootstrap(
-            (x, y), _median_difference, paired=False, vectorized=True, confidence_level=confidence,
-            n_resamples=n_resamples, method="percentile", rng=np.random.default_rng(seed),
+            (x, y),
+            _median_difference,
+            paired=False,
+            vectorized=True,
+            confidence_level=confidence,
+            n_resamples=n_resamples,
+            method="percentile",
+            rng=np.random.default_rng(seed),
         )
         low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    return {"difference": float(np.median(x) - np.median(y)), "low": low, "high": high,
-            "confidence": float(confidence), "n_resamples": int(n_resamples), "method": "percentile"}
+    return {
+        "difference": float(np.median(x) - np.median(y)),
+        "low": low,
+        "high": high,
+        "confidence": float(confidence),
+        "n_resamples": int(n_resamples),
+        "method": "percentile",
+    }
 
 
 def seen_half_start(initial_azimuth) -> float:
@@ -369,8 +399,10 @@ def view_coverage(chosen_poses, initial_poses, centre=(0.0, 0.0, 0.0)) -> dict:
     chosen_azimuth, _, _ = angles_from_pose(chosen, centre)
     initial_azimuth, _, _ = angles_from_pose(initial, centre)
     offsets = chosen[:, :3, 3].numpy() - np.asarray(centre, dtype=np.float64)
-    return {"unseen_share": unseen_half_share(chosen_azimuth.numpy(), initial_azimuth.numpy()),
-            "spread_deg": mean_pairwise_angle(offsets)}
+    return {
+        "unseen_share": unseen_half_share(chosen_azimuth.numpy(), initial_azimuth.numpy()),
+        "spread_deg": mean_pairwise_angle(offsets),
+    }
 
 
 def _format_cell(value, spec: str | None) -> str:
@@ -430,6 +462,15 @@ def markdown_table(
 
 
 __all__ = [
-    "HIGHER_IS_BETTER", "bootstrap_median_difference", "compare", "markdown_table", "mean_pairwise_angle",
-    "min_attainable_p", "seen_half_start", "summarise", "summary_table", "unseen_half_share", "view_coverage",
+    "HIGHER_IS_BETTER",
+    "bootstrap_median_difference",
+    "compare",
+    "markdown_table",
+    "mean_pairwise_angle",
+    "min_attainable_p",
+    "seen_half_start",
+    "summarise",
+    "summary_table",
+    "unseen_half_share",
+    "view_coverage",
 ]

@@ -17,8 +17,24 @@ from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, sa
 
 pytestmark = [pytest.mark.slow]
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_gpu.py"
-TOY = ["--device", "cpu", "--engine", "test", "--steps", "24", "--add-at", "8", "--n-new", "2",
-       "--test-views", "2", "--threads", "1", "--save-renders", "0"]
+TOY = [
+    "--device",
+    "cpu",
+    "--engine",
+    "test",
+    "--steps",
+    "24",
+    "--add-at",
+    "8",
+    "--n-new",
+    "2",
+    "--test-views",
+    "2",
+    "--threads",
+    "1",
+    "--save-renders",
+    "0",
+]
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +72,9 @@ def dataset(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def packed(bench, dataset, tmp_path_factory) -> tuple[Path, dict]:
     out = tmp_path_factory.mktemp("pack") / "toy.npz"
-    figures = bench.main(["pack", "--from", str(dataset), "--out", str(out), "--quality", "95", "--max-test", "3",
-                          "--no-lpips"])
+    figures = bench.main(
+        ["pack", "--from", str(dataset), "--out", str(out), "--quality", "95", "--max-test", "3", "--no-lpips"]
+    )
     return out, figures
 
 
@@ -98,8 +115,22 @@ def test_pack_embeds_small_lpips_weights_and_the_unpack_points_lpips_at_them(ben
 
 def test_trial_prints_and_returns_the_figures(bench, packed, tmp_path, capsys):
     out, _ = packed
-    figures = bench.main(["trial", "--data", str(out), "--unpack-to", str(tmp_path / "data"), *TOY,
-                          "--warmup-steps", "2", "--out", str(tmp_path / "trial"), "--json", str(tmp_path / "t.json")])
+    figures = bench.main(
+        [
+            "trial",
+            "--data",
+            str(out),
+            "--unpack-to",
+            str(tmp_path / "data"),
+            *TOY,
+            "--warmup-steps",
+            "2",
+            "--out",
+            str(tmp_path / "trial"),
+            "--json",
+            str(tmp_path / "t.json"),
+        ]
+    )
     printed = capsys.readouterr().out
     for label in ("s/step", "trial time", "peak GPU memory", "test PSNR / SSIM / LPIPS"):
         assert label in printed
@@ -115,8 +146,20 @@ def test_trial_prints_and_returns_the_figures(bench, packed, tmp_path, capsys):
 
 def test_protocol_runs_every_method_and_resumes_within_its_budget(bench, packed, tmp_path, capsys):
     out, _ = packed
-    common = ["protocol", "--data", str(out), "--unpack-to", str(tmp_path / "data"), *TOY,
-              "--methods", "ours", "uniform", "--out", str(tmp_path / "protocol"), "--no-report"]
+    common = [
+        "protocol",
+        "--data",
+        str(out),
+        "--unpack-to",
+        str(tmp_path / "data"),
+        *TOY,
+        "--methods",
+        "ours",
+        "uniform",
+        "--out",
+        str(tmp_path / "protocol"),
+        "--no-report",
+    ]
     first = bench.main([*common, "--trials", "2"])
     assert first["complete"] and first["trials_done"] == 2
     assert {m: r["trials"] for m, r in first["methods"].items()} == {"ours": 2, "uniform": 2}

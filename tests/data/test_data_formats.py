@@ -52,8 +52,8 @@ def test_lazy_loading_matches_eager(tmp_path):
 def test_alpha_composited_over_background_and_downscaled(tmp_path):
     (tmp_path / "train").mkdir()
     rgba = np.zeros((4, 4, 4), np.uint8)
-    rgba[..., 0] = 255          # pure red
-    rgba[:2, :, 3] = 255        # top half opaque, bottom half transparent
+    rgba[..., 0] = 255  # pure red
+    rgba[:2, :, 3] = 255  # top half opaque, bottom half transparent
     iio.imwrite(tmp_path / "train" / "a.png", rgba)
     frame = {"file_path": "./train/a", "transform_matrix": np.eye(4).tolist()}
     (tmp_path / "transforms_train.json").write_text(json.dumps({"camera_angle_x": 0.7, "frames": [frame]}))
@@ -83,6 +83,7 @@ def test_load_blender_finds_existing_splits(tmp_path):
 
 
 # --- bad input: every error names the file, the field and the value ------------------------
+
 
 def write_json(tmp_path, meta, name="transforms_train.json"):
     (tmp_path / name).write_text(json.dumps(meta) if not isinstance(meta, str) else meta)
@@ -183,6 +184,7 @@ def test_semi_transparent_pixels_round_trip(tmp_path):
 
 # --- paths from a transforms file never leave the dataset folder ----------------------------
 
+
 @pytest.fixture
 def outside_image(tmp_path):
     """A readable image beside (not inside) the dataset folder `tmp_path / "dataset"`."""
@@ -202,8 +204,12 @@ def test_a_file_path_leaving_the_dataset_folder_is_refused(outside_image, fmt, h
         (root / "link.png").symlink_to(outside_image)
     if how == "symlinked_folder":
         (root / "link").symlink_to(outside_image.parent, target_is_directory=True)
-    value = {"dotdot": "../outside/secret.png", "absolute": str(outside_image),
-             "symlinked_file": "link.png", "symlinked_folder": "link/secret"}[how]
+    value = {
+        "dotdot": "../outside/secret.png",
+        "absolute": str(outside_image),
+        "symlinked_file": "link.png",
+        "symlinked_folder": "link/secret",
+    }[how]
     meta = json.loads(json_path.read_text())
     meta["frames"][1]["file_path"] = value
     json_path.write_text(json.dumps(meta))
@@ -236,11 +242,14 @@ def test_a_file_path_that_is_not_a_path_string_is_refused(tmp_path, value):
         load_blender_split(tmp_path, "train")
 
 
-@pytest.mark.parametrize("key, value, message", [
-    ("camera_angle_x", True, "camera_angle_x must be a number"),
-    ("camera_angle_x", 10**400, "camera_angle_x must be a number"),
-    ("camera_angle_x", 1e-300, "camera_angle_x must be a number"),
-])
+@pytest.mark.parametrize(
+    "key, value, message",
+    [
+        ("camera_angle_x", True, "camera_angle_x must be a number"),
+        ("camera_angle_x", 10**400, "camera_angle_x must be a number"),
+        ("camera_angle_x", 1e-300, "camera_angle_x must be a number"),
+    ],
+)
 def test_camera_angle_must_be_a_usable_number(tmp_path, key, value, message):
     meta = valid_meta(tmp_path)
     meta[key] = value
@@ -249,13 +258,19 @@ def test_camera_angle_must_be_a_usable_number(tmp_path, key, value, message):
         load_blender_split(tmp_path, "train")
 
 
-@pytest.mark.parametrize("matrix, message", [
-    ([["1", "0", "0", "0"], ["0", "1", "0", "0"], ["0", "0", "1", "0"], ["0", "0", "0", "1"]], "4 rows of 4 numbers"),
-    (np.eye(4, dtype=bool).tolist(), "4 rows of 4 numbers"),
-    ([[1, 0, 0, 10**400], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "4 rows of 4 numbers"),
-    ([[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "beyond float32 range"),
-    ([[1, 0, 0], [0, 1, 0, 0]], "4 rows of 4 numbers"),
-])
+@pytest.mark.parametrize(
+    "matrix, message",
+    [
+        (
+            [["1", "0", "0", "0"], ["0", "1", "0", "0"], ["0", "0", "1", "0"], ["0", "0", "0", "1"]],
+            "4 rows of 4 numbers",
+        ),
+        (np.eye(4, dtype=bool).tolist(), "4 rows of 4 numbers"),
+        ([[1, 0, 0, 10**400], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "4 rows of 4 numbers"),
+        ([[1, 0, 0, 1e300], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "beyond float32 range"),
+        ([[1, 0, 0], [0, 1, 0, 0]], "4 rows of 4 numbers"),
+    ],
+)
 def test_matrix_entries_must_be_numbers_float32_can_hold(tmp_path, matrix, message):
     meta = valid_meta(tmp_path)
     meta["frames"][0]["transform_matrix"] = matrix
@@ -288,10 +303,13 @@ def test_nerfstudio_intrinsics_must_be_numbers(tmp_path, key, value):
         load_nerfstudio(tmp_path)
 
 
-@pytest.mark.parametrize("data, message", [
-    (b"\x89PNG\r\n\x1a\n" + b"\x00" * 30, "cannot read image"),
-    (b"", "cannot read image"),
-])
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        (b"\x89PNG\r\n\x1a\n" + b"\x00" * 30, "cannot read image"),
+        (b"", "cannot read image"),
+    ],
+)
 def test_unreadable_images_give_one_line(tmp_path, data, message):
     valid_meta(tmp_path)
     (tmp_path / "train" / "r_1.png").write_bytes(data)

@@ -31,7 +31,10 @@ from nerfaug.data import DatasetError, load_dataset
 
 SIZE = 8
 FUZZ = settings(
-    derandomize=True, database=None, deadline=None, suppress_health_check=list(HealthCheck),
+    derandomize=True,
+    database=None,
+    deadline=None,
+    suppress_health_check=list(HealthCheck),
 )
 
 
@@ -86,22 +89,50 @@ def _base(fmt: str, n: int) -> tuple[str, dict, dict[str, bytes]]:
         return "transforms_train.json", {"camera_angle_x": 0.69, "frames": frames}, files
     frames = [{"file_path": f"images/f_{i}.png", "transform_matrix": _pose(i)} for i in range(n)]
     files = {f"images/f_{i}.png": IMAGES["rgba"] for i in range(n)}
-    meta = {"camera_model": "OPENCV", "fl_x": 9.0, "fl_y": 9.5, "cx": 4.0, "cy": 4.0, "w": SIZE, "h": SIZE,
-            "frames": frames}
+    meta = {
+        "camera_model": "OPENCV",
+        "fl_x": 9.0,
+        "fl_y": 9.5,
+        "cx": 4.0,
+        "cy": 4.0,
+        "w": SIZE,
+        "h": SIZE,
+        "frames": frames,
+    }
     return "transforms.json", meta, files
 
 
 NASTY_STRINGS = [
-    "", ".", "..", "../outside", "/etc/passwd", "a\x00b", "~", "x" * 5000, "C:\\windows", "file:///etc/hosts",
-    "images", "train", "./train/", "é", "\u202e", " ",
+    "",
+    ".",
+    "..",
+    "../outside",
+    "/etc/passwd",
+    "a\x00b",
+    "~",
+    "x" * 5000,
+    "C:\\windows",
+    "file:///etc/hosts",
+    "images",
+    "train",
+    "./train/",
+    "é",
+    "\u202e",
+    " ",
 ]
 scalars = (
-    st.none() | st.booleans() | st.integers(-(10**30), 10**30) | st.just(10**400)
-    | st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([0, -1, 1e-300, 1e300, 3.2])
-    | st.text(max_size=12) | st.sampled_from(NASTY_STRINGS)
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**30), 10**30)
+    | st.just(10**400)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.sampled_from([0, -1, 1e-300, 1e300, 3.2])
+    | st.text(max_size=12)
+    | st.sampled_from(NASTY_STRINGS)
 )
 json_values = st.recursive(
-    scalars, lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    scalars,
+    lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
     max_leaves=12,
 )
 TOP_KEYS = ["camera_angle_x", "frames", "fl_x", "fl_y", "cx", "cy", "w", "h", "camera_model", "k1"]
@@ -113,18 +144,61 @@ mutations = st.one_of(
     st.tuples(st.just("set_frame"), frame_index, st.sampled_from(FRAME_KEYS), json_values),
     st.tuples(st.just("delete_frame_key"), frame_index, st.sampled_from(FRAME_KEYS)),
     st.tuples(st.just("set_entry"), frame_index, st.integers(0, 4), st.integers(0, 4), json_values),
-    st.tuples(st.just("matrix"), frame_index, st.sampled_from(
-        ["scale", "shear", "reflect", "nan", "inf", "last_row", "3x4", "4x4x1", "flat", "huge_translation",
-         "tiny_noise", "rows_of_strings", "bools", "empty"])),
-    st.tuples(st.just("path"), frame_index, st.sampled_from(
-        ["dotdot", "absolute_outside", "absolute_inside", "symlink_file_out", "symlink_dir_out", "symlink_in",
-         "symlink_loop", "empty", "dot", "folder", "nul", "long", "missing", "dotdot_back_inside", "root_itself"])),
+    st.tuples(
+        st.just("matrix"),
+        frame_index,
+        st.sampled_from(
+            [
+                "scale",
+                "shear",
+                "reflect",
+                "nan",
+                "inf",
+                "last_row",
+                "3x4",
+                "4x4x1",
+                "flat",
+                "huge_translation",
+                "tiny_noise",
+                "rows_of_strings",
+                "bools",
+                "empty",
+            ]
+        ),
+    ),
+    st.tuples(
+        st.just("path"),
+        frame_index,
+        st.sampled_from(
+            [
+                "dotdot",
+                "absolute_outside",
+                "absolute_inside",
+                "symlink_file_out",
+                "symlink_dir_out",
+                "symlink_in",
+                "symlink_loop",
+                "empty",
+                "dot",
+                "folder",
+                "nul",
+                "long",
+                "missing",
+                "dotdot_back_inside",
+                "root_itself",
+            ]
+        ),
+    ),
     st.tuples(st.just("image"), frame_index, st.sampled_from(sorted(IMAGES))),
     st.tuples(st.just("remove_image"), frame_index),
-    st.tuples(st.just("frames"), st.sampled_from(
-        ["empty", "object", "string", "null", "frame_not_object", "duplicate", "many"])),
-    st.tuples(st.just("raw"), st.sampled_from(
-        ["truncated", "not_utf8", "array", "null", "nan_literal", "huge_int", "deep", "empty", "bom"])),
+    st.tuples(
+        st.just("frames"),
+        st.sampled_from(["empty", "object", "string", "null", "frame_not_object", "duplicate", "many"]),
+    ),
+    st.tuples(
+        st.just("raw"),
+        st.sampled_from(["truncated", "not_utf8", "array", "null", "nan_literal", "huge_int", "deep", "empty", "bom"]),
+    ),
 )
 
 
@@ -147,8 +221,10 @@ def _mutate(root: Path, outside: Path, name: str, meta: dict, files: dict[str, b
         frame = frames[args[0]]
 
     def image_of(f):
-        return next((p for p in files if isinstance(f.get("file_path"), str)
-                     and Path(p).stem == Path(f["file_path"]).stem), None)
+        return next(
+            (p for p in files if isinstance(f.get("file_path"), str) and Path(p).stem == Path(f["file_path"]).stem),
+            None,
+        )
 
     if kind == "set_top":
         meta[args[0]] = args[1]
@@ -160,8 +236,12 @@ def _mutate(root: Path, outside: Path, name: str, meta: dict, files: dict[str, b
         frame.pop(args[1], None)
     elif kind == "set_entry":
         matrix = frame.get("transform_matrix")
-        if isinstance(matrix, list) and args[1] < len(matrix) and isinstance(matrix[args[1]], list) \
-                and args[2] < len(matrix[args[1]]):
+        if (
+            isinstance(matrix, list)
+            and args[1] < len(matrix)
+            and isinstance(matrix[args[1]], list)
+            and args[2] < len(matrix[args[1]])
+        ):
             matrix[args[1]][args[2]] = args[3]
     elif kind == "matrix":
         m = np.array(_pose(args[0]))
@@ -211,9 +291,14 @@ def _mutate(root: Path, outside: Path, name: str, meta: dict, files: dict[str, b
             frame["file_path"] = f"link_{i}"
         else:
             frame["file_path"] = {
-                "empty": "", "dot": ".", "folder": "images" if "images/f_0.png" in files else "train",
-                "nul": "train/r\x000", "long": "a/" * 3000 + "b", "missing": "./train/nope",
-                "dotdot_back_inside": f"../{root.name}/{image_of(frame) or 'x'}", "root_itself": str(root),
+                "empty": "",
+                "dot": ".",
+                "folder": "images" if "images/f_0.png" in files else "train",
+                "nul": "train/r\x000",
+                "long": "a/" * 3000 + "b",
+                "missing": "./train/nope",
+                "dotdot_back_inside": f"../{root.name}/{image_of(frame) or 'x'}",
+                "root_itself": str(root),
             }[how]
     elif kind == "image":
         target = image_of(frame)
@@ -225,16 +310,26 @@ def _mutate(root: Path, outside: Path, name: str, meta: dict, files: dict[str, b
             del files[target]
     elif kind == "frames":
         meta["frames"] = {
-            "empty": list, "object": lambda: {"0": frames[0] if frames else {}}, "string": lambda: "frames",
-            "null": lambda: None, "frame_not_object": lambda: frames[:1] + [[1, 2]],
-            "duplicate": lambda: frames + frames, "many": lambda: (frames * 12)[:30],
+            "empty": list,
+            "object": lambda: {"0": frames[0] if frames else {}},
+            "string": lambda: "frames",
+            "null": lambda: None,
+            "frame_not_object": lambda: frames[:1] + [[1, 2]],
+            "duplicate": lambda: frames + frames,
+            "many": lambda: (frames * 12)[:30],
         }[args[0]]()
     elif kind == "raw":
         text = json.dumps(meta)
         return {
-            "truncated": text[: len(text) // 2], "not_utf8": "\udcff", "array": "[1, 2]", "null": "null",
-            "nan_literal": "NaN", "huge_int": '{"camera_angle_x": ' + "7" * 5000 + "}",
-            "deep": "[" * 50_000 + "]" * 50_000, "empty": "", "bom": "\ufeff" + text,
+            "truncated": text[: len(text) // 2],
+            "not_utf8": "\udcff",
+            "array": "[1, 2]",
+            "null": "null",
+            "nan_literal": "NaN",
+            "huge_int": '{"camera_angle_x": ' + "7" * 5000 + "}",
+            "deep": "[" * 50_000 + "]" * 50_000,
+            "empty": "",
+            "bom": "\ufeff" + text,
         }[args[0]]
     return None
 
@@ -289,8 +384,10 @@ def _check(fmt: str, n: int, mutation_list, downscale: int, lazy: bool) -> None:
 
 @settings(FUZZ, max_examples=BLENDER_EXAMPLES)
 @given(
-    n=st.integers(1, 3), mutation_list=st.lists(mutations, min_size=1, max_size=4),
-    downscale=st.sampled_from([1, 1, 1, 1, 2, 3, 16]), lazy=st.booleans(),
+    n=st.integers(1, 3),
+    mutation_list=st.lists(mutations, min_size=1, max_size=4),
+    downscale=st.sampled_from([1, 1, 1, 1, 2, 3, 16]),
+    lazy=st.booleans(),
 )
 def _blender_examples(n, mutation_list, downscale, lazy):
     _check("blender", n, mutation_list, downscale, lazy)
@@ -298,8 +395,10 @@ def _blender_examples(n, mutation_list, downscale, lazy):
 
 @settings(FUZZ, max_examples=NERFSTUDIO_EXAMPLES)
 @given(
-    n=st.integers(1, 3), mutation_list=st.lists(mutations, min_size=1, max_size=4),
-    downscale=st.sampled_from([1, 1, 1, 2, 16]), lazy=st.booleans(),
+    n=st.integers(1, 3),
+    mutation_list=st.lists(mutations, min_size=1, max_size=4),
+    downscale=st.sampled_from([1, 1, 1, 2, 16]),
+    lazy=st.booleans(),
 )
 def _nerfstudio_examples(n, mutation_list, downscale, lazy):
     _check("nerfstudio", n, mutation_list, downscale, lazy)

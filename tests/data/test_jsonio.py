@@ -54,14 +54,17 @@ def test_a_failed_write_keeps_the_old_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["a.json"]
 
 
-@pytest.mark.parametrize("content, message", [
-    (None, "file not found"),
-    (b"\xff\xfe{}", "not UTF-8 text"),
-    (b'{"a": 1,\n "b": }', "invalid JSON at line 2 column 7"),
-    (b'{"a": ' + b"9" * 5000 + b"}", "invalid JSON: Exceeds the limit"),
-    (b"[" * 100_000 + b"]" * 100_000, "invalid JSON"),
-    (b"[1, 2]", "expected a JSON object at the top level"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (None, "file not found"),
+        (b"\xff\xfe{}", "not UTF-8 text"),
+        (b'{"a": 1,\n "b": }', "invalid JSON at line 2 column 7"),
+        (b'{"a": ' + b"9" * 5000 + b"}", "invalid JSON: Exceeds the limit"),
+        (b"[" * 100_000 + b"]" * 100_000, "invalid JSON"),
+        (b"[1, 2]", "expected a JSON object at the top level"),
+    ],
+)
 def test_read_json_names_the_file_and_the_problem(tmp_path, content, message):
     path = tmp_path / "transforms.json"
     if content is not None:

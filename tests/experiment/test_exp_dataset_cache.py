@@ -42,7 +42,10 @@ def assert_same_views(a: Views, b: Views):
         assert torch.equal(a.alphas, b.alphas)
     assert a.names == b.names
     assert torch.equal(a.cameras.camera_to_world, b.cameras.camera_to_world)
-    assert torch.equal(a.cameras.fx, b.cameras.fx) and (a.cameras.width, a.cameras.height) == (b.cameras.width, b.cameras.height)
+    assert torch.equal(a.cameras.fx, b.cameras.fx) and (a.cameras.width, a.cameras.height) == (
+        b.cameras.width,
+        b.cameras.height,
+    )
 
 
 def test_cached_split_equals_an_uncached_load_and_is_read_from_the_cache(tmp_path, monkeypatch):

@@ -27,8 +27,17 @@ def tiny_scene(tmp_path_factory) -> Path:
 
     config = preset("tiny")
     out = tmp_path_factory.mktemp("scene") / "lego"
-    return render_scene_dataset("lego", out, resolution=config.resolution, pool=config.pool, test=config.n_test,
-                                initial=config.n_initial, samples=config.render_samples, seed=0, progress=False)
+    return render_scene_dataset(
+        "lego",
+        out,
+        resolution=config.resolution,
+        pool=config.pool,
+        test=config.n_test,
+        initial=config.n_initial,
+        samples=config.render_samples,
+        seed=0,
+        progress=False,
+    )
 
 
 def tiny_config(scene: Path, **changes):
@@ -60,11 +69,25 @@ def test_tiny_sweep_writes_every_file_and_a_report(tiny_scene, tmp_path):
 
 def test_killed_sweep_resumes_without_recomputing(tiny_scene, tmp_path):
     out = tmp_path / "out"
-    command = [sys.executable, "-m", "nerfaug.cli", "run", "--preset", "tiny", "--data", str(tiny_scene),
-               "--out", str(out), "--trials", "3", "--no-report"]
+    command = [
+        sys.executable,
+        "-m",
+        "nerfaug.cli",
+        "run",
+        "--preset",
+        "tiny",
+        "--data",
+        str(tiny_scene),
+        "--out",
+        str(out),
+        "--trials",
+        "3",
+        "--no-report",
+    ]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               start_new_session=True)
+    process = subprocess.Popen(
+        command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     deadline = time.time() + 300
     while time.time() < deadline and len(list(out.glob("runs/*/*/*/result.json"))) < 2:
         time.sleep(0.2)
@@ -97,7 +120,10 @@ def test_ray_backend_matches_local(tiny_scene, tmp_path):
     local = run_sweep(config, tmp_path / "local", progress=False)
     remote = run_sweep(config, tmp_path / "ray", backend="ray", workers=1, progress=False)
     assert not remote.failed
-    by_key = lambda results: {(r["method"], r["trial"]): r for r in results}
+
+    def by_key(results):
+        return {(r["method"], r["trial"]): r for r in results}
+
     local_results, ray_results = by_key(local.results), by_key(remote.results)
     assert local_results.keys() == ray_results.keys()
     for key in local_results:

@@ -17,8 +17,15 @@ from nerfaug.experiment.sweep import plan_runs, sweep_record
 
 
 def complete_result(fp="abc", psnr=20.0):
-    return {"scene": "lego", "method": "ours", "trial": 0, "seed": 0, "fingerprint": fp,
-            "metrics": {"psnr": psnr, "ssim": 0.8, "lpips": None}, "timing": {"total": 1.0}}
+    return {
+        "scene": "lego",
+        "method": "ours",
+        "trial": 0,
+        "seed": 0,
+        "fingerprint": fp,
+        "metrics": {"psnr": psnr, "ssim": 0.8, "lpips": None},
+        "timing": {"total": 1.0},
+    }
 
 
 def test_result_round_trip_and_fingerprint_check(tmp_path):
@@ -28,8 +35,15 @@ def test_result_round_trip_and_fingerprint_check(tmp_path):
     assert read_result(folder, "other") is None  # made with another configuration
 
 
-@pytest.mark.parametrize("content", ['{"scene": "lego", "metr', "[]", json.dumps({"scene": "lego"}),
-                                     json.dumps({**complete_result(), "metrics": {"psnr": "NaN?"}})])
+@pytest.mark.parametrize(
+    "content",
+    [
+        '{"scene": "lego", "metr',
+        "[]",
+        json.dumps({"scene": "lego"}),
+        json.dumps({**complete_result(), "metrics": {"psnr": "NaN?"}}),
+    ],
+)
 def test_partial_or_corrupted_results_are_not_complete(tmp_path, content):
     folder = tmp_path / "run"
     folder.mkdir()

@@ -46,7 +46,9 @@ def render_sphere(poses, prefix: str) -> Views:
 def sphere(tmp_path_factory) -> Path:
     """A Blender-format dataset: a pool of 12 views, 3 initial views on one half, 3 test views."""
     root = tmp_path_factory.mktemp("data") / "sphere"
-    write_blender_split(root, "train", render_sphere(sample_uniform_poses(12, torch.Generator().manual_seed(0)), "train"))
+    write_blender_split(
+        root, "train", render_sphere(sample_uniform_poses(12, torch.Generator().manual_seed(0)), "train")
+    )
     write_blender_split(root, "initial", render_sphere(half_hemisphere_poses(3), "initial"))
     write_blender_split(root, "test", render_sphere(pose_from_angles(*fibonacci_angles(3)), "test"))
     return root
@@ -58,9 +60,34 @@ def study_out(sphere, tmp_path_factory):
 
     out = tmp_path_factory.mktemp("study")
     docs = out.parent / f"{out.name}_docs" / "results.md"
-    main(["study", "--out", str(out), "--preset", "tiny", "--engines", "test", "--scenes", str(sphere),
-          "--methods", "ours", "uniform", "--trials", "2", "--resolution", str(SIZE), "--steps", "60",
-          "--workers", "1", "--device", "cpu", "--results-doc", str(docs)])
+    main(
+        [
+            "study",
+            "--out",
+            str(out),
+            "--preset",
+            "tiny",
+            "--engines",
+            "test",
+            "--scenes",
+            str(sphere),
+            "--methods",
+            "ours",
+            "uniform",
+            "--trials",
+            "2",
+            "--resolution",
+            str(SIZE),
+            "--steps",
+            "60",
+            "--workers",
+            "1",
+            "--device",
+            "cpu",
+            "--results-doc",
+            str(docs),
+        ]
+    )
     return out, docs
 
 
@@ -78,8 +105,9 @@ def unseen_share(folder: Path) -> float:
     selection = json.loads((folder / "selection.json").read_text())
     chosen = np.asarray(selection["chosen_poses"])[:, :3, 3]
     initial = np.asarray(selection["train_poses"])[:, :3, 3]
-    mean = np.arctan2(np.sin(np.arctan2(initial[:, 1], initial[:, 0])).mean(),
-                      np.cos(np.arctan2(initial[:, 1], initial[:, 0])).mean())
+    mean = np.arctan2(
+        np.sin(np.arctan2(initial[:, 1], initial[:, 0])).mean(), np.cos(np.arctan2(initial[:, 1], initial[:, 0])).mean()
+    )
     offset = np.angle(np.exp(1j * (np.arctan2(chosen[:, 1], chosen[:, 0]) - mean)))
     return float((np.abs(offset) > math.pi / 2).mean())
 
@@ -109,9 +137,15 @@ def test_summary_numbers_equal_a_recomputation(study_out):
     assert cell.winner == ("ours" if np.median(ours) > np.median(uniform) else "uniform")
     entry = cell.methods["ours"].vs_reference["psnr"]
     assert entry["difference"] == pytest.approx(np.median(ours) - np.median(uniform), abs=1e-12)
-    ci = stats.bootstrap((np.array(ours), np.array(uniform)), lambda x, y, axis: np.median(x, axis) - np.median(y, axis),
-                         paired=False, vectorized=True, n_resamples=9999, method="percentile",
-                         rng=np.random.default_rng(BOOTSTRAP_SEED)).confidence_interval
+    ci = stats.bootstrap(
+        (np.array(ours), np.array(uniform)),
+        lambda x, y, axis: np.median(x, axis) - np.median(y, axis),
+        paired=False,
+        vectorized=True,
+        n_resamples=9999,
+        method="percentile",
+        rng=np.random.default_rng(BOOTSTRAP_SEED),
+    ).confidence_interval
     assert (entry["low"], entry["high"]) == pytest.approx((ci.low, ci.high), abs=1e-12)
     p = stats.mannwhitneyu(ours, uniform, alternative="two-sided", method="exact").pvalue
     assert entry["p_value"] == pytest.approx(p) and entry["p_bonferroni"] == pytest.approx(min(1.0, p * 1))
@@ -158,12 +192,22 @@ def test_a_study_run_in_sittings_keeps_every_engine_and_scene(tmp_path):
     from nerfaug.experiment.study import merged_record
 
     path = tmp_path / "study.json"
-    first = {"engines": ["cpu"], "left_out": {"paper": "needs a GPU", "nerfacto-cpu": "not asked"},
-             "scenes": ["lego"], "datasets": {"lego": "/d/lego"}, "command": ["nerfaug", "study", "a"]}
+    first = {
+        "engines": ["cpu"],
+        "left_out": {"paper": "needs a GPU", "nerfacto-cpu": "not asked"},
+        "scenes": ["lego"],
+        "datasets": {"lego": "/d/lego"},
+        "command": ["nerfaug", "study", "a"],
+    }
     assert merged_record(path, first) == first  # nothing to merge with yet
     path.write_text(json.dumps(first))
-    second = {"engines": ["nerfacto-cpu"], "left_out": {}, "scenes": ["chair"], "datasets": {"chair": "/d/chair"},
-              "command": ["nerfaug", "study", "b"]}
+    second = {
+        "engines": ["nerfacto-cpu"],
+        "left_out": {},
+        "scenes": ["chair"],
+        "datasets": {"chair": "/d/chair"},
+        "command": ["nerfaug", "study", "b"],
+    }
     merged = merged_record(path, second)
     assert merged["engines"] == ["cpu", "nerfacto-cpu"] and merged["scenes"] == ["lego", "chair"]
     assert merged["datasets"] == {"lego": "/d/lego", "chair": "/d/chair"}

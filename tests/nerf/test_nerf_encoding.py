@@ -55,8 +55,11 @@ def _naive_hash_encoding(encoding: HashEncoding, x: torch.Tensor) -> torch.Tenso
                 for dz in (0, 1):
                     vertex = (base + torch.tensor([dx, dy, dz])).clamp(max=resolution)
                     row = hash_grid_indices(vertex, torch.tensor(resolution), encoding.table_size)
-                    w = ((frac[:, 0] if dx else 1 - frac[:, 0]) * (frac[:, 1] if dy else 1 - frac[:, 1])
-                         * (frac[:, 2] if dz else 1 - frac[:, 2]))
+                    w = (
+                        (frac[:, 0] if dx else 1 - frac[:, 0])
+                        * (frac[:, 1] if dy else 1 - frac[:, 1])
+                        * (frac[:, 2] if dz else 1 - frac[:, 2])
+                    )
                     feature = feature + w[:, None] * encoding.table[row + level * encoding.table_size]
         out.append(feature)
     return torch.cat(out, dim=-1)

@@ -13,9 +13,19 @@ from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.occupancy import OccupancyGrid
 
 TINY_PROPOSAL = dict(
-    encoding="hash", sampler="proposal", hash_levels=4, hash_log2_table_size=10, hash_max_resolution=64,
-    proposal_samples=(16, 12), proposal_max_resolutions=(32, 64), proposal_log2_table_size=10,
-    proposal_hash_levels=3, num_samples=8, hidden_dim=16, color_hidden_dim=16, color_layers=1,
+    encoding="hash",
+    sampler="proposal",
+    hash_levels=4,
+    hash_log2_table_size=10,
+    hash_max_resolution=64,
+    proposal_samples=(16, 12),
+    proposal_max_resolutions=(32, 64),
+    proposal_log2_table_size=10,
+    proposal_hash_levels=3,
+    num_samples=8,
+    hidden_dim=16,
+    color_hidden_dim=16,
+    color_layers=1,
 )
 
 

@@ -40,8 +40,17 @@ def test_nerfacto_cpu_has_nerfactos_structure():
     assert len(proposal_networks(model)) == 2
     assert all(isinstance(p.encoding, HashEncoding) for p in proposal_networks(model))
     # nerfacto's losses, density activation and initial density, as in the full preset.
-    for name in ("density_activation", "average_init_density", "interlevel_loss_mult", "distortion_loss_mult",
-                 "color_layers", "geo_feat_dim", "sh_levels", "hash_features_per_level", "hash_base_resolution"):
+    for name in (
+        "density_activation",
+        "average_init_density",
+        "interlevel_loss_mult",
+        "distortion_loss_mult",
+        "color_layers",
+        "geo_feat_dim",
+        "sh_levels",
+        "hash_features_per_level",
+        "hash_base_resolution",
+    ):
         assert getattr(config, name) == getattr(paper, name), name
     assert config.interlevel_loss_mult > 0 and config.distortion_loss_mult > 0
     # Shrunk: fewer levels, smaller tables, fewer samples and rays than the full preset.

@@ -17,16 +17,40 @@ from nerfaug.nerf.trainer import Trainer
 # CPU with torch 2.13.0, one thread: `Trainer(views, preset, seed=3)` on the 4 sphere views, the
 # loss of each step, then the sums of `render_weights_only` and `render_rays(...).rgb` over two rays.
 BEFORE = {
-    "cpu": ({}, ["0x1.3f1dea0000000p-3", "0x1.1674fc0000000p-3", "0x1.ef054e0000000p-4", "0x1.a0dda60000000p-4",
-                 "0x1.4ded3e0000000p-4", "0x1.105cae0000000p-4"], "0x1.ab3f440000000p+0", "0x1.3a62d40000000p+2"),
+    "cpu": (
+        {},
+        [
+            "0x1.3f1dea0000000p-3",
+            "0x1.1674fc0000000p-3",
+            "0x1.ef054e0000000p-4",
+            "0x1.a0dda60000000p-4",
+            "0x1.4ded3e0000000p-4",
+            "0x1.105cae0000000p-4",
+        ],
+        "0x1.ab3f440000000p+0",
+        "0x1.3a62d40000000p+2",
+    ),
     "cpu, grid from step 2": (  # a faint start, so that the grid culls about 31% of the cells
         {"occupancy_warmup_steps": 2, "occupancy_update_every": 2, "average_init_density": 0.01},
-        ["0x1.7e9ce00000000p-4", "0x1.629e720000000p-4", "0x1.64b8d80000000p-4", "0x1.40283e0000000p-4",
-         "0x1.459dba0000000p-4", "0x1.5ea7260000000p-4", "0x1.35677a0000000p-4", "0x1.59a1460000000p-4"],
-        "0x1.de7cbc0000000p-4", "0x1.6af6a60000000p+2",
+        [
+            "0x1.7e9ce00000000p-4",
+            "0x1.629e720000000p-4",
+            "0x1.64b8d80000000p-4",
+            "0x1.40283e0000000p-4",
+            "0x1.459dba0000000p-4",
+            "0x1.5ea7260000000p-4",
+            "0x1.35677a0000000p-4",
+            "0x1.59a1460000000p-4",
+        ],
+        "0x1.de7cbc0000000p-4",
+        "0x1.6af6a60000000p+2",
     ),
-    "paper": ({"batch_size": 256}, ["0x1.8af70a0000000p-3", "0x1.7467da0000000p-3", "0x1.61282a0000000p-3",
-                                    "0x1.2e05b20000000p-3"], "0x1.c465560000000p-5", "0x1.d2850c0000000p+1"),
+    "paper": (
+        {"batch_size": 256},
+        ["0x1.8af70a0000000p-3", "0x1.7467da0000000p-3", "0x1.61282a0000000p-3", "0x1.2e05b20000000p-3"],
+        "0x1.c465560000000p-5",
+        "0x1.d2850c0000000p+1",
+    ),
 }
 # Other CPUs may take other vectorised kernels (different rounding): there, equal to 1e-5.
 SAME_MACHINE = torch.backends.cpu.get_cpu_capability() == "AVX512" and torch.__version__.startswith("2.13.0")
@@ -92,8 +116,9 @@ class ConstantEncoding(nn.Module):
 
 def test_an_encoding_added_by_one_registry_entry_trains(monkeypatch, sphere_views):
     monkeypatch.setitem(ENCODINGS, "constant", ConstantEncoding.from_config)
-    trainer = Trainer(sphere_views([0.0], [1.0], size=6), NerfConfig.preset("test", encoding="constant"),
-                      progress=False)
+    trainer = Trainer(
+        sphere_views([0.0], [1.0], size=6), NerfConfig.preset("test", encoding="constant"), progress=False
+    )
     assert isinstance(trainer.model.field.encoding, ConstantEncoding)
     trainer.train(3)
     assert trainer.model.field.encoding.value.abs().sum() > 0  # it received gradients
@@ -131,9 +156,17 @@ def test_a_field_passed_in_is_the_one_rendered_and_trained(sphere_views):
 
 def test_a_model_saved_before_the_sampler_interface_loads():
     torch.manual_seed(0)
-    proposal = NerfConfig.preset("test", encoding="hash", sampler="proposal", hash_levels=2, hash_log2_table_size=8,
-                               proposal_hash_levels=2, proposal_log2_table_size=8, proposal_samples=(8, 8),
-                               proposal_max_resolutions=(16, 16))
+    proposal = NerfConfig.preset(
+        "test",
+        encoding="hash",
+        sampler="proposal",
+        hash_levels=2,
+        hash_log2_table_size=8,
+        proposal_hash_levels=2,
+        proposal_log2_table_size=8,
+        proposal_samples=(8, 8),
+        proposal_max_resolutions=(16, 16),
+    )
     for config in (proposal, NerfConfig.preset("test")):
         saved = NerfModel(config)
         saved.sampler.before_step(300 if config.sampler == "proposal" else 8, saved.density)

@@ -16,8 +16,10 @@ def views(sphere_views) -> Views:
 
 
 def views_psnr(trainer: Trainer, views: Views) -> float:
-    mses = [float((trainer.model.render_image(views.cameras, i)["rgb"] - views.images[i]).square().mean())
-            for i in range(len(views))]
+    mses = [
+        float((trainer.model.render_image(views.cameras, i)["rgb"] - views.images[i]).square().mean())
+        for i in range(len(views))
+    ]
     return psnr_from_mse(sum(mses) / len(mses))
 
 
@@ -121,9 +123,17 @@ def test_learning_rate_decays_exponentially_between_its_ends():
 
 def test_field_and_proposal_groups_get_their_own_learning_rates(views):
     config = NerfConfig.preset(
-        "test", encoding="hash", sampler="proposal", hash_levels=2, hash_log2_table_size=8,
-        proposal_samples=(8,), proposal_max_resolutions=(32,), proposal_hash_levels=2,
-        proposal_log2_table_size=8, field_lr=2e-3, lr=1e-2,
+        "test",
+        encoding="hash",
+        sampler="proposal",
+        hash_levels=2,
+        hash_log2_table_size=8,
+        proposal_samples=(8,),
+        proposal_max_resolutions=(32,),
+        proposal_hash_levels=2,
+        proposal_log2_table_size=8,
+        field_lr=2e-3,
+        lr=1e-2,
     )
     trainer = Trainer(views, config, progress=False)
     trainer.train(2)

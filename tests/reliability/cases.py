@@ -15,15 +15,28 @@ from pathlib import Path
 
 from harness import Case, copy
 
-TINY = ["--preset", "tiny", "--methods", "uniform", "--trials", "1", "--resolution", "8", "--steps", "21",
-        "--no-report", "--device", "cpu"]
+TINY = [
+    "--preset",
+    "tiny",
+    "--methods",
+    "uniform",
+    "--trials",
+    "1",
+    "--resolution",
+    "8",
+    "--steps",
+    "21",
+    "--no-report",
+    "--device",
+    "cpu",
+]
 
 
 @dataclass
 class Bases:
-    dataset: Path    # Blender format, 10 train (8x8), 3 test, 3 initial views
-    session: Path    # a capture session on `dataset`, trained 3 steps (preset test)
-    results: Path    # a finished `nerfaug run` of `dataset` (TINY)
+    dataset: Path  # Blender format, 10 train (8x8), 3 test, 3 initial views
+    session: Path  # a capture session on `dataset`, trained 3 steps (preset test)
+    results: Path  # a finished `nerfaug run` of `dataset` (TINY)
 
 
 CASES: dict = {}
@@ -45,8 +58,9 @@ def copy_dataset(tmp: Path, bases: Bases, name: str = "data") -> Path:
 
 
 def train_on(data: Path, tmp: Path, *extra) -> Case:
-    return Case(["train", data, "--out", tmp / "run", "--preset", "test", "--steps", "1", "--device", "cpu", *extra],
-                [data])
+    return Case(
+        ["train", data, "--out", tmp / "run", "--preset", "test", "--steps", "1", "--device", "cpu", *extra], [data]
+    )
 
 
 def all_cases() -> dict:

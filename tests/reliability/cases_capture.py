@@ -33,8 +33,11 @@ def train_into_the_folder_holding_the_dataset(tmp, bases):
     """The issue's data loss: `nerfaug train proj/dataset --out proj` deleted proj/dataset."""
     project = tmp / "proj"
     copy(bases.dataset, project / "dataset")
-    return Case(["train", project / "dataset", "--out", project, "--preset", "test", "--steps", "1",
-                 "--device", "cpu"], [project], says=(str(project),))
+    return Case(
+        ["train", project / "dataset", "--out", project, "--preset", "test", "--steps", "1", "--device", "cpu"],
+        [project],
+        says=(str(project),),
+    )
 
 
 @case
@@ -50,16 +53,22 @@ def train_out_is_a_users_folder(tmp, bases):
     (tmp / "mine" / "notes.txt").write_text("keep me")
     (tmp / "mine" / "dataset").mkdir()
     (tmp / "mine" / "dataset" / "photo.png").write_bytes(b"1234")
-    return Case(["train", data, "--out", tmp / "mine", "--preset", "test", "--device", "cpu"], [data, tmp / "mine"],
-                says=("mine",))
+    return Case(
+        ["train", data, "--out", tmp / "mine", "--preset", "test", "--device", "cpu"],
+        [data, tmp / "mine"],
+        says=("mine",),
+    )
 
 
 @case
 def train_out_is_a_file(tmp, bases):
     data = copy_dataset(tmp, bases)
     (tmp / "out.txt").write_text("x")
-    return Case(["train", data, "--out", tmp / "out.txt", "--preset", "test", "--device", "cpu"],
-                [data, tmp / "out.txt"], says=("out.txt",))
+    return Case(
+        ["train", data, "--out", tmp / "out.txt", "--preset", "test", "--device", "cpu"],
+        [data, tmp / "out.txt"],
+        says=("out.txt",),
+    )
 
 
 @case
@@ -146,8 +155,11 @@ def propose_unknown_method(tmp, bases):
 @case
 def propose_zero_candidates(tmp, bases):
     run = _session(tmp, bases)
-    return Case(["propose", run, "--out", tmp / "poses.json", "--n-candidates", "0", "--device", "cpu"], [run],
-                says=("--n-candidates", "0"))
+    return Case(
+        ["propose", run, "--out", tmp / "poses.json", "--n-candidates", "0", "--device", "cpu"],
+        [run],
+        says=("--n-candidates", "0"),
+    )
 
 
 @case
@@ -214,9 +226,21 @@ def session_json_bad_background(tmp, bases):
 
 @case
 def session_json_proposal_file_outside(tmp, bases):
-    record = {"number": 0, "method": "ours", "n": 1, "step": 3, "seed": 1, "candidates": "hemisphere",
-              "n_candidates": 12, "names": ["capture_000_00"], "poses": [], "azimuth": [], "polar": [],
-              "file": "../../elsewhere/proposal.json", "created": "now"}
+    record = {
+        "number": 0,
+        "method": "ours",
+        "n": 1,
+        "step": 3,
+        "seed": 1,
+        "candidates": "hemisphere",
+        "n_candidates": 12,
+        "names": ["capture_000_00"],
+        "poses": [],
+        "azimuth": [],
+        "polar": [],
+        "file": "../../elsewhere/proposal.json",
+        "created": "now",
+    }
     return _broken_session(tmp, bases, lambda d: d.update(proposals=[record]), "proposals[0].file")
 
 
@@ -237,8 +261,10 @@ def checkpoint_corrupt(tmp, bases):
 def _poses(tmp: Path, bases: Bases, names=("capture_000_00", "capture_000_01"), change=None) -> Path:
     """A poses JSON as `nerfaug propose` writes it (two poses of the dataset's test split)."""
     test = json.loads((bases.dataset / "transforms_test.json").read_text())
-    frames = [{"file_path": f"./{name}", "transform_matrix": frame["transform_matrix"]}
-              for name, frame in zip(names, test["frames"])]
+    frames = [
+        {"file_path": f"./{name}", "transform_matrix": frame["transform_matrix"]}
+        for name, frame in zip(names, test["frames"])
+    ]
     data = {"camera_angle_x": test["camera_angle_x"], "frames": frames}
     if change is not None:
         change(data)
@@ -246,15 +272,17 @@ def _poses(tmp: Path, bases: Bases, names=("capture_000_00", "capture_000_01"), 
     return tmp / "poses.json"
 
 
-def _add(tmp, bases, images=None, poses=None, *extra, says=(), image_names=("capture_000_00", "capture_000_01"),
-         size=8) -> Case:
+def _add(
+    tmp, bases, images=None, poses=None, *extra, says=(), image_names=("capture_000_00", "capture_000_01"), size=8
+) -> Case:
     run = _session(tmp, bases)
     poses = _poses(tmp, bases) if poses is None else poses
     if images is None:
         images = write_images(tmp / "captures", list(image_names), size=size)
     inputs = [run, poses] + ([images] if Path(images).exists() else [])
-    return Case(["add", run, "--images", images, "--poses", poses, "--steps", "1", "--device", "cpu", *extra],
-                inputs, says=says)
+    return Case(
+        ["add", run, "--images", images, "--poses", poses, "--steps", "1", "--device", "cpu", *extra], inputs, says=says
+    )
 
 
 @case
@@ -277,6 +305,7 @@ def add_poses_invalid_json(tmp, bases):
 def add_poses_nan(tmp, bases):
     def change(d):
         d["frames"][1]["transform_matrix"][1][1] = float("nan")
+
     return _add(tmp, bases, poses=_poses(tmp, bases, change=change), says=("poses.json", "frames[1]"))
 
 
@@ -311,8 +340,7 @@ def add_negative_steps(tmp, bases):
 
 @case
 def add_a_frame_already_in_the_dataset(tmp, bases):
-    return _add(tmp, bases, poses=_poses(tmp, bases, names=("r_0", "r_1")), image_names=("r_0", "r_1"),
-                says=("r_0",))
+    return _add(tmp, bases, poses=_poses(tmp, bases, names=("r_0", "r_1")), image_names=("r_0", "r_1"), says=("r_0",))
 
 
 @case
@@ -354,7 +382,6 @@ def export_unknown_format(tmp, bases):
     return Case(["export", run, "--out", tmp / "out", "--format", "colmap"], [run, tmp], says=("colmap",), usage=True)
 
 
-
 @case
 def train_zero_radius(tmp, bases):
     data = copy_dataset(tmp, bases)
@@ -384,15 +411,19 @@ def propose_candidates_with_a_nan_pose(tmp, bases):
 def propose_candidates_all_trained_on(tmp, bases):
     """Candidates the model already trains on are left out: none remain, so nothing is proposed."""
     (tmp / "reach.json").write_text((bases.dataset / "transforms_train.json").read_text())
-    return _propose_case(tmp, bases, "--candidates", tmp / "reach.json", "--n", "2",
-                         says=("reach.json", "0 candidates"))
+    return _propose_case(
+        tmp, bases, "--candidates", tmp / "reach.json", "--n", "2", says=("reach.json", "0 candidates")
+    )
 
 
 @case
 def propose_out_is_the_session_file(tmp, bases):
     run = _session(tmp, bases)
-    return Case(_propose(run, tmp)[:2] + ["--out", run / "session.json", "--n-candidates", "12", "--device", "cpu"],
-                [run], says=("session.json",))
+    return Case(
+        _propose(run, tmp)[:2] + ["--out", run / "session.json", "--n-candidates", "12", "--device", "cpu"],
+        [run],
+        says=("session.json",),
+    )
 
 
 @case
@@ -454,6 +485,7 @@ def add_two_poses_with_one_name(tmp, bases):
 def add_pose_not_rigid(tmp, bases):
     def change(d):
         d["frames"][0]["transform_matrix"][0][0] *= 3
+
     return _add(tmp, bases, poses=_poses(tmp, bases, change=change), says=("poses.json", "frames[0]"))
 
 
@@ -470,8 +502,11 @@ def add_to_a_dataset_folder(tmp, bases):
 def _render_proposals(tmp, bases, *extra, says=()) -> Case:
     run = _session(tmp, bases)
     poses = _poses(tmp, bases)
-    return Case(["render-proposals", run, "--poses", poses, "--scene", "lego", "--out", tmp / "renders", *extra],
-                [run, poses], says=says)
+    return Case(
+        ["render-proposals", run, "--poses", poses, "--scene", "lego", "--out", tmp / "renders", *extra],
+        [run, poses],
+        says=says,
+    )
 
 
 @case
@@ -490,5 +525,8 @@ def render_proposals_poses_missing(tmp, bases):
 def train_session_with_new_session_options(tmp, bases):
     """Options that only shape a new session are refused, not silently ignored, on an existing one."""
     run = _session(tmp, bases)
-    return Case(["train", run, "--preset", "paper", "--seed", "3", "--steps", "1", "--device", "cpu"], [run],
-                says=("--preset", "--seed", "session.json"))
+    return Case(
+        ["train", run, "--preset", "paper", "--seed", "3", "--steps", "1", "--device", "cpu"],
+        [run],
+        says=("--preset", "--seed", "session.json"),
+    )

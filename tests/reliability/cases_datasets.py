@@ -68,14 +68,19 @@ def frame_without_matrix(tmp, bases):
 
 @case
 def frame_matrix_3x4(tmp, bases):
-    return _bad_train_json(tmp, bases, lambda d: d["frames"][1].update(transform_matrix=d["frames"][1]
-                                                                         ["transform_matrix"][:3]), "frames[1]")
+    return _bad_train_json(
+        tmp,
+        bases,
+        lambda d: d["frames"][1].update(transform_matrix=d["frames"][1]["transform_matrix"][:3]),
+        "frames[1]",
+    )
 
 
 @case
 def frame_matrix_nan(tmp, bases):
     def change(d):
         d["frames"][2]["transform_matrix"][0][3] = float("nan")
+
     return _bad_train_json(tmp, bases, change, "frames[2]")
 
 
@@ -88,6 +93,7 @@ def frame_matrix_strings(tmp, bases):
 def frame_matrix_not_rigid(tmp, bases):
     def change(d):
         d["frames"][0]["transform_matrix"][0][0] = 5.0
+
     return _bad_train_json(tmp, bases, change, "frames[0]")
 
 
@@ -158,11 +164,15 @@ def split_missing(tmp, bases):
 def nerfstudio_without_focal_length(tmp, bases):
     data = tmp / "ns"
     write_images(data / "images", ["a", "b", "c"])
-    frames = [{"file_path": f"images/{n}.png", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4 + i],
-                                                                       [0, 0, 0, 1]]} for i, n in enumerate("abc")]
+    frames = [
+        {
+            "file_path": f"images/{n}.png",
+            "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 4 + i], [0, 0, 0, 1]],
+        }
+        for i, n in enumerate("abc")
+    ]
     (data / "transforms.json").write_text(json.dumps({"w": 8, "h": 8, "cx": 4, "cy": 4, "frames": frames}))
     return Case(train_on(data, tmp).argv, [data], says=("transforms.json", "fl_x"))
-
 
 
 def _nerfstudio(tmp, bases, change=None, **top) -> Path:
@@ -237,18 +247,40 @@ def split_name_leaving_the_folder(tmp, bases):
 @case
 def cameras_looking_the_same_way(tmp, bases):
     """The hemisphere cannot be estimated from parallel optical axes: say so, and what to give."""
+
     def parallel(d):
         for frame in d["frames"]:
             m = frame["transform_matrix"]
             frame["transform_matrix"] = [[1, 0, 0, m[0][3]], [0, 1, 0, m[1][3]], [0, 0, 1, 4], [0, 0, 0, 1]]
+
     data = copy_dataset(tmp, bases)
     edit_json(data / "transforms_train.json", parallel)
     return Case(train_on(data, tmp).argv, [data], says=("centre", "radius"))
 
 
 def _scene_render(tmp, *extra, says=()) -> Case:
-    return Case(["scene", "render", "lego", "--out", tmp / "lego", "--res", "8", "--pool", "2", "--test", "1",
-                 "--initial", "1", "--samples", "1", *extra], [tmp], says=says)
+    return Case(
+        [
+            "scene",
+            "render",
+            "lego",
+            "--out",
+            tmp / "lego",
+            "--res",
+            "8",
+            "--pool",
+            "2",
+            "--test",
+            "1",
+            "--initial",
+            "1",
+            "--samples",
+            "1",
+            *extra,
+        ],
+        [tmp],
+        says=says,
+    )
 
 
 @case

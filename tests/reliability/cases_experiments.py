@@ -127,8 +127,12 @@ def run_two_scenes_with_one_name(tmp, bases):
 def run_folder_shadowing_a_builtin_scene(tmp, bases):
     """A folder ./lego must not silently replace the built-in lego scene."""
     copy(bases.dataset, tmp / "lego")
-    return Case(["run", "--scenes", "lego", "--out", tmp / "results", *TINY], [tmp / "lego"], cwd=tmp,
-                says=("lego", "ambiguous"))
+    return Case(
+        ["run", "--scenes", "lego", "--out", tmp / "results", *TINY],
+        [tmp / "lego"],
+        cwd=tmp,
+        says=("lego", "ambiguous"),
+    )
 
 
 @case
@@ -240,8 +244,15 @@ def results_sweep_json_without_fingerprint(tmp, bases):
 @case
 def results_changed_selection_setting(tmp, bases):
     results = _results(tmp, bases)
-    return _run(tmp, bases, "--selection.temperature", "2", out=results,
-                says=("selection.temperature", "1.0", "2.0", "--force"), inputs=[results])
+    return _run(
+        tmp,
+        bases,
+        "--selection.temperature",
+        "2",
+        out=results,
+        says=("selection.temperature", "1.0", "2.0", "--force"),
+        inputs=[results],
+    )
 
 
 @case
@@ -253,8 +264,9 @@ def results_changed_engine(tmp, bases):
 @case
 def results_changed_resolution(tmp, bases):
     results = _results(tmp, bases)
-    return _run(tmp, bases, "--resolution", "4", out=results, says=("resolution", "8", "4", "--force"),
-                inputs=[results])
+    return _run(
+        tmp, bases, "--resolution", "4", out=results, says=("resolution", "8", "4", "--force"), inputs=[results]
+    )
 
 
 @case
@@ -270,8 +282,9 @@ def results_of_a_dataset_with_the_same_cameras_and_other_images(tmp, bases):
     results = _results(tmp, bases)
     other = copy(bases.dataset, tmp / "elsewhere" / bases.dataset.name)
     write_images(other / "test", ["r_1"])
-    return _run(tmp, bases, data=other, out=results, says=(bases.dataset.name, "different content"),
-                inputs=[results, other])
+    return _run(
+        tmp, bases, data=other, out=results, says=(bases.dataset.name, "different content"), inputs=[results, other]
+    )
 
 
 @case

@@ -43,7 +43,7 @@ def _compatible_run_cli():
         argv = list(argv)
         if argv[:1] == ["run"] and "--device" in argv:
             i = argv.index("--device")
-            del argv[i:i + 2]
+            del argv[i : i + 2]
         return run_cli(argv, cwd)
 
     return without_device
@@ -83,8 +83,11 @@ def main() -> None:
 
     outcome_of, totals = count(args.names)
     print(f"nerfaug from {Path(nerfaug.__file__).parent}")
-    print(f"cases {len(outcome_of)}: " + ", ".join(f"{k} {totals[k]}" for k in KINDS)
-          + f" (of the clear ones, {totals['usage']} by the argument parser's usage text)")
+    print(
+        f"cases {len(outcome_of)}: "
+        + ", ".join(f"{k} {totals[k]}" for k in KINDS)
+        + f" (of the clear ones, {totals['usage']} by the argument parser's usage text)"
+    )
     if args.json:
         args.json.write_text(json.dumps({"totals": dict(totals), "cases": outcome_of}, indent=1))
 

@@ -132,9 +132,9 @@ class Case:
     argv: list
     inputs: list[Path] = field(default_factory=list)
     code: int = 2
-    says: tuple[str, ...] = ()          # substrings the one-line error must contain (file, field, value)
+    says: tuple[str, ...] = ()  # substrings the one-line error must contain (file, field, value)
     cwd: Path | None = None
-    usage: bool = False                  # refused by the argument parser (its usage text, exit 2)
+    usage: bool = False  # refused by the argument parser (its usage text, exit 2)
 
 
 def classify(case: Case, outcome: Outcome, before: dict, after: dict) -> str:
@@ -163,8 +163,10 @@ def make_bases(root: Path):
     root = Path(root)
     dataset = make_dataset(root / "dataset")
     session, results = root / "session", root / "results"
-    for argv in (["train", dataset, "--out", session, "--preset", "test", "--steps", "3", "--device", "cpu"],
-                 ["run", "--data", dataset, "--out", results, *TINY]):
+    for argv in (
+        ["train", dataset, "--out", session, "--preset", "test", "--steps", "3", "--device", "cpu"],
+        ["run", "--data", dataset, "--out", results, *TINY],
+    ):
         outcome = run_cli(argv)
         if outcome.code != 0:
             raise RuntimeError(f"making the inputs failed: nerfaug {argv}: {outcome.err}{outcome.escaped or ''}")

@@ -76,8 +76,11 @@ def test_ctrl_c_while_training_after_add_keeps_the_added_views(bases, tmp_path, 
     (tmp_path / "poses.json").write_text(json.dumps({"camera_angle_x": test["camera_angle_x"], "frames": frames}))
     images = write_images(tmp_path / "captures", names)
     _interrupt_at(monkeypatch, start + 10, times=2)  # stopped at once, before any periodic checkpoint
-    _one_line(run_cli(["add", run, "--images", images, "--poses", tmp_path / "poses.json", "--steps", "100",
-                       "--device", "cpu"]))
+    _one_line(
+        run_cli(
+            ["add", run, "--images", images, "--poses", tmp_path / "poses.json", "--steps", "100", "--device", "cpu"]
+        )
+    )
     state = json.loads((run / "session.json").read_text())
     assert state["additions"][-1]["names"] == names
     session = CaptureSession.open(run)

@@ -52,8 +52,7 @@ def test_with_a_flat_entropy_the_local_penalty_spreads_the_batch(rotations):
     for seed in range(40):
         chosen = rejection_sample(plain_scores, 6, torch.Generator().manual_seed(seed))
         plain.append(_min_pairwise_angle(candidates, chosen))
-        chosen = batch_aware_sample(flat, base, candidates, 6, torch.Generator().manual_seed(seed),
-                                    entropy_sigma=0.35)
+        chosen = batch_aware_sample(flat, base, candidates, 6, torch.Generator().manual_seed(seed), entropy_sigma=0.35)
         assert len(set(chosen.tolist())) == 6
         local.append(_min_pairwise_angle(candidates, chosen))
     assert sum(local) / len(local) > 1.2 * sum(plain) / len(plain)
@@ -94,8 +93,9 @@ def test_ineligible_candidates_are_never_chosen(rotations):
     base = coverage_distance(candidates, training)
     eligible = torch.arange(len(candidates)) % 3 == 0
     for seed in range(5):
-        chosen = batch_aware_sample(None, base, candidates, 6, torch.Generator().manual_seed(seed), (0.0, 1.0),
-                                    eligible=eligible)
+        chosen = batch_aware_sample(
+            None, base, candidates, 6, torch.Generator().manual_seed(seed), (0.0, 1.0), eligible=eligible
+        )
         assert eligible[chosen].all()
 
 

@@ -2,7 +2,10 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import (
-    BLENDER_CAMERA_ANGLE_X, BLENDER_RADIUS, half_hemisphere_poses, sample_uniform_poses,
+    BLENDER_CAMERA_ANGLE_X,
+    BLENDER_RADIUS,
+    half_hemisphere_poses,
+    sample_uniform_poses,
 )
 from nerfaug.selection.candidates import hemisphere_candidates, matching_poses, pool_candidates
 
@@ -26,8 +29,9 @@ def test_hemisphere_candidates_take_the_radius_from_the_template_unless_given():
     template = Cameras.from_fov(sample_uniform_poses(3, radius=2.5), 0.7, 10, 10)
     radii = hemisphere_candidates(template, 20).positions.norm(dim=-1)
     assert torch.allclose(radii, torch.full((20,), 2.5), atol=1e-4)
-    assert torch.allclose(hemisphere_candidates(template, 20, radius=3.0).positions.norm(dim=-1),
-                          torch.full((20,), 3.0), atol=1e-4)
+    assert torch.allclose(
+        hemisphere_candidates(template, 20, radius=3.0).positions.norm(dim=-1), torch.full((20,), 3.0), atol=1e-4
+    )
 
 
 def test_pool_candidates_leave_out_training_views():

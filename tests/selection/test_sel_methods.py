@@ -10,16 +10,32 @@ from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, angles_from_pose, half_hemisphere_poses
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 from nerfaug.selection import (
-    METHODS, Selection, SelectionConfig, candidate_scores, hemisphere_candidates, select_views,
+    METHODS,
+    Selection,
+    SelectionConfig,
+    candidate_scores,
+    hemisphere_candidates,
+    select_views,
 )
 
 EXPECTED = {
-    "ours", "ours-nbv", "uniform", "entropy", "entropy-sampling", "fisherrf", "fisherrf-sampling",
-    "distance", "distance-nbv", "furthest", "ours-authors", "entropy-authors-nbv", "distance-authors-nbv",
-    "ours-batch", "ours-batch-local", "ours-batch-sharp",
+    "ours",
+    "ours-nbv",
+    "uniform",
+    "entropy",
+    "entropy-sampling",
+    "fisherrf",
+    "fisherrf-sampling",
+    "distance",
+    "distance-nbv",
+    "furthest",
+    "ours-authors",
+    "entropy-authors-nbv",
+    "distance-authors-nbv",
+    "ours-batch",
+    "ours-batch-local",
+    "ours-batch-sharp",
 }
-
-
 
 
 class BlobNerf(nn.Module):
@@ -132,10 +148,20 @@ def test_too_many_views_and_bad_config_are_refused(scene):
         SelectionConfig(entropy_mode="nats")
 
 
-@pytest.mark.parametrize("name, value", [
-    ("chunk", 0), ("max_draws", 0), ("fisher_train_pixels", 0), ("fisher_resolution", -1), ("fisher_probes", 0),
-    ("fisher_cache_floats", 0), ("fisher_lambda", 0.0), ("scale_m", -1.0), ("authors_threshold", -0.5),
-])
+@pytest.mark.parametrize(
+    "name, value",
+    [
+        ("chunk", 0),
+        ("max_draws", 0),
+        ("fisher_train_pixels", 0),
+        ("fisher_resolution", -1),
+        ("fisher_probes", 0),
+        ("fisher_cache_floats", 0),
+        ("fisher_lambda", 0.0),
+        ("scale_m", -1.0),
+        ("authors_threshold", -0.5),
+    ],
+)
 def test_counts_and_scales_out_of_range_are_refused_by_name(name, value):
     with pytest.raises(ValueError, match=f"SelectionConfig.{name}="):
         SelectionConfig(**{name: value})
@@ -154,6 +180,7 @@ def test_selection_round_trips_through_json(scene):
 
 
 # --- The authors' code's variants, the registries and the families -------------------------
+
 
 def test_ours_authors_is_ours_with_the_authors_settings(scene):
     from nerfaug.selection import AUTHORS_SETTINGS, get_method

@@ -9,7 +9,10 @@ from scipy import stats
 
 from nerfaug.hemisphere import pose_from_angles
 from nerfaug.selection.selectors import (
-    greedy_farthest, rejection_sample, select_top_k, select_uniform,
+    greedy_farthest,
+    rejection_sample,
+    select_top_k,
+    select_uniform,
 )
 
 TOY = torch.tensor([0.5, 1.0, 2.0, 4.0, 0.0, 2.5])

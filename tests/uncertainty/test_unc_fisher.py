@@ -7,15 +7,20 @@ from torch.func import functional_call
 from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
-from nerfaug.cameras import generate_rays
 from nerfaug.uncertainty.fisher import (
-    fisher_diagonal, fisher_diagonal_groups, fisher_views, fisherrf_greedy, fisherrf_scores,
-    fisherrf_view_scores, n_trainable, pixel_grid, sample_pixel_rays, stratified_pixel_rays,
+    fisher_diagonal,
+    fisher_diagonal_groups,
+    fisher_views,
+    fisherrf_greedy,
+    fisherrf_scores,
+    fisherrf_view_scores,
+    n_trainable,
+    pixel_grid,
+    sample_pixel_rays,
+    stratified_pixel_rays,
     stratified_pixels,
 )
 from nerfaug.uncertainty.rays import views_rays
-
-
 
 
 class TinyNerf(nn.Module):
@@ -90,15 +95,27 @@ def test_random_sign_estimator_is_unbiased():
     origins, directions = rays(10)
     expected = full_jacobian_diagonal(model, origins, directions)
     estimate = fisher_diagonal(
-        model, origins, directions, method="random-sign", n_probes=1000, chunk=10,
+        model,
+        origins,
+        directions,
+        method="random-sign",
+        n_probes=1000,
+        chunk=10,
         generator=torch.Generator().manual_seed(0),
     )
     # Relative error ~ sqrt(2 / n_probes) per entry; a bias (e.g. a missing 1 / n_probes or a
     # factor from the probe distribution) would show up far above this bound.
     relative = (estimate - expected).norm() / expected.norm()
     assert relative < 0.1
-    few = fisher_diagonal(model, origins, directions, method="random-sign", n_probes=2, chunk=10,
-                          generator=torch.Generator().manual_seed(0))
+    few = fisher_diagonal(
+        model,
+        origins,
+        directions,
+        method="random-sign",
+        n_probes=2,
+        chunk=10,
+        generator=torch.Generator().manual_seed(0),
+    )
     assert (few - expected).norm() / expected.norm() > 0.3  # the bound above is not loose
 
 
@@ -107,8 +124,15 @@ def test_random_sign_with_one_ray_per_chunk_is_exact():
     model = TinyNerf()
     origins, directions = rays(4)
     expected = full_jacobian_diagonal(model, origins, directions)
-    per_ray = fisher_diagonal(model, origins, directions, method="random-sign", n_probes=1, chunk=1,
-                              generator=torch.Generator().manual_seed(1))
+    per_ray = fisher_diagonal(
+        model,
+        origins,
+        directions,
+        method="random-sign",
+        n_probes=1,
+        chunk=1,
+        generator=torch.Generator().manual_seed(1),
+    )
     assert torch.allclose(per_ray, expected, rtol=1e-4, atol=1e-7)
 
 
@@ -128,8 +152,9 @@ def test_groups_split_the_diagonal_by_view():
     per_group = fisher_diagonal_groups(model, origins, directions, groups, 3, method="exact")
     for g in range(3):
         mask = groups == g
-        assert torch.allclose(per_group[g], full_jacobian_diagonal(model, origins[mask], directions[mask]),
-                              rtol=1e-4, atol=1e-7)
+        assert torch.allclose(
+            per_group[g], full_jacobian_diagonal(model, origins[mask], directions[mask]), rtol=1e-4, atol=1e-7
+        )
 
 
 def test_bad_arguments_are_refused():
@@ -189,13 +214,20 @@ def test_view_scores_recompute_dropped_views_identically():
     candidates = cameras(7)
     h_train = fisher_diagonal(model, *rays(16), n_probes=4, generator=torch.Generator().manual_seed(0))
     scores, h_of = fisherrf_view_scores(
-        model, candidates, h_train, cache_floats=1, resolution=3, n_probes=2,
-        generator=torch.Generator().manual_seed(1), views_per_batch=3,
+        model,
+        candidates,
+        h_train,
+        cache_floats=1,
+        resolution=3,
+        n_probes=2,
+        generator=torch.Generator().manual_seed(1),
+        views_per_batch=3,
     )
     for i in range(7):
         assert torch.allclose(fisherrf_scores(h_train, h_of(i)), scores[i], rtol=1e-5)
-    exact_scores, _ = fisherrf_view_scores(model, candidates, h_train, resolution=3, method="exact",
-                                           generator=torch.Generator().manual_seed(2))
+    exact_scores, _ = fisherrf_view_scores(
+        model, candidates, h_train, resolution=3, method="exact", generator=torch.Generator().manual_seed(2)
+    )
     dense = fisher_views(model, candidates, resolution=3, method="exact", generator=torch.Generator().manual_seed(2))
     assert torch.allclose(exact_scores, fisherrf_scores(h_train, dense), rtol=1e-5)
 
@@ -241,10 +273,14 @@ def full_image_diagonals(model, cams):
     """Per view, diag(J^T J) over every pixel of its image: the full Jacobian (torch reference)."""
     n_pixels = cams.width * cams.height
     origins, directions = views_rays(cams, list(range(len(cams))))
-    return torch.stack([
-        full_jacobian_diagonal(model, origins[v * n_pixels : (v + 1) * n_pixels], directions[v * n_pixels : (v + 1) * n_pixels])
-        for v in range(len(cams))
-    ])
+    return torch.stack(
+        [
+            full_jacobian_diagonal(
+                model, origins[v * n_pixels : (v + 1) * n_pixels], directions[v * n_pixels : (v + 1) * n_pixels]
+            )
+            for v in range(len(cams))
+        ]
+    )
 
 
 def test_whole_image_diagonal_equals_the_sum_over_every_pixel():
@@ -252,7 +288,9 @@ def test_whole_image_diagonal_equals_the_sum_over_every_pixel():
     cams = cameras(2).resized(6, 5)
     expected = full_image_diagonals(model, cams)
     for method in ("exact", "random-sign"):  # the random-sign with chunk 1 is exact too
-        whole = fisher_views(model, cams, resolution=6, method=method, chunk=1, generator=torch.Generator().manual_seed(0))
+        whole = fisher_views(
+            model, cams, resolution=6, method=method, chunk=1, generator=torch.Generator().manual_seed(0)
+        )
         assert torch.allclose(whole, expected, rtol=1e-4, atol=1e-6), method
     # H_train over every pixel of the same views is on the same scale: the sum of the H_cand.
     origins, directions, weights = stratified_pixel_rays(cams, 10**6, torch.Generator().manual_seed(0))
@@ -268,9 +306,9 @@ def test_subsampled_diagonal_is_an_unbiased_estimate_of_the_whole_image():
     n_seeds = 300
     generator = torch.Generator().manual_seed(0)
     # 3 x 2 blocks of 4 x 5 pixels, one pixel each, weight 20; only the pixels are random ("exact").
-    estimates = torch.stack([
-        fisher_views(model, cams, resolution=3, method="exact", generator=generator)[0] for _ in range(n_seeds)
-    ])
+    estimates = torch.stack(
+        [fisher_views(model, cams, resolution=3, method="exact", generator=generator)[0] for _ in range(n_seeds)]
+    )
     mean, standard_error = estimates.mean(dim=0), estimates.std(dim=0) / n_seeds**0.5
     z = (mean - expected) / standard_error
     assert z.abs().max() < 4.5  # about 70 parameters: a max |z| of 4.5 is a 1-in-1000 event
@@ -304,11 +342,20 @@ def test_random_sign_with_weights_is_unbiased_for_the_weighted_sum():
     origins, directions = rays(6)
     weights = torch.tensor([1.0, 4.0, 0.5, 9.0, 2.0, 3.0])
     expected = fisher_diagonal(model, origins, directions, method="exact", weights=weights)
-    reference = sum(w * full_jacobian_diagonal(model, origins[i : i + 1], directions[i : i + 1])
-                    for i, w in enumerate(weights))
+    reference = sum(
+        w * full_jacobian_diagonal(model, origins[i : i + 1], directions[i : i + 1]) for i, w in enumerate(weights)
+    )
     assert torch.allclose(expected, reference, rtol=1e-4, atol=1e-7)
-    estimate = fisher_diagonal(model, origins, directions, method="random-sign", n_probes=2000, chunk=6,
-                               weights=weights, generator=torch.Generator().manual_seed(0))
+    estimate = fisher_diagonal(
+        model,
+        origins,
+        directions,
+        method="random-sign",
+        n_probes=2000,
+        chunk=6,
+        weights=weights,
+        generator=torch.Generator().manual_seed(0),
+    )
     assert (estimate - expected).norm() / expected.norm() < 0.1
 
 
@@ -324,12 +371,18 @@ def test_fisherrf_training_sum_is_on_the_candidates_whole_image_scale():
     h_train, scores, h_of = fisherrf_candidates(model, train, candidates, config, torch.Generator().manual_seed(0))
     assert torch.allclose(h_train, expected, rtol=1e-4, atol=1e-6)
     # Subsampled (12 of 60 pixels), it is still an estimate of the same sum, not of a fifth of it.
-    estimates = torch.stack([
-        fisherrf_candidates(model, train, candidates, SelectionConfig(fisher_method="exact", fisher_train_pixels=12,
-                                                                      fisher_resolution=6),
-                            torch.Generator().manual_seed(seed))[0]
-        for seed in range(60)
-    ])
+    estimates = torch.stack(
+        [
+            fisherrf_candidates(
+                model,
+                train,
+                candidates,
+                SelectionConfig(fisher_method="exact", fisher_train_pixels=12, fisher_resolution=6),
+                torch.Generator().manual_seed(seed),
+            )[0]
+            for seed in range(60)
+        ]
+    )
     ratio = estimates.mean(dim=0).sum() / expected.sum()
     assert 0.8 < ratio < 1.25, ratio
     assert torch.allclose(h_of(0), full_image_diagonals(model, candidates)[0], rtol=1e-4, atol=1e-6)

@@ -15,12 +15,14 @@ def rotvecs_with_hard_angles(n: int, seed: int) -> np.ndarray:
     axes = rng.normal(size=(n, 3))
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
     k = n // 4
-    angles = np.concatenate([
-        rng.uniform(0.0, math.pi, n - 3 * k),
-        math.pi - 10.0 ** rng.uniform(-12, -6, k),
-        10.0 ** rng.uniform(-12, -6, k),
-        np.array([0.0, math.pi, math.pi - 1e-6, 1e-6] * (k // 4 + 1))[:k],
-    ])
+    angles = np.concatenate(
+        [
+            rng.uniform(0.0, math.pi, n - 3 * k),
+            math.pi - 10.0 ** rng.uniform(-12, -6, k),
+            10.0 ** rng.uniform(-12, -6, k),
+            np.array([0.0, math.pi, math.pi - 1e-6, 1e-6] * (k // 4 + 1))[:k],
+        ]
+    )
     return axes * angles[:, None]
 
 

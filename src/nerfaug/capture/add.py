@@ -42,12 +42,14 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
     if names is not None:
         expected_names = list(names)
     is_folder = isinstance(images, (str, Path)) and Path(images).is_dir()
-    captures = collect_images(images, expected_names if is_folder else None,
-                              tuple(session.state.background))
+    captures = collect_images(images, expected_names if is_folder else None, tuple(session.state.background))
     if len(captures) != len(checked):
         where = str(images) if isinstance(images, (str, Path)) else "images"
-        raise DatasetError(where, f"got {len(captures)} images but {len(checked)} poses; "
-                                  "give one image per pose", value=f"{len(captures)} images")
+        raise DatasetError(
+            where,
+            f"got {len(captures)} images but {len(checked)} poses; give one image per pose",
+            value=f"{len(captures)} images",
+        )
     if expected_names is not None and len(expected_names) != len(checked):
         raise DatasetError(pose_source, f"got {len(expected_names)} names but {len(checked)} poses")
     k = session.state.intrinsics
@@ -68,11 +70,19 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
     seen: set[str] = set()
     for i, name in enumerate(expected_names):
         if not NAME.fullmatch(name):
-            raise DatasetError(pose_source, "an image name may hold only letters, digits, '.', '_', '-'",
-                               field=f"names[{i}]", value=name)
+            raise DatasetError(
+                pose_source,
+                "an image name may hold only letters, digits, '.', '_', '-'",
+                field=f"names[{i}]",
+                value=name,
+            )
         if name in existing:
-            raise DatasetError(json_path, f"the dataset already has a frame named {name!r}; was this capture "
-                                          "added before?", field=f"names[{i}]", value=name)
+            raise DatasetError(
+                json_path,
+                f"the dataset already has a frame named {name!r}; was this capture added before?",
+                field=f"names[{i}]",
+                value=name,
+            )
         if name in seen:
             raise DatasetError(pose_source, "two new images share this name", field=f"names[{i}]", value=name)
         seen.add(name)
@@ -92,7 +102,12 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
     session.trainer.add_views(session.engine_views(start))
     session.state.views_in_model = len(session.trainer.train_views)
     matched = [p.number for p in session.state.proposals if set(expected_names) <= set(p.names)]
-    session.state.additions.append(AdditionRecord(
-        step=session.step, names=list(expected_names), proposal=matched[-1] if matched else None, created=now(),
-    ))
+    session.state.additions.append(
+        AdditionRecord(
+            step=session.step,
+            names=list(expected_names),
+            proposal=matched[-1] if matched else None,
+            created=now(),
+        )
+    )
     return list(expected_names)

@@ -22,15 +22,24 @@ def check_method(method: str) -> None:
     from nerfaug.selection import METHODS
 
     if method not in METHODS:
-        raise ValueError(f"unknown selection method {method!r}; choose one of {', '.join(METHODS)} "
-                         "(`nerfaug methods` describes them)")
+        raise ValueError(
+            f"unknown selection method {method!r}; choose one of {', '.join(METHODS)} "
+            "(`nerfaug methods` describes them)"
+        )
 
 
 def with_poses(template: Cameras, poses: Tensor) -> Cameras:
     """Cameras at `poses` (n, 4, 4) with the intrinsics of `template`'s first camera."""
     first = template[0]
-    return Cameras(poses, float(first.fx[0]), float(first.fy[0]), float(first.cx[0]), float(first.cy[0]),
-                   template.width, template.height)
+    return Cameras(
+        poses,
+        float(first.fx[0]),
+        float(first.fy[0]),
+        float(first.cx[0]),
+        float(first.cy[0]),
+        template.width,
+        template.height,
+    )
 
 
 def describe_candidates(candidates) -> str:
@@ -42,8 +51,9 @@ def describe_candidates(candidates) -> str:
     return "given"
 
 
-def candidate_cameras(session, candidates=None, n_candidates: int = 500,
-                      generator: torch.Generator | None = None) -> Cameras:
+def candidate_cameras(
+    session, candidates=None, n_candidates: int = 500, generator: torch.Generator | None = None
+) -> Cameras:
     """`CaptureSession.candidate_cameras`: world-frame candidates minus the poses trained on."""
     from nerfaug.selection import hemisphere_candidates, matching_poses
 
@@ -51,8 +61,13 @@ def candidate_cameras(session, candidates=None, n_candidates: int = 500,
     template = session.template()
     engine_train = session.trainer.train_views.cameras.to("cpu")
     if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
-        engine = hemisphere_candidates(session.template(engine_train.width, engine_train.height),
-                                       n_candidates, generator, radius=ENGINE_RADIUS, training=engine_train)
+        engine = hemisphere_candidates(
+            session.template(engine_train.width, engine_train.height),
+            n_candidates,
+            generator,
+            radius=ENGINE_RADIUS,
+            training=engine_train,
+        )
         return with_poses(template, session.hemisphere.to_world(engine.camera_to_world))
     if isinstance(candidates, Cameras):
         given = candidates
@@ -62,16 +77,23 @@ def candidate_cameras(session, candidates=None, n_candidates: int = 500,
         poses = np.asarray(as_array(candidates), dtype=np.float64)
         if poses.ndim != 3 or poses.shape[1:] != (4, 4):
             raise ValueError(f"candidate poses must have shape (n, 4, 4), got {poses.shape}")
-        given = with_poses(template, torch.stack(
-            [check_pose(p, Path("candidates"), f"candidates[{i}]") for i, p in enumerate(poses)]))
+        given = with_poses(
+            template, torch.stack([check_pose(p, Path("candidates"), f"candidates[{i}]") for i, p in enumerate(poses)])
+        )
     # Compared in the engine frame, so the tolerance does not depend on the data's units.
     known = matching_poses(session.hemisphere.to_engine(given.camera_to_world), engine_train.camera_to_world)
     return given[torch.nonzero(~known).reshape(-1).tolist()]
 
 
 def propose(
-    session, n: int = 6, method: str = "ours", candidates=None, n_candidates: int = 500,
-    generator: torch.Generator | None = None, seed: int | None = None, config=None,
+    session,
+    n: int = 6,
+    method: str = "ours",
+    candidates=None,
+    n_candidates: int = 500,
+    generator: torch.Generator | None = None,
+    seed: int | None = None,
+    config=None,
     map: bool = True,
 ) -> Proposal:
     """`CaptureSession.propose`: choose, record and write `n` views to capture next."""
@@ -95,17 +117,21 @@ def propose(
         generator = torch.Generator().manual_seed(used_seed)
     world = candidate_cameras(session, candidates, n_candidates, generator)
     if len(world) < n:
-        raise ValueError(f"{describe_candidates(candidates)}: cannot propose {n} views from {len(world)} candidates "
-                         "(poses the model already trains on are left out); ask for fewer views or give more "
-                         "candidates")
+        raise ValueError(
+            f"{describe_candidates(candidates)}: cannot propose {n} views from {len(world)} candidates "
+            "(poses the model already trains on are left out); ask for fewer views or give more "
+            "candidates"
+        )
     hemisphere = session.hemisphere
     engine_train = session.trainer.train_views.cameras
-    engine = Cameras(hemisphere.to_engine(world.camera_to_world), world.fx, world.fy, world.cx, world.cy,
-                     world.width, world.height)
+    engine = Cameras(
+        hemisphere.to_engine(world.camera_to_world), world.fx, world.fy, world.cx, world.cy, world.width, world.height
+    )
     if (engine.width, engine.height) != (engine_train.width, engine_train.height):
         engine = engine.resized(engine_train.width, engine_train.height)
-    selection = select_views(method, session.trainer.model, engine_train, engine.to(session.trainer.device), n,
-                             generator, config)
+    selection = select_views(
+        method, session.trainer.model, engine_train, engine.to(session.trainer.device), n, generator, config
+    )
     chosen = selection.indices.long()
     poses = world.camera_to_world[chosen]
     azimuth, polar, _ = hemisphere.angles(poses)
@@ -116,20 +142,48 @@ def propose(
         from nerfaug.maps import plot_hemisphere_map
 
         map_path = plot_hemisphere_map(
-            engine.camera_to_world, selection.scores, engine_train.camera_to_world.cpu(),
-            engine.camera_to_world[chosen], path=folder / f"proposal_{number:03d}.png",
+            engine.camera_to_world,
+            selection.scores,
+            engine_train.camera_to_world.cpu(),
+            engine.camera_to_world[chosen],
+            path=folder / f"proposal_{number:03d}.png",
             title=f"proposal {number}: {method} at step {session.step}",
         )
     angle_x = float(world.camera_angle_x[0])
-    proposal = Proposal(number, selection.method or method, poses, names, azimuth, polar, chosen, world,
-                        selection.scores.float(), dict(selection.components), map_path, session.step,
-                        used_seed, angle_x, hemisphere)
+    proposal = Proposal(
+        number,
+        selection.method or method,
+        poses,
+        names,
+        azimuth,
+        polar,
+        chosen,
+        world,
+        selection.scores.float(),
+        dict(selection.components),
+        map_path,
+        session.step,
+        used_seed,
+        angle_x,
+        hemisphere,
+    )
     record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
-    session.state.proposals.append(ProposalRecord(
-        number=number, method=proposal.method, n=n, step=session.step, seed=used_seed,
-        candidates=describe_candidates(candidates), n_candidates=len(world), names=names,
-        poses=poses.tolist(), azimuth=azimuth.tolist(), polar=polar.tolist(),
-        file=str(record_path.relative_to(session.run_dir)), created=now(),
-        extra={"selection": used_config.to_dict()},
-    ))
+    session.state.proposals.append(
+        ProposalRecord(
+            number=number,
+            method=proposal.method,
+            n=n,
+            step=session.step,
+            seed=used_seed,
+            candidates=describe_candidates(candidates),
+            n_candidates=len(world),
+            names=names,
+            poses=poses.tolist(),
+            azimuth=azimuth.tolist(),
+            polar=polar.tolist(),
+            file=str(record_path.relative_to(session.run_dir)),
+            created=now(),
+            extra={"selection": used_config.to_dict()},
+        )
+    )
     return proposal

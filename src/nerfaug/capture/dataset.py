@@ -21,8 +21,22 @@ from nerfaug.jsonio import atomic_write_bytes, read_json
 # A new frame's image name (file stem): no separators, no leading dot.
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 # nerfstudio keys describing the camera, kept when a nerfstudio dataset is copied or exported.
-CAMERA_KEYS = ("camera_model", "fl_x", "fl_y", "cx", "cy", "w", "h", "k1", "k2", "k3", "k4", "p1", "p2",
-               "camera_angle_x")
+CAMERA_KEYS = (
+    "camera_model",
+    "fl_x",
+    "fl_y",
+    "cx",
+    "cy",
+    "w",
+    "h",
+    "k1",
+    "k2",
+    "k3",
+    "k4",
+    "p1",
+    "p2",
+    "camera_angle_x",
+)
 DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 
@@ -38,8 +52,10 @@ def dataset_json(root: Path, split: str = "train") -> tuple[Path, str]:
 
 def frame_files(root: Path, json_path: Path, frames: list) -> list[Path]:
     """The image file of each frame (resolved against `root`; the reader's checks apply)."""
-    return [resolve_image(root, str(frame["file_path"]), json_path, f"frames[{i}].file_path")
-            for i, frame in enumerate(frames)]
+    return [
+        resolve_image(root, str(frame["file_path"]), json_path, f"frames[{i}].file_path")
+        for i, frame in enumerate(frames)
+    ]
 
 
 def unique_stem(stem: str, taken: set[str]) -> str:
@@ -62,7 +78,8 @@ def blender_compatible(cameras: Cameras) -> bool:
     fx, fy, cx, cy = cameras.fx.double(), cameras.fy.double(), cameras.cx.double(), cameras.cy.double()
     tolerance = 1e-4 * float(fx.abs().max())
     return bool(
-        (fx - fx[0]).abs().max() <= tolerance and (fy - fx).abs().max() <= tolerance
+        (fx - fx[0]).abs().max() <= tolerance
+        and (fy - fx).abs().max() <= tolerance
         and (cx - cameras.width / 2).abs().max() <= 1e-3 * cameras.width
         and (cy - cameras.height / 2).abs().max() <= 1e-3 * cameras.height
     )
@@ -72,11 +89,13 @@ def has_distortion(meta: dict) -> bool:
     """Whether a nerfstudio transforms dict has a non-zero distortion coefficient (global or per frame)."""
     frames = meta.get("frames") or []
     return any(float(meta.get(k) or 0) != 0 for k in DISTORTION_KEYS) or any(
-        float(f.get(k) or 0) != 0 for f in frames if isinstance(f, dict) for k in DISTORTION_KEYS)
+        float(f.get(k) or 0) != 0 for f in frames if isinstance(f, dict) for k in DISTORTION_KEYS
+    )
 
 
-def copy_frames(root: Path, json_path: Path, frames: list, out: Path, folder: str, fmt: str,
-                keep: Sequence[str] = ()) -> list[dict]:
+def copy_frames(
+    root: Path, json_path: Path, frames: list, out: Path, folder: str, fmt: str, keep: Sequence[str] = ()
+) -> list[dict]:
     """Copy the images of `frames` (entries of the transforms file `json_path`, relative to `root`)
     into `out/folder` under unique stems, and return the new frames (not written).
 
@@ -94,13 +113,19 @@ def copy_frames(root: Path, json_path: Path, frames: list, out: Path, folder: st
         stem = unique_stem(Path(str(frame["file_path"])).stem, taken)
         data, suffix = stored_bytes(read_capture(path, f"frames[{i}].file_path"), png_only=fmt == "blender")
         atomic_write_bytes(out / folder / f"{stem}{suffix}", data)
-        new_frames.append({"file_path": file_path(fmt, folder, stem, suffix),
-                           "transform_matrix": frame["transform_matrix"], **{k: frame[k] for k in keep if k in frame}})
+        new_frames.append(
+            {
+                "file_path": file_path(fmt, folder, stem, suffix),
+                "transform_matrix": frame["transform_matrix"],
+                **{k: frame[k] for k in keep if k in frame},
+            }
+        )
     return new_frames
 
 
-def copy_split(source: Path, json_path: Path, out: Path, folder: str, fmt: str,
-               camera_angle_x: float | None = None) -> dict:
+def copy_split(
+    source: Path, json_path: Path, out: Path, folder: str, fmt: str, camera_angle_x: float | None = None
+) -> dict:
     """Copy a transforms file's frames and images into `out/folder` (`copy_frames`). Returns the
     new transforms dict (not written).
 

@@ -19,19 +19,25 @@ def export(session, out: str | Path, format: str = "nerfstudio", source_splits: 
         raise ValueError(f"format must be 'nerfstudio' or 'blender', got {format!r}")
     out = Path(out)
     if owned.overlaps(out, session.run_dir) or owned.overlaps(out, session.state.source.data_dir):
-        raise FolderRefused(f"{out}: the export folder must lie outside the run folder {session.run_dir} and "
-                                  f"the source dataset {session.state.source.data_dir}; choose another --out")
+        raise FolderRefused(
+            f"{out}: the export folder must lie outside the run folder {session.run_dir} and "
+            f"the source dataset {session.state.source.data_dir}; choose another --out"
+        )
     if not owned.is_empty(out) and not owned.marked(out, EXPORT_KIND):
-        raise FolderRefused(f"{out}: not empty and not an earlier nerfaug export, so nothing is written "
-                                  "there; choose a new or empty folder for --out")
+        raise FolderRefused(
+            f"{out}: not empty and not an earlier nerfaug export, so nothing is written "
+            "there; choose a new or empty folder for --out"
+        )
     json_path = session.json_path()
     meta = read_json(json_path)
     frames = session.frames()
     frame_files(session.dataset_dir, json_path, frames)  # every image found before anything is written
     cameras = session.cameras
     if format == "blender" and not blender_compatible(cameras):
-        raise ValueError("these cameras do not fit the Blender format (one camera_angle_x, square pixels, "
-                         "centred principal point); export with format='nerfstudio'")
+        raise ValueError(
+            "these cameras do not fit the Blender format (one camera_angle_x, square pixels, "
+            "centred principal point); export with format='nerfstudio'"
+        )
     folder = "images" if format == "nerfstudio" else "train"
     owned.mark(out, EXPORT_KIND)
     new_frames = copy_frames(session.dataset_dir, json_path, frames, out, folder, format)

@@ -25,15 +25,18 @@ STORED_SUFFIXES = (".png", ".jpg", ".jpeg")
 class Capture:
     """One validated image to add: its pixels (for the format check), and how to store it."""
 
-    label: str                     # names it in error messages: the file, or images[i]
-    array: np.ndarray              # (H, W, 3 | 4) as decoded, uint8 / uint16 / float
-    source: Path | None = None     # the file it came from, copied byte for byte when possible
-    name: str | None = None        # the stem a folder match found it under
+    label: str  # names it in error messages: the file, or images[i]
+    array: np.ndarray  # (H, W, 3 | 4) as decoded, uint8 / uint16 / float
+    source: Path | None = None  # the file it came from, copied byte for byte when possible
+    name: str | None = None  # the stem a folder match found it under
 
 
 def image_files(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.iterdir()
-                  if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in CAPTURE_SUFFIXES)
+    return sorted(
+        p
+        for p in folder.iterdir()
+        if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in CAPTURE_SUFFIXES
+    )
 
 
 def read_capture(path: Path, label: str | None = None) -> Capture:
@@ -77,8 +80,10 @@ def collect_images(images, names: Sequence[str] | None = None, background=(1.0, 
         background: the colour `Views` images were composited over.
     """
     if isinstance(images, Views):
-        return [Capture(f"images[{i}] ({name})", array, name=Path(name).stem)
-                for i, (name, array) in enumerate(zip(images.names, _uncomposite(images, background)))]
+        return [
+            Capture(f"images[{i}] ({name})", array, name=Path(name).stem)
+            for i, (name, array) in enumerate(zip(images.names, _uncomposite(images, background)))
+        ]
     if isinstance(images, (str, Path)):
         path = Path(images)
         if path.is_dir():
@@ -96,12 +101,18 @@ def collect_images(images, names: Sequence[str] | None = None, background=(1.0, 
                 if not found:
                     present = ", ".join(f.name for f in files[:8]) + (" ..." if len(files) > 8 else "")
                     raise DatasetError(
-                        path, f"no image named {name}.* for pose {i} (the folder holds: {present or 'no images'})",
-                        field=f"frames[{i}]", value=name,
+                        path,
+                        f"no image named {name}.* for pose {i} (the folder holds: {present or 'no images'})",
+                        field=f"frames[{i}]",
+                        value=name,
                     )
                 if len(found) > 1:
-                    raise DatasetError(path, f"several images named {name}.*; keep one", field=f"frames[{i}]",
-                                       value=[f.name for f in found])
+                    raise DatasetError(
+                        path,
+                        f"several images named {name}.*; keep one",
+                        field=f"frames[{i}]",
+                        value=[f.name for f in found],
+                    )
                 captures.append(read_capture(found[0]))
             return captures
         return [read_capture(path)]
@@ -110,8 +121,9 @@ def collect_images(images, names: Sequence[str] | None = None, background=(1.0, 
         if array.ndim == 3:
             array = array[None]
         if array.ndim != 4:
-            raise DatasetError("images", "an array of images must have shape (n, H, W, 3 | 4)",
-                               value=f"shape {array.shape}")
+            raise DatasetError(
+                "images", "an array of images must have shape (n, H, W, 3 | 4)", value=f"shape {array.shape}"
+            )
         return [Capture(f"images[{i}]", array[i]) for i in range(array.shape[0])]
     if isinstance(images, (list, tuple)):
         captures = []
@@ -132,11 +144,17 @@ def check_capture(capture: Capture, width: int, height: int) -> None:
     array = capture.array
     where = capture.label
     if array.ndim != 3 or array.shape[-1] not in (3, 4):
-        raise DatasetError(where, "an image must have shape (H, W, 3) or (H, W, 4), channels last (RGB or RGBA)",
-                           value=f"shape {array.shape}")
+        raise DatasetError(
+            where,
+            "an image must have shape (H, W, 3) or (H, W, 4), channels last (RGB or RGBA)",
+            value=f"shape {array.shape}",
+        )
     if array.shape[:2] != (height, width):
-        raise DatasetError(where, f"image is {array.shape[1]}x{array.shape[0]} pixels but the dataset's camera "
-                                  f"is {width}x{height}", value=f"shape {array.shape}")
+        raise DatasetError(
+            where,
+            f"image is {array.shape[1]}x{array.shape[0]} pixels but the dataset's camera is {width}x{height}",
+            value=f"shape {array.shape}",
+        )
     if array.dtype in (np.uint8, np.uint16):
         return
     if not np.issubdtype(array.dtype, np.floating):
@@ -145,8 +163,11 @@ def check_capture(capture: Capture, width: int, height: int) -> None:
         raise DatasetError(where, "image has non-finite values", value=f"{int((~np.isfinite(array)).sum())} NaN/inf")
     low, high = float(array.min()), float(array.max())
     if low < 0.0 or high > 1.0:
-        raise DatasetError(where, "float images must lie in [0, 1] (pass uint8 for 0-255 values)",
-                           value=f"min {low:.4g}, max {high:.4g}")
+        raise DatasetError(
+            where,
+            "float images must lie in [0, 1] (pass uint8 for 0-255 values)",
+            value=f"min {low:.4g}, max {high:.4g}",
+        )
 
 
 def _encode_png(array: np.ndarray) -> bytes:

@@ -72,25 +72,41 @@ class Proposal:
         c = self.candidates
         chosen = self.indices.tolist()
         frames = [
-            {"file_path": f"./{name}", "transform_matrix": pose.tolist(), "azimuth": float(a),
-             "polar": float(p), "score": float(self.scores[i])}
+            {
+                "file_path": f"./{name}",
+                "transform_matrix": pose.tolist(),
+                "azimuth": float(a),
+                "polar": float(p),
+                "score": float(self.scores[i]),
+            }
             for name, pose, a, p, i in zip(self.names, self.poses.double(), self.azimuth, self.polar, chosen)
         ]
         info = {
-            "proposal": self.number, "method": self.method, "step": self.step, "seed": self.seed,
-            "hemisphere": self.hemisphere.to_dict(), "nerfaug": nerfaug.__version__,
+            "proposal": self.number,
+            "method": self.method,
+            "step": self.step,
+            "seed": self.seed,
+            "hemisphere": self.hemisphere.to_dict(),
+            "nerfaug": nerfaug.__version__,
             "map": None if self.map_path is None else str(self.map_path),
         }
         if include_candidates:
             info["candidates"] = {
-                "transform_matrix": c.camera_to_world.tolist(), "scores": self.scores.tolist(),
+                "transform_matrix": c.camera_to_world.tolist(),
+                "scores": self.scores.tolist(),
                 "components": {k: v.tolist() for k, v in self.components.items()},
                 "chosen": chosen,
             }
         return {
-            "camera_angle_x": self.camera_angle_x, "w": c.width, "h": c.height,
-            "fl_x": float(c.fx[0]), "fl_y": float(c.fy[0]), "cx": float(c.cx[0]), "cy": float(c.cy[0]),
-            "frames": frames, "nerfaug": info,
+            "camera_angle_x": self.camera_angle_x,
+            "w": c.width,
+            "h": c.height,
+            "fl_x": float(c.fx[0]),
+            "fl_y": float(c.fy[0]),
+            "cx": float(c.cx[0]),
+            "cy": float(c.cy[0]),
+            "frames": frames,
+            "nerfaug": info,
         }
 
     def write(self, path: str | Path, include_candidates: bool = False) -> Path:

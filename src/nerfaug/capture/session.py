@@ -78,9 +78,20 @@ class CaptureSession:
 
     @classmethod
     def create(
-        cls, data_dir: str | Path, run_dir: str | Path, preset: str = "cpu", seed: int = 0,
-        split: str = "train", *, config=None, centre=None, radius: float | None = None,
-        up=(0.0, 0.0, 1.0), downscale: int = 1, background=(1.0, 1.0, 1.0), device="cpu",
+        cls,
+        data_dir: str | Path,
+        run_dir: str | Path,
+        preset: str = "cpu",
+        seed: int = 0,
+        split: str = "train",
+        *,
+        config=None,
+        centre=None,
+        radius: float | None = None,
+        up=(0.0, 0.0, 1.0),
+        downscale: int = 1,
+        background=(1.0, 1.0, 1.0),
+        device="cpu",
         progress: bool = False,
     ) -> CaptureSession:
         """Start a session: copy `split` of the dataset into `run_dir/dataset`, build the NeRF,
@@ -113,8 +124,10 @@ class CaptureSession:
 
         data_dir, run_dir = Path(data_dir).resolve(), Path(run_dir)
         if (run_dir / SESSION_FILE).exists():
-            raise SessionError(f"{run_dir} already holds a capture session; open it with CaptureSession.open "
-                               "(`nerfaug train RUN` trains it further)")
+            raise SessionError(
+                f"{run_dir} already holds a capture session; open it with CaptureSession.open "
+                "(`nerfaug train RUN` trains it further)"
+            )
         check_new_run(data_dir, run_dir)
         if int(seed) < 0:
             raise ValueError(f"seed must be >= 0, got {seed}")
@@ -126,8 +139,9 @@ class CaptureSession:
         json_path, fmt = dataset_json(data_dir, split)
         cameras = source.cameras
         if int(downscale) > min(cameras.width, cameras.height):
-            raise ValueError(f"downscale must be at most the image size ({cameras.width}x{cameras.height}), "
-                             f"got {downscale}")
+            raise ValueError(
+                f"downscale must be at most the image size ({cameras.width}x{cameras.height}), got {downscale}"
+            )
         if fmt == "nerfstudio" and blender_compatible(cameras) and not has_distortion(read_json(json_path)):
             fmt_out = "blender"
         else:
@@ -154,23 +168,29 @@ class CaptureSession:
             seed=int(seed),
             downscale=int(downscale),
             background=tuple(float(c) for c in background),
-            intrinsics=Intrinsics(cameras.width, cameras.height, float(cameras.fx[0]), float(cameras.fy[0]),
-                                  float(cameras.cx[0]), float(cameras.cy[0]), float(cameras.camera_angle_x[0])),
+            intrinsics=Intrinsics(
+                cameras.width,
+                cameras.height,
+                float(cameras.fx[0]),
+                float(cameras.fy[0]),
+                float(cameras.cx[0]),
+                float(cameras.cy[0]),
+                float(cameras.camera_angle_x[0]),
+            ),
             hemisphere=hemisphere,
             hemisphere_estimated={"centre": centre is None, "radius": radius is None, "up": isinstance(up, str)},
         )
         session = cls(run_dir, None, state)
         views = session.engine_views(0)
-        session.trainer = Trainer(views, config, seed=int(seed), device=device, background=tuple(background),
-                                  progress=progress)
+        session.trainer = Trainer(
+            views, config, seed=int(seed), device=device, background=tuple(background), progress=progress
+        )
         session.state.views_in_model = len(views)
         session.save()
         return session
 
     @classmethod
-    def open(
-        cls, run_dir: str | Path, device="cpu", progress: bool = False, load_model: bool = True
-    ) -> CaptureSession:
+    def open(cls, run_dir: str | Path, device="cpu", progress: bool = False, load_model: bool = True) -> CaptureSession:
         """Reopen a session where `save()` left it (plus any views added after that save).
 
         Args:
@@ -196,16 +216,20 @@ class CaptureSession:
             trainer = Trainer.load_checkpoint(checkpoint, device=device, progress=progress)
         except Exception as error:  # noqa: BLE001 -- torch.load and the state dicts raise many types
             reason = str(error).split(".")[0][:160]
-            raise SessionError(f"{checkpoint}: cannot load the checkpoint ({type(error).__name__}: {reason}); "
-                               "restore it from a backup, or start a new session with `nerfaug train DATA --out "
-                               "NEW_RUN`") from None
+            raise SessionError(
+                f"{checkpoint}: cannot load the checkpoint ({type(error).__name__}: {reason}); "
+                "restore it from a backup, or start a new session with `nerfaug train DATA --out "
+                "NEW_RUN`"
+            ) from None
         session.trainer = trainer
         in_model = len(trainer.train_views)
         session._saved = (trainer.step, in_model)
         frames = session.frames()
         if len(frames) < in_model:
-            raise SessionError(f"{json_path} lists {len(frames)} frames but the checkpoint was "
-                               f"trained on {in_model}: the dataset was edited outside the session")
+            raise SessionError(
+                f"{json_path} lists {len(frames)} frames but the checkpoint was "
+                f"trained on {in_model}: the dataset was edited outside the session"
+            )
         if len(frames) > in_model:  # added after the last save: train on them too
             trainer.add_views(session.engine_views(in_model))
         state.views_in_model = len(frames)
@@ -275,8 +299,10 @@ class CaptureSession:
         """The dataset's transforms file; SessionError if session.json sends it outside the run folder."""
         path = self.dataset_dir / self.state.dataset.json
         if not owned.overlaps(path, self.run_dir) or path.resolve() == self.run_dir.resolve():
-            raise SessionError(f"{self.run_dir / SESSION_FILE}, field 'dataset.json': the dataset file must lie "
-                               f"inside the run folder (got {str(path.resolve())!r})")
+            raise SessionError(
+                f"{self.run_dir / SESSION_FILE}, field 'dataset.json': the dataset file must lie "
+                f"inside the run folder (got {str(path.resolve())!r})"
+            )
         return path
 
     def frames(self) -> list:
@@ -294,19 +320,32 @@ class CaptureSession:
         files = frame_files(self.dataset_dir, json_path, frames)
         background = torch.tensor(self.state.background, dtype=torch.float32)
         downscale = self.state.downscale
-        loaded = [read_image(f, background, downscale, json_path, f"frames[{start + i}].file_path")
-                  for i, f in enumerate(files)]
+        loaded = [
+            read_image(f, background, downscale, json_path, f"frames[{start + i}].file_path")
+            for i, f in enumerate(files)
+        ]
         full = load_dataset(self.dataset_dir, "train", lazy=True).cameras
         cameras = full[list(range(start, len(full)))]
         height, width = full.height // downscale, full.width // downscale
         for i, (image, _) in enumerate(loaded):
             if image.shape[:2] != (height, width):
-                raise DatasetError(json_path, f"image size differs from the dataset's {full.width}x{full.height}",
-                                   field=f"frames[{start + i}].file_path", value=str(files[i]))
+                raise DatasetError(
+                    json_path,
+                    f"image size differs from the dataset's {full.width}x{full.height}",
+                    field=f"frames[{start + i}].file_path",
+                    value=str(files[i]),
+                )
         if (width, height) != (cameras.width, cameras.height):
             cameras = cameras.resized(width, height)
-        cameras = Cameras(self.hemisphere.to_engine(cameras.camera_to_world), cameras.fx, cameras.fy,
-                          cameras.cx, cameras.cy, cameras.width, cameras.height)
+        cameras = Cameras(
+            self.hemisphere.to_engine(cameras.camera_to_world),
+            cameras.fx,
+            cameras.fy,
+            cameras.cx,
+            cameras.cy,
+            cameras.width,
+            cameras.height,
+        )
         alphas = None
         if all(a is not None for _, a in loaded):
             alphas = torch.stack([a for _, a in loaded])
@@ -322,15 +361,22 @@ class CaptureSession:
         self.trainer.train(self.trainer.step + int(steps))
         return self.trainer.history[-1] if self.trainer.history else {"step": self.trainer.step}
 
-    def candidate_cameras(self, candidates=None, n_candidates: int = 500,
-                          generator: torch.Generator | None = None) -> Cameras:
+    def candidate_cameras(
+        self, candidates=None, n_candidates: int = 500, generator: torch.Generator | None = None
+    ) -> Cameras:
         """The world-frame candidate cameras for `propose` (see its `candidates`), without the
         poses the model already trains on."""
         return choose.candidate_cameras(self, candidates, n_candidates, generator)
 
     def propose(
-        self, n: int = 6, method: str = "ours", candidates=None, n_candidates: int = 500,
-        generator: torch.Generator | None = None, seed: int | None = None, config=None,
+        self,
+        n: int = 6,
+        method: str = "ours",
+        candidates=None,
+        n_candidates: int = 500,
+        generator: torch.Generator | None = None,
+        seed: int | None = None,
+        config=None,
         map: bool = True,
     ) -> Proposal:
         """Choose `n` views to capture next.
@@ -397,8 +443,9 @@ class CaptureSession:
         engine = self.hemisphere.to_engine(torch.as_tensor(as_array(poses), dtype=torch.float32).reshape(-1, 4, 4))
         cameras = choose.with_poses(camera, engine).to(self.trainer.device)
         background = torch.tensor(self.state.background, dtype=torch.float32, device=self.trainer.device)
-        return torch.stack([self.trainer.model.render_image(cameras, i, background)["rgb"].cpu()
-                            for i in range(len(cameras))])
+        return torch.stack(
+            [self.trainer.model.render_image(cameras, i, background)["rgb"].cpu() for i in range(len(cameras))]
+        )
 
     def export(self, out: str | Path, format: str = "nerfstudio", source_splits: bool = True) -> Path:
         """Write the grown dataset to `out` so other tools open it.
@@ -429,10 +476,10 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
     run_dir = Path(run_dir)
     data_dir = Path(data_dir).resolve()
     if data_dir == run_dir.resolve() or run_dir.resolve() in data_dir.parents:
-        raise FolderRefused(f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
-                                  f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset")
+        raise FolderRefused(
+            f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
+            f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset"
+        )
     if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
         what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
-        raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder "
-                                  "for --out")
-
+        raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder for --out")

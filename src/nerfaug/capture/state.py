@@ -124,12 +124,21 @@ class SessionState:
     def to_dict(self) -> dict:
         """The JSON object written to session.json (the historic key layout)."""
         data = {
-            "format": self.format, "nerfaug": self.nerfaug, "created": self.created,
-            "source": asdict(self.source), "dataset": asdict(self.dataset), "preset": self.preset,
-            "engine": self.engine, "seed": self.seed, "downscale": self.downscale,
-            "background": list(self.background), "intrinsics": asdict(self.intrinsics),
-            "hemisphere": self.hemisphere.to_dict(), "hemisphere_estimated": dict(self.hemisphere_estimated),
-            "step": self.step, "views_in_model": self.views_in_model,
+            "format": self.format,
+            "nerfaug": self.nerfaug,
+            "created": self.created,
+            "source": asdict(self.source),
+            "dataset": asdict(self.dataset),
+            "preset": self.preset,
+            "engine": self.engine,
+            "seed": self.seed,
+            "downscale": self.downscale,
+            "background": list(self.background),
+            "intrinsics": asdict(self.intrinsics),
+            "hemisphere": self.hemisphere.to_dict(),
+            "hemisphere_estimated": dict(self.hemisphere_estimated),
+            "step": self.step,
+            "views_in_model": self.views_in_model,
             "proposals": [_record_dict(p) for p in self.proposals],
             "additions": [_record_dict(a) for a in self.additions],
         }
@@ -148,17 +157,22 @@ class SessionState:
         if not isinstance(data, dict):
             raise SessionError(f"{path}: expected a JSON object at the top level, got {type(data).__name__}")
         if data.get("format") != SESSION_FORMAT:
-            raise SessionError(f"{path}, field 'format': unsupported session format (got {data.get('format')!r}); "
-                               f"this nerfaug reads format {SESSION_FORMAT}")
+            raise SessionError(
+                f"{path}, field 'format': unsupported session format (got {data.get('format')!r}); "
+                f"this nerfaug reads format {SESSION_FORMAT}"
+            )
         source = reader.section(data, "source", SourceInfo, {"data_dir": str, "split": str, "format": str})
         dataset = reader.section(data, "dataset", DatasetInfo, {"format": str, "folder": str, "json": str})
         if dataset.format not in DATASET_FORMATS:
             reader.fail("dataset.format", dataset.format, f"must be one of {DATASET_FORMATS}")
         for key in ("folder", "json"):
             reader.relative_name(f"dataset.{key}", getattr(dataset, key))
-        intrinsics = reader.section(data, "intrinsics", Intrinsics, {
-            "width": int, "height": int, "fx": float, "fy": float, "cx": float, "cy": float,
-            "camera_angle_x": float})
+        intrinsics = reader.section(
+            data,
+            "intrinsics",
+            Intrinsics,
+            {"width": int, "height": int, "fx": float, "fy": float, "cx": float, "cy": float, "camera_angle_x": float},
+        )
         if intrinsics.width < 1 or intrinsics.height < 1:
             reader.fail("intrinsics", [intrinsics.width, intrinsics.height], "the image size must be positive")
         try:
@@ -171,20 +185,33 @@ class SessionState:
         seed, downscale = reader.get(data, "seed", int), reader.get(data, "downscale", int)
         if seed < 0 or downscale < 1:
             reader.fail("seed/downscale", [seed, downscale], "seed must be >= 0 and downscale >= 1")
-        proposals = [reader.record(p, f"proposals[{i}]", ProposalRecord)
-                     for i, p in enumerate(reader.get(data, "proposals", list))]
+        proposals = [
+            reader.record(p, f"proposals[{i}]", ProposalRecord)
+            for i, p in enumerate(reader.get(data, "proposals", list))
+        ]
         for i, p in enumerate(proposals):
             reader.relative_name(f"proposals[{i}].file", p.file)
         return cls(
-            source=source, dataset=dataset, preset=reader.get(data, "preset", str),
-            engine=reader.get(data, "engine", dict), seed=seed, downscale=downscale,
-            background=tuple(float(c) for c in background), intrinsics=intrinsics, hemisphere=hemisphere,
+            source=source,
+            dataset=dataset,
+            preset=reader.get(data, "preset", str),
+            engine=reader.get(data, "engine", dict),
+            seed=seed,
+            downscale=downscale,
+            background=tuple(float(c) for c in background),
+            intrinsics=intrinsics,
+            hemisphere=hemisphere,
             hemisphere_estimated=dict(data.get("hemisphere_estimated") or {}),
-            step=reader.get(data, "step", int), views_in_model=reader.get(data, "views_in_model", int),
+            step=reader.get(data, "step", int),
+            views_in_model=reader.get(data, "views_in_model", int),
             proposals=proposals,
-            additions=[reader.record(a, f"additions[{i}]", AdditionRecord)
-                       for i, a in enumerate(reader.get(data, "additions", list))],
-            format=SESSION_FORMAT, nerfaug=str(data.get("nerfaug", "")), created=str(data.get("created", "")),
+            additions=[
+                reader.record(a, f"additions[{i}]", AdditionRecord)
+                for i, a in enumerate(reader.get(data, "additions", list))
+            ],
+            format=SESSION_FORMAT,
+            nerfaug=str(data.get("nerfaug", "")),
+            created=str(data.get("created", "")),
             saved=data.get("saved"),
         )
 
@@ -197,8 +224,10 @@ class SessionState:
         """
         path = Path(run_dir) / SESSION_FILE
         if not path.is_file():
-            raise SessionError(f"{run_dir} is not a capture session: {SESSION_FILE} not found "
-                               f"(start one with `nerfaug train DATA --out {run_dir}`)")
+            raise SessionError(
+                f"{run_dir} is not a capture session: {SESSION_FILE} not found "
+                f"(start one with `nerfaug train DATA --out {run_dir}`)"
+            )
         try:
             data = json.loads(path.read_text())
         except json.JSONDecodeError as error:
@@ -225,8 +254,10 @@ class _Reader:
 
     def fail(self, name: str, value, problem: str):
         text = repr(value)
-        raise SessionError(f"{self.path}, field '{name}': {problem} (got {text[:120]}); the file was edited or "
-                           "damaged: restore it, or start a new session with `nerfaug train DATA --out NEW_RUN`")
+        raise SessionError(
+            f"{self.path}, field '{name}': {problem} (got {text[:120]}); the file was edited or "
+            "damaged: restore it, or start a new session with `nerfaug train DATA --out NEW_RUN`"
+        )
 
     def check(self, name: str, value, kind: type):
         if kind is float and _number(value):

@@ -49,6 +49,14 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
-    "FORMATS", "DatasetError", "Views", "detect_format", "load_blender", "load_blender_split",
-    "load_dataset", "load_nerfstudio", "write_blender_split", "write_nerfstudio",
+    "FORMATS",
+    "DatasetError",
+    "Views",
+    "detect_format",
+    "load_blender",
+    "load_blender_split",
+    "load_dataset",
+    "load_nerfstudio",
+    "write_blender_split",
+    "write_nerfstudio",
 ]

@@ -21,7 +21,10 @@ SPLITS = ("train", "val", "test")
 
 
 def load_blender_split(
-    root: str | Path, split: str = "train", background=(1.0, 1.0, 1.0), downscale: int = 1,
+    root: str | Path,
+    split: str = "train",
+    background=(1.0, 1.0, 1.0),
+    downscale: int = 1,
     lazy: bool = False,
 ) -> Views:
     """Load one split of a Blender-format dataset.
@@ -40,12 +43,20 @@ def load_blender_split(
     meta = read_json(json_path)
     angle = require(meta, "camera_angle_x", json_path)
     if not is_number(angle) or not MIN_ANGLE < float(angle) < math.pi:
-        raise DatasetError(json_path, f"camera_angle_x must be a number in ({MIN_ANGLE:g}, pi) radians",
-                           field="camera_angle_x", value=angle)
+        raise DatasetError(
+            json_path,
+            f"camera_angle_x must be a number in ({MIN_ANGLE:g}, pi) radians",
+            field="camera_angle_x",
+            value=angle,
+        )
     frames = require(meta, "frames", json_path)
     if not isinstance(frames, list) or not frames:
-        raise DatasetError(json_path, "frames must be a non-empty list", field="frames",
-                           value=frames if not isinstance(frames, list) else [])
+        raise DatasetError(
+            json_path,
+            "frames must be a non-empty list",
+            field="frames",
+            value=frames if not isinstance(frames, list) else [],
+        )
     return load_frames(root, json_path, frames, background, downscale, lazy, lambda w, h, i: (float(angle), None))
 
 
@@ -80,8 +91,12 @@ def write_blender_split(
         stem = Path(name).name or f"r_{i}"
         rel = f"./{folder}/{Path(stem).stem}"
         alpha = None if views.alphas is None else views.alphas[i]
-        write_image(root / folder / f"{Path(stem).stem}.png", views.images[i], alpha,
-                    torch.as_tensor(background, dtype=torch.float32))
+        write_image(
+            root / folder / f"{Path(stem).stem}.png",
+            views.images[i],
+            alpha,
+            torch.as_tensor(background, dtype=torch.float32),
+        )
         frames.append({"file_path": rel, "transform_matrix": cameras.camera_to_world[i].tolist()})
     path = root / f"transforms_{split}.json"
     atomic_write_json(path, {"camera_angle_x": float(angles[0]), "frames": frames})

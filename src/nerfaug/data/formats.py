@@ -35,8 +35,11 @@ FORMATS: tuple[Format, ...] = (
     # Blender first: a folder holding both kinds of file is read by its split files.
     Format("blender", lambda root, split: root / f"transforms_{split}.json", load_blender_split),
     # nerfstudio's one transforms.json has no splits: every split reads all of its frames.
-    Format("nerfstudio", lambda root, split: root / "transforms.json",
-           lambda root, split, **kwargs: load_nerfstudio(root, **kwargs)),
+    Format(
+        "nerfstudio",
+        lambda root, split: root / "transforms.json",
+        lambda root, split, **kwargs: load_nerfstudio(root, **kwargs),
+    ),
 )
 
 
@@ -59,6 +62,4 @@ def load_dataset(root: str | Path, split: str = "train", **kwargs) -> Views:
         return found.load(root, split, **kwargs)
     if not root.is_dir():
         raise DatasetError(root, "dataset folder does not exist")
-    raise DatasetError(
-        root, f"no transforms_{split}.json (Blender format) nor transforms.json (nerfstudio format)"
-    )
+    raise DatasetError(root, f"no transforms_{split}.json (Blender format) nor transforms.json (nerfstudio format)")

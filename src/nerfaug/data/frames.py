@@ -69,14 +69,17 @@ def check_pose(matrix, path: Path, field: str) -> Tensor:
     with np.errstate(over="ignore"):
         finite = np.isfinite(pose.astype(np.float32)).all()
     if not finite:
-        raise DatasetError(path, "transform_matrix has non-finite entries (or beyond float32 range)",
-                           field=field, value=pose.tolist())
+        raise DatasetError(
+            path, "transform_matrix has non-finite entries (or beyond float32 range)", field=field, value=pose.tolist()
+        )
     rotation = pose[:3, :3]
     # Blender exports are float32; 1e-3 accepts their round-off, rejects scaled or sheared matrices.
     if np.abs(rotation.T @ rotation - np.eye(3)).max() > 1e-3 or abs(np.linalg.det(rotation) - 1) > 1e-3:
         raise DatasetError(
-            path, "transform_matrix rotation is not rigid (R^T R != I or det(R) != 1)",
-            field=field, value=np.round(rotation, 4).tolist(),
+            path,
+            "transform_matrix rotation is not rigid (R^T R != I or det(R) != 1)",
+            field=field,
+            value=np.round(rotation, 4).tolist(),
         )
     if np.abs(pose[3] - np.array([0, 0, 0, 1])).max() > 1e-6:
         raise DatasetError(path, "transform_matrix last row must be [0, 0, 0, 1]", field=field, value=pose[3].tolist())
@@ -86,8 +89,9 @@ def check_pose(matrix, path: Path, field: str) -> Tensor:
 def check_file_path(value, path: Path, field: str) -> str:
     """A frame's `file_path`: a non-empty string without NUL characters."""
     if not isinstance(value, str) or not value.strip() or "\x00" in value:
-        raise DatasetError(path, "file_path must be a non-empty path string (relative to the dataset folder)",
-                           field=field, value=value)
+        raise DatasetError(
+            path, "file_path must be a non-empty path string (relative to the dataset folder)", field=field, value=value
+        )
     return value
 
 
@@ -110,8 +114,10 @@ def resolve_image(root: Path, file_path: str, json_path: Path, field: str) -> Pa
             resolved = candidate.resolve(strict=True)
             if not resolved.is_relative_to(real_root):
                 raise DatasetError(
-                    json_path, f"image path leads outside the dataset folder {real_root} (to {resolved})",
-                    field=field, value=file_path,
+                    json_path,
+                    f"image path leads outside the dataset folder {real_root} (to {resolved})",
+                    field=field,
+                    value=file_path,
                 )
             return resolved
     except (OSError, RuntimeError, ValueError) as error:  # DatasetError is a ValueError: let it pass
@@ -142,11 +148,19 @@ def read_image(
     except Exception as error:  # noqa: BLE001 -- imageio's plugins raise many types; all mean "cannot read"
         raise DatasetError(json_path, f"cannot read image {path}: {_first_line(error)}", field=field) from None
     if array.ndim != 3 or array.shape[-1] not in (3, 4):
-        raise DatasetError(json_path, f"image {path} must be an RGB or RGBA image (one frame)", field=field,
-                           value=f"shape {array.shape}")
+        raise DatasetError(
+            json_path,
+            f"image {path} must be an RGB or RGBA image (one frame)",
+            field=field,
+            value=f"shape {array.shape}",
+        )
     if min(array.shape[:2]) < downscale:
-        raise DatasetError(json_path, f"image {path} is smaller than the downscale factor {downscale}",
-                           field=field, value=f"{array.shape[1]}x{array.shape[0]}")
+        raise DatasetError(
+            json_path,
+            f"image {path} is smaller than the downscale factor {downscale}",
+            field=field,
+            value=f"{array.shape[1]}x{array.shape[0]}",
+        )
     if array.dtype == np.uint8:
         image = torch.from_numpy(array.astype(np.float32) / 255.0)
     elif array.dtype == np.uint16:
@@ -156,8 +170,9 @@ def read_image(
             raise DatasetError(json_path, f"image {path} has non-finite pixel values", field=field)
         image = torch.from_numpy(array.astype(np.float32)).clamp(0, 1)
     else:
-        raise DatasetError(json_path, f"image {path} has an unsupported pixel type", field=field,
-                           value=str(array.dtype))
+        raise DatasetError(
+            json_path, f"image {path} has an unsupported pixel type", field=field, value=str(array.dtype)
+        )
     alpha = image[..., 3] if image.shape[-1] == 4 else None
     rgb = image[..., :3]
     if alpha is not None:
@@ -198,7 +213,12 @@ IntrinsicsOf = Callable[[int, int, int], tuple[float | None, tuple[float, float,
 
 
 def load_frames(
-    root: Path, json_path: Path, frames: Sequence, background, downscale: int, lazy: bool,
+    root: Path,
+    json_path: Path,
+    frames: Sequence,
+    background,
+    downscale: int,
+    lazy: bool,
     intrinsics_of: IntrinsicsOf,
 ) -> Views:
     """The views a transforms file's `frames` list describes, for either format.
@@ -234,8 +254,10 @@ def load_frames(
     for i, (image, _) in enumerate(loaded):
         if image.shape[:2] != (height, width):
             raise DatasetError(
-                json_path, f"image size differs from frames[0]'s {width}x{height}",
-                field=f"frames[{i}].file_path", value=f"{image.shape[1]}x{image.shape[0]} ({paths[i]})",
+                json_path,
+                f"image size differs from frames[0]'s {width}x{height}",
+                field=f"frames[{i}].file_path",
+                value=f"{image.shape[1]}x{image.shape[0]} ({paths[i]})",
             )
     full_w, full_h = width * downscale, height * downscale
     c2w = torch.stack(poses)
@@ -248,12 +270,18 @@ def load_frames(
     cameras = cameras.resized(width, height) if downscale > 1 else cameras
 
     if lazy:
+
         def checked_load(i: int):
             image, alpha = load(i)
             if image.shape[:2] != (height, width):
-                raise DatasetError(json_path, f"image size differs from frames[0]'s {width}x{height}",
-                                   field=f"frames[{i}].file_path", value=f"{image.shape[1]}x{image.shape[0]}")
+                raise DatasetError(
+                    json_path,
+                    f"image size differs from frames[0]'s {width}x{height}",
+                    field=f"frames[{i}].file_path",
+                    value=f"{image.shape[1]}x{image.shape[0]}",
+                )
             return image, alpha
+
         return Views(cameras, None, names, None, loader=checked_load)
     images = torch.stack([im for im, _ in loaded])
     alphas = torch.stack([a for _, a in loaded]) if all(a is not None for _, a in loaded) else None

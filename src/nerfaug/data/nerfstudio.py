@@ -30,8 +30,12 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
     meta = read_json(json_path)
     frames = require(meta, "frames", json_path)
     if not isinstance(frames, list) or not frames:
-        raise DatasetError(json_path, "frames must be a non-empty list", field="frames",
-                           value=frames if not isinstance(frames, list) else [])
+        raise DatasetError(
+            json_path,
+            "frames must be a non-empty list",
+            field="frames",
+            value=frames if not isinstance(frames, list) else [],
+        )
 
     def intrinsics_of(width: int, height: int, i: int):
         frame = frames[i]
@@ -44,8 +48,11 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
 
         if get("fl_x") is None:
             if get("camera_angle_x") is None:
-                raise DatasetError(json_path, "missing intrinsics: need fl_x (and fl_y, cx, cy) or camera_angle_x",
-                                   field=f"frames[{i}].fl_x")
+                raise DatasetError(
+                    json_path,
+                    "missing intrinsics: need fl_x (and fl_y, cx, cy) or camera_angle_x",
+                    field=f"frames[{i}].fl_x",
+                )
             angle = check_number(get("camera_angle_x"), json_path, field("camera_angle_x"), MIN_ANGLE, math.pi)
             # As Cameras.from_fov: frames may mix a field of view with focal lengths.
             focal = 0.5 * width / math.tan(0.5 * angle)
@@ -65,8 +72,12 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
         for key, value in zip(("fl_x", "fl_y", "cx", "cy"), scaled):
             # float32 must hold it: a focal of 1e-300 pixels would become 0, one of 1e300 inf.
             if not (1e-6 < value < 1e30 if key.startswith("fl") else abs(value) < 1e30):
-                raise DatasetError(json_path, f"intrinsic out of range once scaled to the image's {width}x{height} "
-                                   f"(w, h = {w:g}, {h:g})", field=field(key), value=get(key))
+                raise DatasetError(
+                    json_path,
+                    f"intrinsic out of range once scaled to the image's {width}x{height} (w, h = {w:g}, {h:g})",
+                    field=field(key),
+                    value=get(key),
+                )
         return None, scaled
 
     return load_frames(root, json_path, frames, background, downscale, lazy, intrinsics_of)
@@ -82,11 +93,18 @@ def write_nerfstudio(root: str | Path, views: Views, image_folder: str = "images
         stem = Path(name).stem or f"frame_{i:05d}"
         rel = f"{image_folder}/{stem}.png"
         write_image(root / rel, views.images[i], None if views.alphas is None else views.alphas[i])
-        frames.append({
-            "file_path": rel, "transform_matrix": cams.camera_to_world[i].tolist(),
-            "fl_x": float(cams.fx[i]), "fl_y": float(cams.fy[i]), "cx": float(cams.cx[i]), "cy": float(cams.cy[i]),
-            "w": cams.width, "h": cams.height,
-        })
+        frames.append(
+            {
+                "file_path": rel,
+                "transform_matrix": cams.camera_to_world[i].tolist(),
+                "fl_x": float(cams.fx[i]),
+                "fl_y": float(cams.fy[i]),
+                "cx": float(cams.cx[i]),
+                "cy": float(cams.cy[i]),
+                "w": cams.width,
+                "h": cams.height,
+            }
+        )
     path = root / "transforms.json"
     atomic_write_json(path, {"camera_model": "OPENCV", "w": cams.width, "h": cams.height, "frames": frames})
     return path

@@ -56,7 +56,9 @@ class Views:
         indices = [int(i) for i in indices]
         full = self.materialised()
         return Views(
-            full.cameras[indices], full.images[indices], [full.names[i] for i in indices],
+            full.cameras[indices],
+            full.images[indices],
+            [full.names[i] for i in indices],
             None if full.alphas is None else full.alphas[indices],
         )
 
@@ -67,6 +69,8 @@ class Views:
         if all(p.alphas is not None for p in parts):
             alphas = torch.cat([p.alphas for p in parts])
         return Views(
-            Cameras.cat([p.cameras for p in parts]), torch.cat([p.images for p in parts]),
-            [n for p in parts for n in p.names], alphas,
+            Cameras.cat([p.cameras for p in parts]),
+            torch.cat([p.images for p in parts]),
+            [n for p in parts for n in p.names],
+            alphas,
         )

@@ -9,7 +9,14 @@ from typing import Literal
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
 from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
-    AUTHORS_VARIANTS, BATCH_AWARE, FAMILIES, MAIN_COMPARISON, STUDY_METHODS, TABLE_I, TABLE_II, SelectionConfig,
+    AUTHORS_VARIANTS,
+    BATCH_AWARE,
+    FAMILIES,
+    MAIN_COMPARISON,
+    STUDY_METHODS,
+    TABLE_I,
+    TABLE_II,
+    SelectionConfig,
 )
 
 PresetName = Literal["quick", "paper", "ablation", "tiny"]
@@ -36,7 +43,7 @@ class ExperimentConfig:
     seed: int = 0
     """Trial k uses seed + k."""
     engine: str = "cpu"
-    """NeRF engine preset: cpu, paper or test."""
+    """NeRF engine preset: a name in `nerfaug.nerf.config.PRESETS` (cpu, nerfacto-cpu, paper, test)."""
     resolution: int = 100
     """Image size (square) of the built-in scenes, or the width a user dataset is downscaled to."""
     steps: int = 2000
@@ -78,14 +85,26 @@ class ExperimentConfig:
         from nerfaug.device import device_kind
         from nerfaug.nerf.config import NerfConfig
 
-        keep = ("seed", "engine", "resolution", "steps", "add_at_step", "n_new", "n_initial", "pool",
-                "n_test", "render_samples", "field_lr", "threads_per_run")
+        keep = (
+            "seed",
+            "engine",
+            "resolution",
+            "steps",
+            "add_at_step",
+            "n_new",
+            "n_initial",
+            "pool",
+            "n_test",
+            "render_samples",
+            "field_lr",
+            "threads_per_run",
+        )
         record = {k: getattr(self, k) for k in keep} | {"device": device_kind(self.device)}
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).to_dict().items()})
         return json.loads(json.dumps(record, default=str))
 
-    def replace(self, **changes) -> "ExperimentConfig":
+    def replace(self, **changes) -> ExperimentConfig:
         return dataclasses.replace(self, **changes)
 
 
@@ -106,15 +125,31 @@ def preset(name: PresetName) -> ExperimentConfig:
         return ExperimentConfig(trials=5, steps=800, pool=100, n_test=20)
     if name == "paper":
         return ExperimentConfig(
-            scenes=("lego", "chair", "materials"), trials=10, engine="paper", resolution=800,
-            steps=10_000, pool=500, n_test=200, render_samples=64,
+            scenes=("lego", "chair", "materials"),
+            trials=10,
+            engine="paper",
+            resolution=800,
+            steps=10_000,
+            pool=500,
+            n_test=200,
+            render_samples=64,
         )
     if name == "ablation":
         methods = tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS))
         return ExperimentConfig(methods=methods, trials=5)
     if name == "tiny":
         return ExperimentConfig(
-            methods=("ours", "uniform"), trials=2, engine="test", resolution=24, steps=60, add_at_step=20,
-            n_new=2, n_initial=3, pool=12, n_test=3, render_samples=4, save_renders=1,
+            methods=("ours", "uniform"),
+            trials=2,
+            engine="test",
+            resolution=24,
+            steps=60,
+            add_at_step=20,
+            n_new=2,
+            n_initial=3,
+            pool=12,
+            n_test=3,
+            render_samples=4,
+            save_renders=1,
         )
     raise ValueError(f"unknown preset {name!r}; choose quick, paper, ablation or tiny")

@@ -17,7 +17,12 @@ from nerfaug.data.errors import DatasetError
 from nerfaug.device import describe_device
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.runfolder import (
-    FILES, write_config, write_history, write_metrics, write_progress, write_selection,
+    FILES,
+    write_config,
+    write_history,
+    write_metrics,
+    write_progress,
+    write_selection,
 )
 from nerfaug.experiment.store import RunKey, fingerprint, start_run_folder, write_result
 from nerfaug.hemisphere import half_hemisphere_poses
@@ -51,13 +56,16 @@ def scene_folder(scene: str) -> Path | None:
     explicit = "/" in scene or "\\" in scene or scene.startswith(".") or Path(scene).is_absolute()
     if scene in BUILTIN_SCENES and not explicit:
         if Path(scene).exists():
-            raise ValueError(f"scene {scene!r} is ambiguous: a built-in scene and the folder ./{scene}; write "
-                             f"./{scene} (or --data ./{scene}) for the folder, or run elsewhere for the built-in scene")
+            raise ValueError(
+                f"scene {scene!r} is ambiguous: a built-in scene and the folder ./{scene}; write "
+                f"./{scene} (or --data ./{scene}) for the folder, or run elsewhere for the built-in scene"
+            )
         return None
     if Path(scene).is_dir():
         return Path(scene)
-    raise ValueError(f"unknown scene {scene!r}: not a dataset folder and not one of the built-in scenes "
-                     f"{', '.join(BUILTIN_SCENES)}")
+    raise ValueError(
+        f"unknown scene {scene!r}: not a dataset folder and not one of the built-in scenes {', '.join(BUILTIN_SCENES)}"
+    )
 
 
 def scene_dataset_dir(root: Path, scene: str, config: ExperimentConfig) -> Path:
@@ -81,8 +89,15 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
     if scene not in BUILTIN_SCENES:
         raise ValueError(f"unknown scene {scene!r}: not a folder and not one of the built-in scenes {BUILTIN_SCENES}")
     return render_scene_dataset(
-        scene, folder, resolution=config.resolution, pool=config.pool, test=config.n_test,
-        initial=config.n_initial, samples=config.render_samples, seed=config.seed, progress=progress,
+        scene,
+        folder,
+        resolution=config.resolution,
+        pool=config.pool,
+        test=config.n_test,
+        initial=config.n_initial,
+        samples=config.render_samples,
+        seed=config.seed,
+        progress=progress,
     )
 
 
@@ -138,8 +153,9 @@ def load_scene_data(folder: Path, config: ExperimentConfig, cache_dir: Path | No
     if cache_dir is None:
         load = functools.partial(load_dataset, folder, downscale=downscale)
     else:
-        load = functools.partial(load_split_cached, folder, downscale=downscale, cache_dir=cache_dir,
-                                 digest=folder_digest(folder))
+        load = functools.partial(
+            load_split_cached, folder, downscale=downscale, cache_dir=cache_dir, digest=folder_digest(folder)
+        )
     pool = load(split="train")
     test = load(split="test")
     test = test.subset(range(min(config.n_test, len(test))))
@@ -209,7 +225,12 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     start = time.perf_counter()
     generator = torch.Generator().manual_seed(seed)
     selection = select_views(
-        key.method, trainer.model, trainer.train_views.cameras, data.pool.cameras, config.n_new, generator,
+        key.method,
+        trainer.model,
+        trainer.train_views.cameras,
+        data.pool.cameras,
+        config.n_new,
+        generator,
         config.selection,
     )
     timing["selection"] = time.perf_counter() - start
@@ -227,27 +248,53 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     start = time.perf_counter()
     evaluation = evaluate_views(
         lambda cameras, index: trainer.model.render_image(cameras, index)["rgb"],
-        data.test, lpips=cached_lpips(), save_dir=folder / FILES.renders, save_count=config.save_renders, progress=progress,
+        data.test,
+        lpips=cached_lpips(),
+        save_dir=folder / FILES.renders,
+        save_count=config.save_renders,
+        progress=progress,
     )
     timing["evaluation"] = time.perf_counter() - start
     timing["total"] = sum(timing.values())
 
-    write_selection(folder, selection.to_dict(), [data.pool.names[i] for i in chosen],
-                    data.pool.cameras.camera_to_world, data.initial.cameras.camera_to_world)
+    write_selection(
+        folder,
+        selection.to_dict(),
+        [data.pool.names[i] for i in chosen],
+        data.pool.cameras.camera_to_world,
+        data.initial.cameras.camera_to_world,
+    )
     plot_hemisphere_map(
-        data.pool.cameras.camera_to_world, selection.scores, data.initial.cameras.camera_to_world,
-        data.pool.cameras.camera_to_world[chosen], path=folder / FILES.uncertainty, title=f"{key.scene}: {key.method}",
+        data.pool.cameras.camera_to_world,
+        selection.scores,
+        data.initial.cameras.camera_to_world,
+        data.pool.cameras.camera_to_world[chosen],
+        path=folder / FILES.uncertainty,
+        title=f"{key.scene}: {key.method}",
     )
     write_metrics(folder, evaluation.to_dict())
     write_history(folder, trainer.history)
     spec = get_method(key.method)  # the settings the method ran with: the sweep's, with the method's own over them
-    write_config(folder, asdict(config), asdict(engine), device=describe_device(trainer.device),
-                 selection=spec.effective_config(config.selection).to_dict(), method=spec.definition())
+    write_config(
+        folder,
+        asdict(config),
+        asdict(engine),
+        device=describe_device(trainer.device),
+        selection=spec.effective_config(config.selection).to_dict(),
+        method=spec.definition(),
+    )
     result = {
-        "scene": key.scene, "method": key.method, "trial": key.trial, "seed": seed,
+        "scene": key.scene,
+        "method": key.method,
+        "trial": key.trial,
+        "seed": seed,
         "fingerprint": fingerprint(config.fingerprinted()),
-        "metrics": evaluation.mean, "lpips_status": evaluation.lpips_status,
-        "chosen": chosen, "timing": timing, "host": platform.node(), "torch": torch.__version__,
+        "metrics": evaluation.mean,
+        "lpips_status": evaluation.lpips_status,
+        "chosen": chosen,
+        "timing": timing,
+        "host": platform.node(),
+        "torch": torch.__version__,
         "device": describe_device(trainer.device),
     }
     write_result(folder, result)

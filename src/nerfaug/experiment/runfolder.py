@@ -80,8 +80,7 @@ def _read_json(path: Path):
         return None
 
 
-def write_selection(folder: Path, selection: dict, chosen_names: list[str], candidate_poses,
-                    train_poses) -> Path:
+def write_selection(folder: Path, selection: dict, chosen_names: list[str], candidate_poses, train_poses) -> Path:
     """Write selection.json.
 
     Args:
@@ -94,19 +93,24 @@ def write_selection(folder: Path, selection: dict, chosen_names: list[str], cand
 
     from nerfaug.hemisphere import angles_from_pose
 
-    candidates = torch.as_tensor(np.asarray(candidate_poses) if not torch.is_tensor(candidate_poses)
-                                 else candidate_poses)
+    candidates = torch.as_tensor(
+        np.asarray(candidate_poses) if not torch.is_tensor(candidate_poses) else candidate_poses
+    )
     chosen = [int(i) for i in selection["indices"]]
     azimuth, polar, _ = angles_from_pose(candidates)
     path = Path(folder) / FILES.selection
-    atomic_write_json(path, {
-        **selection,
-        "chosen_names": list(chosen_names),
-        "chosen_poses": candidates[chosen].tolist(),
-        "candidate_poses": candidates.tolist(),
-        "candidate_azimuth": azimuth.tolist(), "candidate_polar": polar.tolist(),
-        "train_poses": np.asarray(train_poses).tolist(),
-    })
+    atomic_write_json(
+        path,
+        {
+            **selection,
+            "chosen_names": list(chosen_names),
+            "chosen_poses": candidates[chosen].tolist(),
+            "candidate_poses": candidates.tolist(),
+            "candidate_azimuth": azimuth.tolist(),
+            "candidate_polar": polar.tolist(),
+            "train_poses": np.asarray(train_poses).tolist(),
+        },
+    )
     return path
 
 
@@ -203,7 +207,23 @@ def render_paths(folder: Path, kind: str = "render") -> list[Path]:
 
 
 __all__ = [
-    "FILES", "SELECTION_KEYS", "RunFiles", "SelectionRecord", "read_config", "read_error", "read_history",
-    "read_metrics", "read_progress", "read_result", "read_selection", "render_paths", "write_config",
-    "write_error", "write_history", "write_metrics", "write_progress", "write_result", "write_selection",
+    "FILES",
+    "SELECTION_KEYS",
+    "RunFiles",
+    "SelectionRecord",
+    "read_config",
+    "read_error",
+    "read_history",
+    "read_metrics",
+    "read_progress",
+    "read_result",
+    "read_selection",
+    "render_paths",
+    "write_config",
+    "write_error",
+    "write_history",
+    "write_metrics",
+    "write_progress",
+    "write_result",
+    "write_selection",
 ]

@@ -40,8 +40,17 @@ SWEEP_FILE = "sweep.json"
 SUPERSEDED_DIR = "superseded"
 RESULTS_KIND, RUN_KIND = "experiment-results", "experiment-run"
 # Files a run folder of an earlier nerfaug (before the marker) may hold; temporary files start with ".".
-_RUN_CONTRACT = ("result.json", "selection.json", "metrics.json", "history.json", "config.json",
-                 "progress.json", "error.json", "uncertainty.png", "renders")
+_RUN_CONTRACT = (
+    "result.json",
+    "selection.json",
+    "metrics.json",
+    "history.json",
+    "config.json",
+    "progress.json",
+    "error.json",
+    "uncertainty.png",
+    "renders",
+)
 
 
 @dataclass(frozen=True)
@@ -119,11 +128,15 @@ def clear_incomplete(folder: Path) -> bool:
     if not folder.exists():
         return False
     if not is_run_folder(folder):
-        raise FolderRefused(f"{folder}: holds files nerfaug did not write, so it is not redone; move them "
-                            "elsewhere, or choose a new --out folder")
+        raise FolderRefused(
+            f"{folder}: holds files nerfaug did not write, so it is not redone; move them "
+            "elsewhere, or choose a new --out folder"
+        )
     if read_result(folder) is not None:
-        raise IncompatibleResults(f"{folder}: holds a finished run of another configuration; it is not deleted. "
-                                  "Use a new --out folder, or --force to move the old runs aside")
+        raise IncompatibleResults(
+            f"{folder}: holds a finished run of another configuration; it is not deleted. "
+            "Use a new --out folder, or --force to move the old runs aside"
+        )
     shutil.rmtree(folder)
     return True
 
@@ -202,8 +215,10 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
     previous, problem = read_sweep(root)
     folders = run_folders(root)
     if previous is None and not folders and not owned.is_empty(root) and not owned.marked(root, RESULTS_KIND):
-        raise FolderRefused(f"{root}: not empty and not a nerfaug results folder (no {SWEEP_FILE}), so nothing is "
-                            "written there; choose a new or empty folder for --out")
+        raise FolderRefused(
+            f"{root}: not empty and not a nerfaug results folder (no {SWEEP_FILE}), so nothing is "
+            "written there; choose a new or empty folder for --out"
+        )
     moved = None
     if force:
         if folders or previous is not None:
@@ -214,21 +229,23 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
         raise IncompatibleResults(
             f"{path} {problem} but {root / 'runs'} holds {len(folders)} run folder(s), so nerfaug cannot tell "
             f"what made them; re-run with --force to move them aside into {root / SUPERSEDED_DIR} (nothing is "
-            "deleted), or use another --out folder")
+            "deleted), or use another --out folder"
+        )
     owned.mark(root, RESULTS_KIND)
     atomic_write_json(path, sweep)
     return moved
 
 
 def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> None:
-    how = (f"Use another --out folder, or --force to move the existing runs aside into {root / SUPERSEDED_DIR} "
-           "(nothing is deleted)")
+    how = (
+        f"Use another --out folder, or --force to move the existing runs aside into {root / SUPERSEDED_DIR} "
+        "(nothing is deleted)"
+    )
     if previous.get("fingerprint") != sweep["fingerprint"]:
         old, new = previous.get("fingerprinted", {}), sweep["fingerprinted"]
         changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
         details = "; ".join(f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in changed[:6])
-        raise IncompatibleResults(
-            f"{path}: results there were made with a different configuration ({details}). {how}.")
+        raise IncompatibleResults(f"{path}: results there were made with a different configuration ({details}). {how}.")
     old_data, new_data = previous.get("datasets") or {}, sweep.get("datasets") or {}
     for scene in sorted(set(old_data) & set(new_data)):
         old, new = old_data[scene], new_data[scene]
@@ -237,12 +254,16 @@ def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> No
         if old.get("digest") != new.get("digest") or not same_content:
             raise IncompatibleResults(
                 f"{path}, scene '{scene}': its runs were made on the dataset {old_data[scene].get('path')!r}, "
-                f"this sweep uses {new_data[scene].get('path')!r} with different content. {how}.")
-    others = sorted({r["scene"] + "/" + r["method"] for r in finished_runs(root)
-                     if r["fingerprint"] != sweep["fingerprint"]})
+                f"this sweep uses {new_data[scene].get('path')!r} with different content. {how}."
+            )
+    others = sorted(
+        {r["scene"] + "/" + r["method"] for r in finished_runs(root) if r["fingerprint"] != sweep["fingerprint"]}
+    )
     if others:
-        raise IncompatibleResults(f"{root / 'runs'}: finished runs of another configuration ({', '.join(others[:4])}) "
-                                  f"although {path} matches. {how}.")
+        raise IncompatibleResults(
+            f"{root / 'runs'}: finished runs of another configuration ({', '.join(others[:4])}) "
+            f"although {path} matches. {how}."
+        )
 
 
 def dataset_digest(folder: Path) -> str:

@@ -59,8 +59,10 @@ def default_engines(device: str) -> tuple[list[str], dict[str, str]]:
         if name in SMOKE_ENGINES:
             left_out[name] = "a smoke-test preset for the test suite, not a NeRF to compare methods on"
         elif name in GPU_ENGINES and device != "cuda":
-            left_out[name] = ("needs a GPU: on a CPU it is about 100x slower than the cpu preset; run it on a GPU "
-                              f"with --engines {name} --device cuda")
+            left_out[name] = (
+                "needs a GPU: on a CPU it is about 100x slower than the cpu preset; run it on a GPU "
+                f"with --engines {name} --device cuda"
+            )
         else:
             chosen.append(name)
     return chosen, left_out
@@ -92,8 +94,13 @@ def machine() -> dict:
     """What the study ran on, for its summary."""
     import torch
 
-    return {"platform": platform.platform(), "cpu_count": os.cpu_count(), "torch": torch.__version__,
-            "python": platform.python_version(), "host": platform.node()}
+    return {
+        "platform": platform.platform(),
+        "cpu_count": os.cpu_count(),
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+        "host": platform.node(),
+    }
 
 
 @dataclass
@@ -113,15 +120,22 @@ class StudyPlan:
 
     def record(self) -> dict:
         return {
-            "engines": self.engines, "left_out": self.left_out, "scenes": self.scenes, "datasets": self.datasets,
-            "methods": list(self.config.methods), "trials": self.config.trials, "config": asdict(self.config),
-            "command": self.command, "machine": machine(),
+            "engines": self.engines,
+            "left_out": self.left_out,
+            "scenes": self.scenes,
+            "datasets": self.datasets,
+            "methods": list(self.config.methods),
+            "trials": self.config.trials,
+            "config": asdict(self.config),
+            "command": self.command,
+            "machine": machine(),
             "written": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         }
 
 
-def prepare_datasets(out: Path, scenes: tuple[str, ...], config: ExperimentConfig,
-                     progress: bool = True) -> dict[str, str]:
+def prepare_datasets(
+    out: Path, scenes: tuple[str, ...], config: ExperimentConfig, progress: bool = True
+) -> dict[str, str]:
     """scene name -> dataset folder (absolute). A built-in scene is rendered once (cached by its
     manifest) into OUT/datasets/<res>px/<scene>/, a folder named by the scene so that results and
     per-scene settings (the field learning rate) know it by its name; a dataset folder is used
@@ -135,9 +149,15 @@ def prepare_datasets(out: Path, scenes: tuple[str, ...], config: ExperimentConfi
             from nerfaug.scenes import render_scene_dataset
 
             folder = render_scene_dataset(
-                scene, Path(out) / "datasets" / f"{config.resolution}px" / scene, resolution=config.resolution,
-                pool=config.pool, test=config.n_test, initial=config.n_initial, samples=config.render_samples,
-                seed=config.seed, progress=progress,
+                scene,
+                Path(out) / "datasets" / f"{config.resolution}px" / scene,
+                resolution=config.resolution,
+                pool=config.pool,
+                test=config.n_test,
+                initial=config.n_initial,
+                samples=config.render_samples,
+                seed=config.seed,
+                progress=progress,
             )
         name = Path(folder).name
         if name in found:
@@ -180,8 +200,14 @@ def run_study(plan: StudyPlan, workers: int = 1, force: bool = False, progress: 
     for engine in plan.engines:
         if progress:
             print(f"study: engine {engine} -> {plan.out / engine}", file=sys.stderr)
-        outcome = run_sweep(plan.engine_config(engine), plan.out / engine, workers=workers, force=force,
-                            progress=progress, command=plan.command)
+        outcome = run_sweep(
+            plan.engine_config(engine),
+            plan.out / engine,
+            workers=workers,
+            force=force,
+            progress=progress,
+            command=plan.command,
+        )
         outcomes[engine] = {"failed": outcome.failed, "results": len(outcome.results)}
     return outcomes
 
@@ -233,7 +259,9 @@ def study(
         for engine, why in plan.left_out.items():
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)
         if workers is None:
-            workers = 1 if plan.config.device == "cuda" else max(1, (os.cpu_count() or 1) // plan.config.threads_per_run)
+            workers = (
+                1 if plan.config.device == "cuda" else max(1, (os.cpu_count() or 1) // plan.config.threads_per_run)
+            )
         outcomes = run_study(plan, workers=workers, force=force)
         failed = {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
     paths = write_study(out)
@@ -247,23 +275,39 @@ def study(
         raise SystemExit(1)
 
 
-def study_command(out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str,
-                  preset_name: str) -> list[str]:
+def study_command(
+    out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str, preset_name: str
+) -> list[str]:
     """The command line that plans this study again (the options that decide what runs)."""
     command = ["nerfaug", "study", "--out", str(out)]
     for flag, values in (("--engines", engines), ("--scenes", scenes), ("--methods", methods)):
         if values:
             command += [flag, *map(str, values)]
-    for flag, value in (("--trials", trials), ("--resolution", resolution), ("--steps", steps),
-                        ("--device", device), ("--preset", preset_name)):
+    for flag, value in (
+        ("--trials", trials),
+        ("--resolution", resolution),
+        ("--steps", steps),
+        ("--device", device),
+        ("--preset", preset_name),
+    ):
         if value is not None:
             command += [flag, str(value)]
     return command
 
 
-def make_plan(out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str,
-              preset_name: StudyPreset = "study", command: list[str] | None = None,
-              progress: bool = True) -> StudyPlan:
+def make_plan(
+    out: Path,
+    engines,
+    scenes,
+    methods,
+    trials,
+    resolution: int,
+    steps,
+    device: str,
+    preset_name: StudyPreset = "study",
+    command: list[str] | None = None,
+    progress: bool = True,
+) -> StudyPlan:
     """The plan from the command's options (None: the default), with the datasets prepared."""
     from nerfaug.device import resolve_device
     from nerfaug.scenes import BUILTIN_SCENES
@@ -278,15 +322,19 @@ def make_plan(out: Path, engines, scenes, methods, trials, resolution: int, step
     else:
         unknown = [e for e in engines if e not in known]
         if unknown:
-            raise SystemExit(f"nerfaug study: --engines: unknown preset(s) {', '.join(unknown)}; "
-                             f"valid: {', '.join(known)}")
+            raise SystemExit(
+                f"nerfaug study: --engines: unknown preset(s) {', '.join(unknown)}; valid: {', '.join(known)}"
+            )
         chosen, left_out = list(dict.fromkeys(engines)), {}
     methods = tuple(methods) if methods else study_methods()
     comparisons = max(1, sum(m != "uniform" for m in methods))
     if trials is None:
         trials = min_trials(comparisons)
     config = base_config(preset_name).replace(
-        methods=methods, trials=trials, resolution=resolution, device=device_type,
+        methods=methods,
+        trials=trials,
+        resolution=resolution,
+        device=device_type,
         **({"steps": steps} if steps is not None else {}),
     )
     scenes = tuple(scenes) if scenes else BUILTIN_SCENES
@@ -296,11 +344,22 @@ def make_plan(out: Path, engines, scenes, methods, trials, resolution: int, step
     for engine in chosen:
         check_config(config.replace(scenes=scenes, engine=engine))
     datasets = prepare_datasets(out, scenes, config, progress=progress)
-    return StudyPlan(Path(out), config, chosen, left_out, list(datasets), datasets,
-                     command or ["nerfaug", *sys.argv[1:]])
+    return StudyPlan(
+        Path(out), config, chosen, left_out, list(datasets), datasets, command or ["nerfaug", *sys.argv[1:]]
+    )
 
 
 __all__ = [
-    "DEFAULT_TRIALS", "STUDY_FILE", "StudyPlan", "default_engines", "engine_presets", "make_plan", "min_trials",
-    "prepare_datasets", "run_study", "study", "study_command", "study_methods",
+    "DEFAULT_TRIALS",
+    "STUDY_FILE",
+    "StudyPlan",
+    "default_engines",
+    "engine_presets",
+    "make_plan",
+    "min_trials",
+    "prepare_datasets",
+    "run_study",
+    "study",
+    "study_command",
+    "study_methods",
 ]

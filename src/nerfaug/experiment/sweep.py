@@ -55,7 +55,9 @@ class SweepOutcome:
 def plan_runs(config: ExperimentConfig) -> list[RunKey]:
     return [
         RunKey(scene_name(scene), method, trial)
-        for scene in config.scenes for method in config.methods for trial in range(config.trials)
+        for scene in config.scenes
+        for method in config.methods
+        for trial in range(config.trials)
     ]
 
 
@@ -86,8 +88,12 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
 
     _need(len(config.methods) > 0, "methods", config.methods, "give at least one selection method")
     for method in config.methods:
-        _need(method in METHODS, "methods", method,
-              f"unknown selection method; choose from {', '.join(METHODS)} (`nerfaug methods`)")
+        _need(
+            method in METHODS,
+            "methods",
+            method,
+            f"unknown selection method; choose from {', '.join(METHODS)} (`nerfaug methods`)",
+        )
     _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
     _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
     for name in ("trials", "n_new", "n_initial", "n_test", "pool", "resolution", "render_samples", "threads_per_run"):
@@ -95,20 +101,32 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         _need(isinstance(value, int) and value >= 1, name, value, "must be an integer >= 1")
     _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
     _need(config.add_at_step >= 0, "add_at_step", config.add_at_step, "must be >= 0")
-    _need(config.steps > config.add_at_step, "steps", config.steps,
-          f"must be greater than the step at which views are added ({config.add_at_step}), or the added views "
-          "are never trained on")
+    _need(
+        config.steps > config.add_at_step,
+        "steps",
+        config.steps,
+        f"must be greater than the step at which views are added ({config.add_at_step}), or the added views "
+        "are never trained on",
+    )
     _need(config.pool >= config.n_new, "pool", config.pool, f"the pool must hold the {config.n_new} views to add")
     datasets: dict[str, dict] = {}
     for scene in config.scenes:
         name, folder = scene_name(scene), scene_folder(scene)
-        _need(name not in datasets, "scenes", scene,
-              f"another scene is also named {name!r} in results; rename a folder")
-        _need(folder is not None or config.resolution <= BUILTIN_MAX_RESOLUTION, "resolution", config.resolution,
-              f"built-in scenes are rendered at most {BUILTIN_MAX_RESOLUTION} px across; for more, render one with "
-              "`nerfaug scene render SCENE --res N --out DIR` and pass --data DIR")
-        datasets[name] = ({"builtin": scene, "digest": builtin_dataset_digest(scene, config)} if folder is None
-                          else _check_user_dataset(folder, config))
+        _need(
+            name not in datasets, "scenes", scene, f"another scene is also named {name!r} in results; rename a folder"
+        )
+        _need(
+            folder is not None or config.resolution <= BUILTIN_MAX_RESOLUTION,
+            "resolution",
+            config.resolution,
+            f"built-in scenes are rendered at most {BUILTIN_MAX_RESOLUTION} px across; for more, render one with "
+            "`nerfaug scene render SCENE --res N --out DIR` and pass --data DIR",
+        )
+        datasets[name] = (
+            {"builtin": scene, "digest": builtin_dataset_digest(scene, config)}
+            if folder is None
+            else _check_user_dataset(folder, config)
+        )
     return datasets
 
 
@@ -121,31 +139,58 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
         raise DatasetError(folder / "transforms_test.json", "a test split is needed for evaluation: file not found")
     test = load_dataset(folder, "test", lazy=True)
     width, height = train.cameras.width, train.cameras.height
-    _need(config.resolution <= width, "resolution", config.resolution,
-          f"must be between 1 and the width of {folder}'s images ({width} px)")
+    _need(
+        config.resolution <= width,
+        "resolution",
+        config.resolution,
+        f"must be between 1 and the width of {folder}'s images ({width} px)",
+    )
     ran = width // max(1, width // config.resolution)
     if ran != config.resolution:  # images are shrunk by an integer factor: say what would run
         sizes = sorted({width // k for k in range(1, width + 1)}, key=lambda size: abs(size - config.resolution))
-        _need(False, "resolution", config.resolution,
-              f"{folder}'s {width}-px images shrink by whole factors only; the nearest sizes are "
-              f"{', '.join(str(v) for v in sorted(sizes[:3]))}")
+        _need(
+            False,
+            "resolution",
+            config.resolution,
+            f"{folder}'s {width}-px images shrink by whole factors only; the nearest sizes are "
+            f"{', '.join(str(v) for v in sorted(sizes[:3]))}",
+        )
     if (folder / "transforms_initial.json").exists():
         initial = len(load_dataset(folder, "initial", lazy=True))
-        _need(initial == config.n_initial, "n_initial", config.n_initial,
-              f"{folder / 'transforms_initial.json'} holds {initial} initial views; they are all used")
+        _need(
+            initial == config.n_initial,
+            "n_initial",
+            config.n_initial,
+            f"{folder / 'transforms_initial.json'} holds {initial} initial views; they are all used",
+        )
         pool = len(train)
     else:
-        _need(len(train) >= config.n_initial + config.n_new, "n_initial", config.n_initial,
-              f"{folder / 'transforms_train.json'} holds {len(train)} views, fewer than {config.n_initial} initial + "
-              f"{config.n_new} new ones")
+        _need(
+            len(train) >= config.n_initial + config.n_new,
+            "n_initial",
+            config.n_initial,
+            f"{folder / 'transforms_train.json'} holds {len(train)} views, fewer than {config.n_initial} initial + "
+            f"{config.n_new} new ones",
+        )
         initial, pool = config.n_initial, len(train) - config.n_initial
     _need(pool >= config.n_new, "n_new", config.n_new, f"the candidate pool of {folder} holds only {pool} views")
-    _need(len(test) >= config.n_test, "n_test", config.n_test,
-          f"{folder / 'transforms_test.json'} holds only {len(test)} test views")
+    _need(
+        len(test) >= config.n_test,
+        "n_test",
+        config.n_test,
+        f"{folder / 'transforms_test.json'} holds only {len(test)} test views",
+    )
     splits = ("train", "test", "initial") if (folder / "transforms_initial.json").exists() else ("train", "test")
-    return {"path": str(Path(folder).resolve()), "digest": dataset_digest(folder),
-            "content": dataset_content_digest(folder, splits), "width": ran,
-            "height": height // (width // ran), "initial": initial, "pool": pool, "test": config.n_test}
+    return {
+        "path": str(Path(folder).resolve()),
+        "digest": dataset_digest(folder),
+        "content": dataset_content_digest(folder, splits),
+        "width": ran,
+        "height": height // (width // ran),
+        "initial": initial,
+        "pool": pool,
+        "test": config.n_test,
+    }
 
 
 def versions() -> dict[str, str]:
@@ -162,8 +207,11 @@ def sweep_record(config: ExperimentConfig, command: list[str] | None = None, dat
     """sweep.json: the fingerprint, the config, and what each scene ran on (`check_config`)."""
     fingerprinted = config.fingerprinted()
     return {
-        "fingerprint": fingerprint(fingerprinted), "fingerprinted": fingerprinted,
-        "config": asdict(config), "command": command or sys.argv, "versions": versions(),
+        "fingerprint": fingerprint(fingerprinted),
+        "fingerprinted": fingerprinted,
+        "config": asdict(config),
+        "command": command or sys.argv,
+        "versions": versions(),
         "datasets": datasets or {},
     }
 
@@ -174,8 +222,13 @@ def _run_and_report(key: RunKey, dataset_dir: Path, config: ExperimentConfig, ro
 
 
 def run_sweep(
-    config: ExperimentConfig, root: Path, backend: Backend = "local", workers: int = 1,
-    address: str | None = None, force: bool = False, progress: bool = True,
+    config: ExperimentConfig,
+    root: Path,
+    backend: Backend = "local",
+    workers: int = 1,
+    address: str | None = None,
+    force: bool = False,
+    progress: bool = True,
     command: list[str] | None = None,
 ) -> SweepOutcome:
     """Run every missing run of the sweep and return all results.
@@ -198,8 +251,9 @@ def run_sweep(
     for key in [] if force else keys:  # refuse before anything is written, removed or rendered
         folder = key.folder(root)
         if folder.exists() and read_result(folder, record["fingerprint"]) is None and not is_run_folder(folder):
-            raise IncompatibleResults(f"{folder}: holds files nerfaug did not write; move them away or use "
-                                      "another --out folder")
+            raise IncompatibleResults(
+                f"{folder}: holds files nerfaug did not write; move them away or use another --out folder"
+            )
     moved = check_sweep(root, record, force=force)  # with --force, moves every run aside (deletes nothing)
     if moved is not None:
         console.print(f"--force: the earlier runs and sweep.json were moved to {moved}")
@@ -231,8 +285,14 @@ class _Display:
     def __init__(self, total: int, root: Path, steps: int, enabled: bool):
         self.root, self.steps = root, steps
         self.progress = Progress(
-            TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-            TimeRemainingColumn(), console=console, disable=not enabled, transient=False,
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=console,
+            disable=not enabled,
+            transient=False,
         )
         self.overall = self.progress.add_task("runs", total=total)
         self.running: dict[RunKey, int] = {}
@@ -346,14 +406,20 @@ def _execute_ray(todo, datasets, config, root, workers, address, progress):
         if address:
             ray.init(address=address, log_to_driver=False)
         else:
-            ray.init(num_cpus=max(workers * config.threads_per_run, config.threads_per_run),
-                     include_dashboard=False, log_to_driver=False)
+            ray.init(
+                num_cpus=max(workers * config.threads_per_run, config.threads_per_run),
+                include_dashboard=False,
+                log_to_driver=False,
+            )
     from nerfaug.device import device_kind
 
     # A run asks Ray for a GPU exactly when it will compute on one.
     use_gpu = device_kind(config.device) == "cuda" and ray.cluster_resources().get("GPU", 0) > 0
     remote = ray.remote(_run_and_report).options(
-        num_cpus=config.threads_per_run, num_gpus=1 if use_gpu else 0, max_retries=2, retry_exceptions=True,
+        num_cpus=config.threads_per_run,
+        num_gpus=1 if use_gpu else 0,
+        max_retries=2,
+        retry_exceptions=True,
     )
     results, failed = [], {}
     try:

@@ -8,6 +8,18 @@ from nerfaug.nerf.trainer import Trainer, TrainingDiverged
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 
 __all__ = [
-    "ENCODINGS", "FIELDS", "SAMPLERS", "NerfConfig", "NerfModel", "RenderOutput", "Sampler", "Trainer",
-    "TrainingDiverged", "build_encoding", "build_field", "build_sampler", "composite", "render_weights",
+    "ENCODINGS",
+    "FIELDS",
+    "SAMPLERS",
+    "NerfConfig",
+    "NerfModel",
+    "RenderOutput",
+    "Sampler",
+    "Trainer",
+    "TrainingDiverged",
+    "build_encoding",
+    "build_field",
+    "build_sampler",
+    "composite",
+    "render_weights",
 ]

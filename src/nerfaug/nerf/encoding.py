@@ -65,8 +65,13 @@ class HashEncoding(nn.Module):
     """
 
     def __init__(
-        self, num_levels: int = 16, features_per_level: int = 2, log2_table_size: int = 19,
-        base_resolution: int = 16, max_resolution: int = 2048, init_scale: float = 1e-4,
+        self,
+        num_levels: int = 16,
+        features_per_level: int = 2,
+        log2_table_size: int = 19,
+        base_resolution: int = 16,
+        max_resolution: int = 2048,
+        init_scale: float = 1e-4,
     ):
         super().__init__()
         if (max_resolution + 1) * 2**log2_table_size >= 2**31:
@@ -97,8 +102,11 @@ class HashEncoding(nn.Module):
     def from_config(cls, config) -> HashEncoding:
         """The field's hash grid as a `NerfConfig`'s hash_* fields describe it."""
         return cls(
-            config.hash_levels, config.hash_features_per_level, config.hash_log2_table_size,
-            config.hash_base_resolution, config.hash_max_resolution,
+            config.hash_levels,
+            config.hash_features_per_level,
+            config.hash_log2_table_size,
+            config.hash_base_resolution,
+            config.hash_max_resolution,
         )
 
     @property
@@ -213,15 +221,20 @@ def spherical_harmonics(directions: Tensor, levels: int = 4) -> Tensor:
     if levels > 2:
         xx, yy, zz = x * x, y * y, z * z
         terms += [
-            1.0925484305920792 * x * y, 1.0925484305920792 * y * z,
-            0.9461746957575601 * zz - 0.31539156525251999, 1.0925484305920792 * x * z,
+            1.0925484305920792 * x * y,
+            1.0925484305920792 * y * z,
+            0.9461746957575601 * zz - 0.31539156525251999,
+            1.0925484305920792 * x * z,
             0.5462742152960396 * (xx - yy),
         ]
     if levels > 3:
         terms += [
-            0.5900435899266435 * y * (3 * xx - yy), 2.890611442640554 * x * y * z,
-            0.4570457994644658 * y * (5 * zz - 1), 0.3731763325901154 * z * (5 * zz - 3),
-            0.4570457994644658 * x * (5 * zz - 1), 1.445305721320277 * z * (xx - yy),
+            0.5900435899266435 * y * (3 * xx - yy),
+            2.890611442640554 * x * y * z,
+            0.4570457994644658 * y * (5 * zz - 1),
+            0.3731763325901154 * z * (5 * zz - 3),
+            0.4570457994644658 * x * (5 * zz - 1),
+            1.445305721320277 * z * (xx - yy),
             0.5900435899266435 * x * (xx - 3 * yy),
         ]
     return torch.stack(terms, dim=-1)

@@ -85,9 +85,7 @@ class NerfField(nn.Module):
         self.sh_levels, self.geo_feat_dim = config.sh_levels, config.geo_feat_dim
         self.encoding = encoding
         self.density_mlp = mlp(self.encoding.output_dim, config.hidden_dim, 1 + config.geo_feat_dim, 1)
-        self.color_mlp = mlp(
-            config.sh_levels**2 + config.geo_feat_dim, config.color_hidden_dim, 3, config.color_layers
-        )
+        self.color_mlp = mlp(config.sh_levels**2 + config.geo_feat_dim, config.color_hidden_dim, 3, config.color_layers)
         # Zero bias on the density output: a fresh field then has about the configured density.
         with torch.no_grad():
             self.density_mlp[-1].bias.zero_()
@@ -118,7 +116,11 @@ class DensityField(nn.Module):
         super().__init__()
         self.density_kind, self.average_init_density = config.density_activation, config.average_init_density
         self.encoding = HashEncoding(
-            config.proposal_hash_levels, 2, config.proposal_log2_table_size, 16, max_resolution,
+            config.proposal_hash_levels,
+            2,
+            config.proposal_log2_table_size,
+            16,
+            max_resolution,
         )
         self.mlp = mlp(self.encoding.output_dim, config.proposal_hidden_dim, 1, 1)
         with torch.no_grad():

@@ -74,7 +74,10 @@ class NerfModel(nn.Module):
         self.sampler.before_step(step, self.density, generator)
 
     def forward(
-        self, origins: Tensor, directions: Tensor, background: Tensor | None = None,
+        self,
+        origins: Tensor,
+        directions: Tensor,
+        background: Tensor | None = None,
         generator: torch.Generator | None = None,
     ) -> RenderOutput:
         """Render rays.
@@ -99,9 +102,7 @@ class NerfModel(nn.Module):
         rgb, accumulation, depth = composite(weights, rgbs, t_starts, t_ends, background)
         return RenderOutput(rgb, accumulation, depth, weights, t_starts, t_ends, extras)
 
-    def _sample(
-        self, origins: Tensor, directions: Tensor, generator: torch.Generator | None
-    ) -> tuple[Tensor, dict]:
+    def _sample(self, origins: Tensor, directions: Tensor, generator: torch.Generator | None) -> tuple[Tensor, dict]:
         """Edges (n_rays, num_samples + 1) of the final samples, and the sampler's extras."""
         config = self.config
         t_min, t_max = ray_box_span(origins, directions, config.box_half_size, config.near, config.far)
@@ -237,8 +238,8 @@ def _rename_old_keys(module, state_dict, prefix, *args) -> None:
     """Load-state-dict pre-hook: rename the keys of a model saved before samplers were modules
     of their own (e.g. a capture session's checkpoint) to today's."""
     for key in [k for k in state_dict if k.startswith(prefix)]:
-        local = key[len(prefix):]
+        local = key[len(prefix) :]
         for old, new in _RENAMED_KEYS:
             if local.startswith(old):
-                state_dict[prefix + new + local[len(old):]] = state_dict.pop(key)
+                state_dict[prefix + new + local[len(old) :]] = state_dict.pop(key)
                 break

@@ -37,8 +37,15 @@ class OccupancyGrid(nn.Module):
     """
 
     def __init__(
-        self, half_size: float, resolution: int = 64, update_every: int = 16, warmup_steps: int = 256,
-        ema_decay: float = 0.95, threshold: float = 0.01, update_fraction: float = 0.25, chunk: int = 65536,
+        self,
+        half_size: float,
+        resolution: int = 64,
+        update_every: int = 16,
+        warmup_steps: int = 256,
+        ema_decay: float = 0.95,
+        threshold: float = 0.01,
+        update_fraction: float = 0.25,
+        chunk: int = 65536,
     ):
         super().__init__()
         self.half_size, self.resolution = half_size, resolution
@@ -71,7 +78,10 @@ class OccupancyGrid(nn.Module):
 
     @torch.no_grad()
     def update(
-        self, step: int, density_fn: Callable[[Tensor], Tensor], step_size: float,
+        self,
+        step: int,
+        density_fn: Callable[[Tensor], Tensor],
+        step_size: float,
         generator: torch.Generator | None = None,
     ) -> None:
         """Refresh cell opacities from the field if `step` is an update step.
@@ -124,8 +134,12 @@ class OccupancySampler(Sampler):
     @classmethod
     def from_config(cls, config: NerfConfig) -> OccupancySampler:
         grid = OccupancyGrid(
-            config.box_half_size, config.occupancy_resolution, config.occupancy_update_every,
-            config.occupancy_warmup_steps, config.occupancy_ema_decay, config.occupancy_threshold,
+            config.box_half_size,
+            config.occupancy_resolution,
+            config.occupancy_update_every,
+            config.occupancy_warmup_steps,
+            config.occupancy_ema_decay,
+            config.occupancy_threshold,
             config.occupancy_update_fraction,
         )
         return cls(grid, config.num_samples)

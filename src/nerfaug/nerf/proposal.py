@@ -142,9 +142,16 @@ class ProposalSampler(Sampler):
     """
 
     def __init__(
-        self, networks: list[DensityField], samples: tuple[int, ...], num_samples: int, half_size: float,
-        schedule: ProposalSchedule, anneal_steps: int, anneal_slope: float,
-        interlevel_loss_mult: float, distortion_loss_mult: float,
+        self,
+        networks: list[DensityField],
+        samples: tuple[int, ...],
+        num_samples: int,
+        half_size: float,
+        schedule: ProposalSchedule,
+        anneal_steps: int,
+        anneal_slope: float,
+        interlevel_loss_mult: float,
+        distortion_loss_mult: float,
     ):
         super().__init__()
         self.networks = nn.ModuleList(networks)
@@ -157,11 +164,15 @@ class ProposalSampler(Sampler):
     @classmethod
     def from_config(cls, config: NerfConfig) -> ProposalSampler:
         return cls(
-            [DensityField(config, r) for r in config.proposal_max_resolutions], config.proposal_samples,
-            config.num_samples, config.box_half_size,
+            [DensityField(config, r) for r in config.proposal_max_resolutions],
+            config.proposal_samples,
+            config.num_samples,
+            config.box_half_size,
             ProposalSchedule(config.proposal_update_every, config.proposal_warmup_steps),
-            config.proposal_anneal_steps, config.proposal_anneal_slope,
-            config.interlevel_loss_mult, config.distortion_loss_mult,
+            config.proposal_anneal_steps,
+            config.proposal_anneal_slope,
+            config.interlevel_loss_mult,
+            config.distortion_loss_mult,
         )
 
     def sample(self, origins, directions, t_min, t_max, generator=None) -> tuple[Tensor, dict]:

@@ -26,7 +26,11 @@ class Sampler(nn.Module, ABC):
 
     @abstractmethod
     def sample(
-        self, origins: Tensor, directions: Tensor, t_min: Tensor, t_max: Tensor,
+        self,
+        origins: Tensor,
+        directions: Tensor,
+        t_min: Tensor,
+        t_max: Tensor,
         generator: torch.Generator | None = None,
     ) -> tuple[Tensor, dict]:
         """The final samples along each ray.

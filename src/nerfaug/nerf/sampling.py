@@ -56,7 +56,10 @@ def _uniform(shape: tuple[int, ...], generator: torch.Generator | None, device) 
 
 
 def stratified_edges(
-    t_min: Tensor, t_max: Tensor, n_samples: int, jitter: bool = False,
+    t_min: Tensor,
+    t_max: Tensor,
+    n_samples: int,
+    jitter: bool = False,
     generator: torch.Generator | None = None,
 ) -> Tensor:
     """Edges of `n_samples` equal intervals covering [t_min, t_max], optionally jittered.
@@ -82,8 +85,12 @@ def stratified_edges(
 
 
 def sample_pdf(
-    edges: Tensor, weights: Tensor, n_samples: int, jitter: bool = False,
-    generator: torch.Generator | None = None, padding: float = 0.01,
+    edges: Tensor,
+    weights: Tensor,
+    n_samples: int,
+    jitter: bool = False,
+    generator: torch.Generator | None = None,
+    padding: float = 0.01,
 ) -> Tensor:
     """Intervals placed by inverting the CDF of a piecewise-constant histogram (mip-NeRF 360).
 

@@ -63,8 +63,14 @@ class Trainer:
     """
 
     def __init__(
-        self, views: Views, config: NerfConfig, seed: int = 0, device="cpu",
-        background=(1.0, 1.0, 1.0), progress: bool = True, precision: str = "auto",
+        self,
+        views: Views,
+        config: NerfConfig,
+        seed: int = 0,
+        device="cpu",
+        background=(1.0, 1.0, 1.0),
+        progress: bool = True,
+        precision: str = "auto",
         field: str | nn.Module = DEFAULT_FIELD,
     ):
         # device: "cpu", "cuda", "auto" (cuda when available); precision: "auto" (fp16 autocast
@@ -93,7 +99,8 @@ class Trainer:
                 {"params": params, "lr": config.field_lr if name == "field" else config.lr, "name": name}
                 for name, params in groups.items()
             ],
-            eps=config.adam_eps, fused=True,  # one kernel per step: much faster on a CPU too
+            eps=config.adam_eps,
+            fused=True,  # one kernel per step: much faster on a CPU too
         )
         self._initial_lrs = [group["lr"] for group in self.optimizer.param_groups]
         self.step = 0
@@ -243,9 +250,16 @@ class Trainer:
             "generator": self.generator.get_state(),
             **({"scaler": self.scaler.state_dict()} if self.scaler is not None else {}),
             "views": {
-                "camera_to_world": cameras.camera_to_world, "fx": cameras.fx, "fy": cameras.fy,
-                "cx": cameras.cx, "cy": cameras.cy, "width": cameras.width, "height": cameras.height,
-                "images": views.images, "alphas": views.alphas, "names": list(views.names),
+                "camera_to_world": cameras.camera_to_world,
+                "fx": cameras.fx,
+                "fy": cameras.fy,
+                "cx": cameras.cx,
+                "cy": cameras.cy,
+                "width": cameras.width,
+                "height": cameras.height,
+                "images": views.images,
+                "alphas": views.alphas,
+                "names": list(views.names),
             },
         }
 
@@ -265,9 +279,7 @@ class Trainer:
         return path
 
     @classmethod
-    def load_checkpoint(
-        cls, path: str | Path, device="cpu", progress: bool = True, precision: str = "auto"
-    ) -> Trainer:
+    def load_checkpoint(cls, path: str | Path, device="cpu", progress: bool = True, precision: str = "auto") -> Trainer:
         """A trainer restored from `save_checkpoint` (on any device); training continues exactly
         as it would have on the device it is restored to."""
         state = torch.load(path, map_location="cpu", weights_only=True)
@@ -277,8 +289,16 @@ class Trainer:
         cameras = Cameras(v["camera_to_world"], v["fx"], v["fy"], v["cx"], v["cy"], v["width"], v["height"])
         views = Views(cameras, v["images"], list(v["names"]), v["alphas"])
         config = NerfConfig.from_dict(state["config"])
-        trainer = cls(views, config, state["seed"], device, state["background"], progress, precision=precision,
-                      field=state.get("field") or DEFAULT_FIELD)
+        trainer = cls(
+            views,
+            config,
+            state["seed"],
+            device,
+            state["background"],
+            progress,
+            precision=precision,
+            field=state.get("field") or DEFAULT_FIELD,
+        )
         trainer.model.load_state_dict(state["model"])
         trainer.optimizer.load_state_dict(state["optimizer"])
         trainer.generator.set_state(state["generator"])
@@ -294,7 +314,11 @@ def _progress_bar(enabled: bool):
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     return Progress(
-        TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),
-        TextColumn("loss {task.fields[loss]:.4f}  psnr {task.fields[psnr]:.2f} dB"), TimeRemainingColumn(),
-        disable=not enabled, transient=False,
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("loss {task.fields[loss]:.4f}  psnr {task.fields[psnr]:.2f} dB"),
+        TimeRemainingColumn(),
+        disable=not enabled,
+        transient=False,
     )

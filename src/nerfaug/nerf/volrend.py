@@ -40,16 +40,21 @@ class RenderOutput:
     extras: dict | None = None
 
     def detach(self) -> RenderOutput:
-        return RenderOutput(**{
-            f.name: getattr(self, f.name).detach() for f in fields(self) if f.name != "extras"
-        }, extras=None)
+        return RenderOutput(
+            **{f.name: getattr(self, f.name).detach() for f in fields(self) if f.name != "extras"}, extras=None
+        )
 
     @staticmethod
     def cat(parts: list[RenderOutput]) -> RenderOutput:
         """Concatenate outputs of ray chunks (same n_samples), dropping extras."""
-        return RenderOutput(**{
-            f.name: torch.cat([getattr(p, f.name) for p in parts]) for f in fields(RenderOutput) if f.name != "extras"
-        }, extras=None)
+        return RenderOutput(
+            **{
+                f.name: torch.cat([getattr(p, f.name) for p in parts])
+                for f in fields(RenderOutput)
+                if f.name != "extras"
+            },
+            extras=None,
+        )
 
 
 _MAX_OPTICAL_DEPTH = 80.0

@@ -70,6 +70,13 @@ def write_report(results_dir: Path) -> list[Path]:
 
 
 __all__ = [
-    "NotAggregated", "ReportError", "Results", "Run", "build_report", "collect_results", "history_series",
-    "why_not_valid", "write_report",
+    "NotAggregated",
+    "ReportError",
+    "Results",
+    "Run",
+    "build_report",
+    "collect_results",
+    "history_series",
+    "why_not_valid",
+    "write_report",
 ]

@@ -75,8 +75,9 @@ class Results:
         return [m for m in self.methods if m != self.ours and m in present]
 
     def runs_of(self, scene: str | None = None, method: str | None = None) -> list[Run]:
-        chosen = [r for r in self.runs
-                  if (scene is None or r.scene == scene) and (method is None or r.method == method)]
+        chosen = [
+            r for r in self.runs if (scene is None or r.scene == scene) and (method is None or r.method == method)
+        ]
         return sorted(chosen, key=lambda r: (r.scene, r.method, r.trial))
 
     def values(self, scene: str, method: str, metric: str) -> list[float]:
@@ -161,7 +162,9 @@ def collect_results(results_dir: Path) -> Results:
     existing = {tuple(folder.parts[-3:]) for folder in _run_folders(root)}
     missing = [
         f"{scene}/{method}/trial {trial}"
-        for scene in planned_scenes for method in planned_methods for trial in range(int(config.get("trials", 0)))
+        for scene in planned_scenes
+        for method in planned_methods
+        for trial in range(int(config.get("trials", 0)))
         if (scene, method, f"trial_{trial:03d}") not in existing
     ]
     scenes = _ordered(planned_scenes, {r.scene for r in runs} | {f.folder.parts[-3] for f in skipped})

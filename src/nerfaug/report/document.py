@@ -196,6 +196,19 @@ def bold_best(cells: list[str], values: list[float | None], lower_is_better: boo
 
 
 __all__ = [
-    "Block", "Bullets", "Code", "Figure", "Heading", "Paragraph", "Table", "bold_best", "number", "p_value",
-    "percent", "seconds", "slug", "to_html", "to_markdown",
+    "Block",
+    "Bullets",
+    "Code",
+    "Figure",
+    "Heading",
+    "Paragraph",
+    "Table",
+    "bold_best",
+    "number",
+    "p_value",
+    "percent",
+    "seconds",
+    "slug",
+    "to_html",
+    "to_markdown",
 ]

@@ -48,14 +48,27 @@ def plot_boxplots(results: Results, scene: str, path: Path, title: str | None = 
         arrow = "higher is better" if HIGHER_IS_BETTER[metric] else "lower is better"
         ax.set_title(f"{METRIC_LABELS[metric]} ({arrow})", fontsize=10)
         if not any(data):
-            ax.text(0.5, 0.5, f"{METRIC_LABELS[metric]}\nn/a\n(not computed\nin these runs)", ha="center", va="center",
-                    transform=ax.transAxes, color="0.4")
+            ax.text(
+                0.5,
+                0.5,
+                f"{METRIC_LABELS[metric]}\nn/a\n(not computed\nin these runs)",
+                ha="center",
+                va="center",
+                transform=ax.transAxes,
+                color="0.4",
+            )
             ax.set_xticks([])
             ax.set_yticks([])
             continue
         positions = [i for i, d in enumerate(data) if d]
-        boxes = ax.boxplot([data[i] for i in positions], positions=positions, widths=0.6, patch_artist=True,
-                           showfliers=False, medianprops={"color": "black"})
+        boxes = ax.boxplot(
+            [data[i] for i in positions],
+            positions=positions,
+            widths=0.6,
+            patch_artist=True,
+            showfliers=False,
+            medianprops={"color": "black"},
+        )
         for patch, i in zip(boxes["boxes"], positions):
             patch.set_facecolor((*colours[methods[i]][:3], 0.35))
         for i in positions:
@@ -104,12 +117,17 @@ def plot_uncertainty_maps(results: Results, scene: str, folder: Path) -> tuple[l
     panels, notes = _map_panels(results, scene)
     paths = []
     for part, first in enumerate(range(0, len(panels), MAP_PANELS_PER_FIGURE)):
-        chunk = panels[first: first + MAP_PANELS_PER_FIGURE]
+        chunk = panels[first : first + MAP_PANELS_PER_FIGURE]
         maps = {f"{m} (trial {t})": (s.scores, s.chosen_poses) for m, t, s in chunk}
         suffix = "" if len(panels) <= MAP_PANELS_PER_FIGURE else f"_{part + 1}"
         path = folder / f"fig1_uncertainty_{slug(scene)}{suffix}.png"
-        plot_method_maps(maps, chunk[0][2].candidate_poses, chunk[0][2].train_poses, path,
-                         title=f"{scene}: uncertainty over the hemisphere, seen from above (bright = uncertain)")
+        plot_method_maps(
+            maps,
+            chunk[0][2].candidate_poses,
+            chunk[0][2].train_poses,
+            path,
+            title=f"{scene}: uncertainty over the hemisphere, seen from above (bright = uncertain)",
+        )
         paths.append(path)
     return paths, notes
 
@@ -136,7 +154,7 @@ def _render_rows(results: Results, scene: str) -> tuple[list[tuple[str, list]], 
         if ground_truth is None:
             pairs = [_read_png(p) for p in render_paths(run.folder, "render_vs_gt")]
             # Render left, ground truth right: the right half is the ground truth.
-            ground_truth = [p[:, p.shape[1] // 2:] if p is not None else None for p in pairs]
+            ground_truth = [p[:, p.shape[1] // 2 :] if p is not None else None for p in pairs]
     if ground_truth:
         rows.insert(0, ("ground truth", ground_truth))
     return rows, max((len(images) for _, images in rows), default=0)
@@ -168,8 +186,12 @@ def plot_render_grid(results: Results, scene: str, path: Path) -> Path | None:
 
 
 HISTORY_KEYS = ("psnr", "train_psnr", "loss", "train_loss")
-HISTORY_LABELS = {"psnr": "training-batch PSNR (dB)", "train_psnr": "training PSNR (dB)", "loss": "training loss",
-                  "train_loss": "training loss"}
+HISTORY_LABELS = {
+    "psnr": "training-batch PSNR (dB)",
+    "train_psnr": "training PSNR (dB)",
+    "loss": "training loss",
+    "train_loss": "training loss",
+}
 
 
 def history_series(history) -> tuple[str, np.ndarray, np.ndarray] | None:
@@ -180,8 +202,9 @@ def history_series(history) -> tuple[str, np.ndarray, np.ndarray] | None:
         steps = history.get("step", history.get("steps"))
         if not isinstance(steps, list):
             return None
-        columns = {k: v for k, v in history.items()
-                   if k in HISTORY_KEYS and isinstance(v, list) and len(v) == len(steps)}
+        columns = {
+            k: v for k, v in history.items() if k in HISTORY_KEYS and isinstance(v, list) and len(v) == len(steps)
+        }
         records = [{"step": step, **{k: v[i] for k, v in columns.items()}} for i, step in enumerate(steps)]
     elif isinstance(history, list):
         records = [h for h in history if isinstance(h, dict) and isinstance(h.get("step"), (int, float))]
@@ -239,7 +262,7 @@ def plot_training_curves(results: Results, path: Path) -> Path | None:
     axes = np.atleast_1d(figure.subplots(1, len(panels)))
     add_at = results.config.get("add_at_step")
     for ax, (scene, curves) in zip(axes, panels):
-        for method, (key, series) in curves.items():
+        for method, (_key, series) in curves.items():
             grid, median, q1, q3 = _median_curve(series)
             ax.plot(grid, median, color=colours[method], label=method, linewidth=1.4)
             ax.fill_between(grid, q1, q3, color=colours[method], alpha=0.15, linewidth=0)
@@ -249,15 +272,23 @@ def plot_training_curves(results: Results, path: Path) -> Path | None:
             ax.set_yscale("log")
         if add_at is not None:
             ax.axvline(add_at, color="0.3", linestyle="--", linewidth=1)
-            ax.text(add_at, 0.02, " views added", transform=ax.get_xaxis_transform(), fontsize=8, va="bottom",
-                    color="0.3")
+            ax.text(
+                add_at, 0.02, " views added", transform=ax.get_xaxis_transform(), fontsize=8, va="bottom", color="0.3"
+            )
         ax.set_xlabel("step")
         ax.set_title(scene, fontsize=10)
         ax.grid(alpha=0.3)
     # One legend for all panels, below them, so it never hides a curve.
     legend = {label: handle for ax in axes for handle, label in zip(*ax.get_legend_handles_labels())}
-    figure.legend(legend.values(), legend.keys(), loc="upper center", bbox_to_anchor=(0.5, 0.0),
-                  ncol=min(4, len(legend)), fontsize=8, frameon=False)
+    figure.legend(
+        legend.values(),
+        legend.keys(),
+        loc="upper center",
+        bbox_to_anchor=(0.5, 0.0),
+        ncol=min(4, len(legend)),
+        fontsize=8,
+        frameon=False,
+    )
     figure.suptitle("Training curves: median over trials, IQR shaded", fontsize=11, y=1.03)
     return save_figure(figure, path)
 

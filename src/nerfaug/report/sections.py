@@ -45,7 +45,6 @@ def _lpips_notes(runs: list[Run]) -> list[str]:
     return [f"LPIPS n/a: {status}" for status in statuses]
 
 
-
 def header_section(results: Results) -> list[Block]:
     config, sweep = results.config, results.sweep
     methods = ", ".join(_label(results, m) for m in config.get("methods", results.methods))
@@ -55,41 +54,62 @@ def header_section(results: Results) -> list[Block]:
     command = sweep.get("command") or []
     blocks: list[Block] = [
         Heading(f"nerfaug report: {results.root.name}", 1),
-        Bullets([
-            f"scenes: {', '.join(config.get('scenes', results.scenes))}",
-            f"methods: {methods}",
-            f"trials per scene and method: {config.get('trials', '?')} (trial k uses seed {config.get('seed', 0)} + k)",
-            (f"steps: {config.get('steps', '?')}; {config.get('n_new', '?')} views added at step "
-             f"{config.get('add_at_step', '?')} to {config.get('n_initial', '?')} initial views"),
-            (f"engine preset: {config.get('engine', '?')}; resolution: {config.get('resolution', '?')} px; "
-             f"test views: {config.get('n_test', '?')}; candidate pool: {config.get('pool', '?')}"),
-            (f"runs aggregated: {len(results.runs)} of {planned} planned; not aggregated: "
-             f"{len(results.not_aggregated)}; never run: {len(results.missing)}"),
-            f"fingerprint: `{sweep.get('fingerprint')}`",
-            (f"report written {datetime.now(UTC):%Y-%m-%d %H:%M UTC} on {platform.node()}; "
-             f"runs made on: {', '.join(hosts) or 'n/a'}"),
-            "versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()),
-        ]),
+        Bullets(
+            [
+                f"scenes: {', '.join(config.get('scenes', results.scenes))}",
+                f"methods: {methods}",
+                f"trials per scene and method: {config.get('trials', '?')} "
+                f"(trial k uses seed {config.get('seed', 0)} + k)",
+                (
+                    f"steps: {config.get('steps', '?')}; {config.get('n_new', '?')} views added at step "
+                    f"{config.get('add_at_step', '?')} to {config.get('n_initial', '?')} initial views"
+                ),
+                (
+                    f"engine preset: {config.get('engine', '?')}; resolution: {config.get('resolution', '?')} px; "
+                    f"test views: {config.get('n_test', '?')}; candidate pool: {config.get('pool', '?')}"
+                ),
+                (
+                    f"runs aggregated: {len(results.runs)} of {planned} planned; not aggregated: "
+                    f"{len(results.not_aggregated)}; never run: {len(results.missing)}"
+                ),
+                f"fingerprint: `{sweep.get('fingerprint')}`",
+                (
+                    f"report written {datetime.now(UTC):%Y-%m-%d %H:%M UTC} on {platform.node()}; "
+                    f"runs made on: {', '.join(hosts) or 'n/a'}"
+                ),
+                "versions: " + ", ".join(f"{k} {v}" for k, v in versions.items()),
+            ]
+        ),
         Paragraph("Command:"),
         Code(" ".join(str(part) for part in command) if isinstance(command, list) else str(command)),
         Code(json.dumps(config, indent=2, default=str), summary="configuration (JSON)"),
     ]
     if results.not_aggregated or results.missing:
-        blocks.append(Paragraph(
-            f"**Warning:** {len(results.not_aggregated)} run folder(s) were not aggregated and "
-            f"{len(results.missing)} planned run(s) never ran; see \"Runs not aggregated\" at the end."
-        ))
+        blocks.append(
+            Paragraph(
+                f"**Warning:** {len(results.not_aggregated)} run folder(s) were not aggregated and "
+                f'{len(results.missing)} planned run(s) never ran; see "Runs not aggregated" at the end.'
+            )
+        )
     return blocks
 
 
 def _summary_rows(results: Results, scene: str) -> dict[str, dict[str, dict]]:
     """method -> metric -> summary_table row, for one scene."""
-    records = [{"scene": r.scene, "method": r.method, "trial": r.trial, **{m: r.metric(m) for m in METRICS}}
-               for r in results.runs_of(scene)]
+    records = [
+        {"scene": r.scene, "method": r.method, "trial": r.trial, **{m: r.metric(m) for m in METRICS}}
+        for r in results.runs_of(scene)
+    ]
     rows: dict[str, dict[str, dict]] = {}
     for metric in METRICS:
-        table = summary_table(records, metric, results.ours or "", results.baselines,
-                              n_comparisons=max(1, len(results.baselines)), higher_is_better=HIGHER_IS_BETTER[metric])
+        table = summary_table(
+            records,
+            metric,
+            results.ours or "",
+            results.baselines,
+            n_comparisons=max(1, len(results.baselines)),
+            higher_is_better=HIGHER_IS_BETTER[metric],
+        )
         for row in table:
             rows.setdefault(row["method"], {})[metric] = row
     return rows
@@ -98,8 +118,7 @@ def _summary_rows(results: Results, scene: str) -> dict[str, dict[str, dict]]:
 def _median_table(results: Results, scene: str, rows: dict[str, dict[str, dict]]) -> Table:
     methods = [m for m in results.methods if m in rows]
     headers = ["method", "n"]
-    columns: list[list[str]] = [[_label(results, m) for m in methods],
-                                [str(rows[m]["psnr"]["n"]) for m in methods]]
+    columns: list[list[str]] = [[_label(results, m) for m in methods], [str(rows[m]["psnr"]["n"]) for m in methods]]
     for metric in METRICS:
         arrow = "↑" if HIGHER_IS_BETTER[metric] else "↓"
         headers += [f"{METRIC_LABELS[metric]} {arrow} median", f"{METRIC_LABELS[metric]} IQR"]
@@ -149,21 +168,38 @@ def _comparison_table(results: Results, rows: dict[str, dict[str, dict]]) -> Tab
             if row is None or row["p_value"] is None:
                 continue
             label, decimals = METRIC_LABELS[metric], METRIC_DECIMALS[metric]
-            body.append([
-                baseline, label,
-                f"{number(ours_row['median'], decimals)} vs {number(row['median'], decimals)}",
-                f"{percent(row['median_change'])} median {label} ({_direction(row, ours_row)})",
-                _iqr_change(row["iqr_reduction"]),
-                p_value(row["p_value"]), p_value(row["p_bonferroni"]), _significance(row),
-            ])
+            body.append(
+                [
+                    baseline,
+                    label,
+                    f"{number(ours_row['median'], decimals)} vs {number(row['median'], decimals)}",
+                    f"{percent(row['median_change'])} median {label} ({_direction(row, ours_row)})",
+                    _iqr_change(row["iqr_reduction"]),
+                    p_value(row["p_value"]),
+                    p_value(row["p_bonferroni"]),
+                    _significance(row),
+                ]
+            )
             if row["too_small"] and row["note"] not in notes:
                 notes.append(row["note"])
     if not body:
         return None
-    notes = [(f"Two-sided Mann-Whitney U test of ours against each baseline, Bonferroni correction x{k} "
-              f"(the number of baselines); significant means p x {k} < 0.05.")] + [f"n too small: {n}." for n in notes]
-    headers = ["baseline", "metric", "median (ours vs baseline)", "change of the median", "IQR of ours vs baseline's",
-               "p", f"p x {k} (Bonferroni)", "significant"]
+    notes = [
+        (
+            f"Two-sided Mann-Whitney U test of ours against each baseline, Bonferroni correction x{k} "
+            f"(the number of baselines); significant means p x {k} < 0.05."
+        )
+    ] + [f"n too small: {n}." for n in notes]
+    headers = [
+        "baseline",
+        "metric",
+        "median (ours vs baseline)",
+        "change of the median",
+        "IQR of ours vs baseline's",
+        "p",
+        f"p x {k} (Bonferroni)",
+        "significant",
+    ]
     return Table(headers, body, notes)
 
 
@@ -196,16 +232,25 @@ def summary_section(results: Results) -> list[Block]:
                 continue
             c = compare(x, y, max(1, len(results.baselines)), higher_is_better=True)
             verdict = "significant" if c["significant"] else "n too small" if c["too_small"] else "not significant"
-            parts.append(f"{percent(c['median_change'])} median PSNR vs {baseline} (p x {c['n_comparisons']} = "
-                         f"{p_value(c['p_bonferroni'])}, {verdict})")
+            parts.append(
+                f"{percent(c['median_change'])} median PSNR vs {baseline} (p x {c['n_comparisons']} = "
+                f"{p_value(c['p_bonferroni'])}, {verdict})"
+            )
         if x:
-            items.append(f"{scene}: {ours} median PSNR {summarise(x)['median']:.2f} dB over {len(x)} trials; "
-                         + ("; ".join(parts) if parts else "no baseline results"))
+            items.append(
+                f"{scene}: {ours} median PSNR {summarise(x)['median']:.2f} dB over {len(x)} trials; "
+                + ("; ".join(parts) if parts else "no baseline results")
+            )
     return [Heading("Summary"), Bullets(items)] if items else []
 
 
-def _ablation_table(results: Results, scene: str, labels: list[tuple[list[str], str]], label_headers: list[str],
-                    highlight_groups: list[list[int]]) -> Table:
+def _ablation_table(
+    results: Results,
+    scene: str,
+    labels: list[tuple[list[str], str]],
+    label_headers: list[str],
+    highlight_groups: list[list[int]],
+) -> Table:
     """Median and IQR of PSNR, LPIPS, SSIM (the paper's column order) per (labels, method) row,
     the best of each highlight group in bold."""
     methods = [m for _, m in labels]
@@ -245,8 +290,10 @@ def table_i_section(results: Results) -> list[Block]:
         blocks += [Heading(f"{scene}", 3), table]
     if not blocks:
         return []
-    intro = Paragraph("Impact of the in-distribution (entropy) and out-of-distribution (distance) terms, as the "
-                      "paper's Table I; the best per column in bold.")
+    intro = Paragraph(
+        "Impact of the in-distribution (entropy) and out-of-distribution (distance) terms, as the "
+        "paper's Table I; the best per column in bold."
+    )
     return [Heading("Ablation: uncertainty terms (Table I)"), intro] + blocks
 
 
@@ -261,16 +308,27 @@ def _pair_comparisons(results: Results, scene: str) -> Table | None:
     rows, notes = [], []
     for family, sampling, nbv, x, y in pairs:
         c = compare(x, y, len(pairs), higher_is_better=True)
-        rows.append([family, f"{sampling} vs {nbv}", f"{percent(c['median_change'])} median PSNR",
-                     p_value(c["p_value"]), p_value(c["p_bonferroni"]), _significance(c)])
+        rows.append(
+            [
+                family,
+                f"{sampling} vs {nbv}",
+                f"{percent(c['median_change'])} median PSNR",
+                p_value(c["p_value"]),
+                p_value(c["p_bonferroni"]),
+                _significance(c),
+            ]
+        )
         if c["too_small"] and c["note"] not in notes:
             notes.append(c["note"])
     if not rows:
         return None
     k = len(pairs)
-    return Table(["family", "sampling vs NBV", "change of the median", "p", f"p x {k} (Bonferroni)", "significant"],
-                 rows, [f"Two-sided Mann-Whitney U on PSNR, Bonferroni x{k} (the pairs compared)."]
-                 + [f"n too small: {n}." for n in notes])
+    return Table(
+        ["family", "sampling vs NBV", "change of the median", "p", f"p x {k} (Bonferroni)", "significant"],
+        rows,
+        [f"Two-sided Mann-Whitney U on PSNR, Bonferroni x{k} (the pairs compared)."]
+        + [f"n too small: {n}." for n in notes],
+    )
 
 
 def table_ii_section(results: Results) -> list[Block]:
@@ -293,8 +351,9 @@ def table_ii_section(results: Results) -> list[Block]:
             blocks.append(pairs)
     if not blocks:
         return []
-    intro = Paragraph("Sampling from each method's uncertainty against taking its top views (NBV), as the "
-                      "paper's Table II.")
+    intro = Paragraph(
+        "Sampling from each method's uncertainty against taking its top views (NBV), as the paper's Table II."
+    )
     return [Heading("Ablation: NBV vs sampling (Table II)"), intro] + blocks
 
 
@@ -312,10 +371,15 @@ def timing_section(results: Results) -> list[Block]:
     total = sum(r.seconds("total") or 0.0 for r in results.runs)
     return [
         Heading("Run times"),
-        Table(["method", "runs"] + list(TIMING_FIELDS), rows,
-              ["Median over all aggregated runs of the method (all scenes), per phase."]),
-        Paragraph(f"Sweep total: {seconds(total)} of run time summed over {len(results.runs)} aggregated runs "
-                  f"(wall-clock time is shorter when runs ran in parallel). {paper_run_times()}"),
+        Table(
+            ["method", "runs"] + list(TIMING_FIELDS),
+            rows,
+            ["Median over all aggregated runs of the method (all scenes), per phase."],
+        ),
+        Paragraph(
+            f"Sweep total: {seconds(total)} of run time summed over {len(results.runs)} aggregated runs "
+            f"(wall-clock time is shorter when runs ran in parallel). {paper_run_times()}"
+        ),
     ]
 
 
@@ -324,8 +388,10 @@ def paper_run_times() -> str:
     from nerfaug.experiment.config import preset
 
     side = preset("paper").resolution
-    return (f"The paper reports about {PAPER_MINUTES_PER_RUN['ours']} min per run for ours and "
-            f"{PAPER_MINUTES_PER_RUN['others']} min for the others at {side}x{side} on {PAPER_GPU}.")
+    return (
+        f"The paper reports about {PAPER_MINUTES_PER_RUN['ours']} min per run for ours and "
+        f"{PAPER_MINUTES_PER_RUN['others']} min for the others at {side}x{side} on {PAPER_GPU}."
+    )
 
 
 def problems_section(results: Results) -> list[Block]:
@@ -334,38 +400,61 @@ def problems_section(results: Results) -> list[Block]:
         return blocks + [Paragraph("None: every run folder holds a valid result for this configuration.")]
     if results.not_aggregated:
         rows = [[f.folder.relative_to(results.root).as_posix(), f.reason] for f in results.not_aggregated]
-        blocks += [Paragraph("These run folders are left out of every table and figure:"),
-                   Table(["run folder", "reason"], rows)]
+        blocks += [
+            Paragraph("These run folders are left out of every table and figure:"),
+            Table(["run folder", "reason"], rows),
+        ]
     if results.missing:
         blocks += [Paragraph("Planned by the configuration but never run (no folder):"), Bullets(results.missing)]
     blocks.append(Paragraph("Re-running the same `nerfaug run` command redoes those of them its configuration plans."))
     return blocks
 
 
-
 def figure_sections(results: Results, figures: Figures) -> list[Block]:
     blocks: list[Block] = []
     if figures.maps:
         blocks.append(Heading("Uncertainty over the hemisphere (Fig. 1)"))
-        blocks.append(Paragraph("Each method's scores over the candidate views (its first trial), seen from above: "
-                                "the centre is straight above the object, the rim the horizon; bright = uncertain "
-                                "(min-max normalised per panel). Triangles: the initial views; stars: the views "
-                                "the method chose."))
+        blocks.append(
+            Paragraph(
+                "Each method's scores over the candidate views (its first trial), seen from above: "
+                "the centre is straight above the object, the rim the horizon; bright = uncertain "
+                "(min-max normalised per panel). Triangles: the initial views; stars: the views "
+                "the method chose."
+            )
+        )
     for scene, paths in figures.maps.items():
         blocks += [Figure(p, f"Fig. 1 ({scene}): uncertainty maps per method") for p in paths]
         blocks += [Paragraph(note) for note in figures.map_notes.get(scene, [])]
     if figures.renders:
         blocks.append(Heading("Test renders (Fig. 3)"))
-        blocks += [Figure(p, f"Fig. 3 ({scene}): test renders after training, ground truth on top, one row per "
-                             "method (its first trial)") for scene, p in figures.renders.items()]
+        blocks += [
+            Figure(
+                p,
+                f"Fig. 3 ({scene}): test renders after training, ground truth on top, one row per "
+                "method (its first trial)",
+            )
+            for scene, p in figures.renders.items()
+        ]
     if figures.curves is not None:
-        blocks += [Heading("Training curves"), Figure(figures.curves, "Training curves: median over trials per "
-                                                      "method, IQR shaded; the dashed line marks the step where the "
-                                                      "chosen views were added.")]
+        blocks += [
+            Heading("Training curves"),
+            Figure(
+                figures.curves,
+                "Training curves: median over trials per "
+                "method, IQR shaded; the dashed line marks the step where the "
+                "chosen views were added.",
+            ),
+        ]
     return blocks
 
 
 __all__ = [
-    "figure_sections", "header_section", "problems_section", "scene_section", "summary_section",
-    "table_i_section", "table_ii_section", "timing_section",
+    "figure_sections",
+    "header_section",
+    "problems_section",
+    "scene_section",
+    "summary_section",
+    "table_i_section",
+    "table_ii_section",
+    "timing_section",
 ]

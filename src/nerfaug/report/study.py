@@ -118,15 +118,21 @@ def compare_with_reference(x: list[float], y: list[float], metric: str, n_compar
     """median(x) - median(y) with its bootstrap CI, and the Mann-Whitney test (Bonferroni x
     n_comparisons) in the metric's direction."""
     test = compare(x, y, n_comparisons, higher_is_better=HIGHER_IS_BETTER[metric], alpha=ALPHA)
-    return {**bootstrap_median_difference(x, y, seed=BOOTSTRAP_SEED),
-            **{k: test[k] for k in ("p_value", "p_bonferroni", "significant", "better", "too_small", "n_comparisons")}}
+    return {
+        **bootstrap_median_difference(x, y, seed=BOOTSTRAP_SEED),
+        **{k: test[k] for k in ("p_value", "p_bonferroni", "significant", "better", "too_small", "n_comparisons")},
+    }
 
 
 def make_cell(results: Results, scene: str, engine: str, methods: list[str], trials: int) -> Cell:
     """The cell of `scene` in one engine's results; `methods` and `trials` are the study's plan."""
     present = [m for m in results.methods if results.values(scene, m, "psnr")]
-    by_method = {m: MethodResult(m, {metric: results.values(scene, m, metric) for metric in METRICS},
-                                 coverage=_coverage(results, scene, m)) for m in present}
+    by_method = {
+        m: MethodResult(
+            m, {metric: results.values(scene, m, metric) for metric in METRICS}, coverage=_coverage(results, scene, m)
+        )
+        for m in present
+    }
     compared = [m for m in present if m != REFERENCE]
     k = max(1, len(compared))
     reference = by_method.get(REFERENCE)
@@ -135,10 +141,18 @@ def make_cell(results: Results, scene: str, engine: str, methods: list[str], tri
             x, y = by_method[method].values[metric], reference.values[metric]
             if x and y:
                 by_method[method].vs_reference[metric] = compare_with_reference(x, y, metric, k)
-    missing = [f"{m}: {len(by_method[m].values['psnr']) if m in by_method else 0} of {trials} trials"
-               for m in methods if (len(by_method[m].values["psnr"]) if m in by_method else 0) < trials]
-    lpips = sorted({str(r.result.get("lpips_status", "unknown reason")) for r in results.runs_of(scene)
-                    if r.metric("lpips") is None})
+    missing = [
+        f"{m}: {len(by_method[m].values['psnr']) if m in by_method else 0} of {trials} trials"
+        for m in methods
+        if (len(by_method[m].values["psnr"]) if m in by_method else 0) < trials
+    ]
+    lpips = sorted(
+        {
+            str(r.result.get("lpips_status", "unknown reason"))
+            for r in results.runs_of(scene)
+            if r.metric("lpips") is None
+        }
+    )
     return Cell(scene, engine, by_method, k, trials, missing, lpips)
 
 
@@ -160,8 +174,11 @@ def collect_study(root: Path) -> Study:
         results = found[engine] = collect_results(folder)
         not_run.pop(engine, None)
         for scene in plan.get("scenes", results.scenes):
-            cells.append(make_cell(results, scene, engine, list(plan.get("methods", results.methods)),
-                                   int(plan.get("trials", 0))))
+            cells.append(
+                make_cell(
+                    results, scene, engine, list(plan.get("methods", results.methods)), int(plan.get("trials", 0))
+                )
+            )
     return Study(root, plan, cells, not_run, found)
 
 
@@ -192,11 +209,19 @@ def _ours_sentence(cell: Cell) -> str:
     where = f"{cell.scene}, {cell.engine}"
     if entry is None:
         return f"{where}: not compared (ours or uniform has no valid runs)."
-    verb = ("beats uniform" if entry["significant"] and entry["better"] else
-            "is worse than uniform" if entry["significant"] else "does not beat uniform")
-    return (f"{where}: ours {verb} (median PSNR {_difference(entry, 'psnr')} dB, p x {entry['n_comparisons']} = "
-            f"{p_value(entry['p_bonferroni'])}{'' if entry['significant'] else ', not < 0.05'})"
-            + ("" if cell.complete else "; incomplete cell") + ".")
+    verb = (
+        "beats uniform"
+        if entry["significant"] and entry["better"]
+        else "is worse than uniform"
+        if entry["significant"]
+        else "does not beat uniform"
+    )
+    return (
+        f"{where}: ours {verb} (median PSNR {_difference(entry, 'psnr')} dB, p x {entry['n_comparisons']} = "
+        f"{p_value(entry['p_bonferroni'])}{'' if entry['significant'] else ', not < 0.05'})"
+        + ("" if cell.complete else "; incomplete cell")
+        + "."
+    )
 
 
 def where_wins_table(study: Study) -> Table:
@@ -206,18 +231,43 @@ def where_wins_table(study: Study) -> Table:
         winner = cell.winner
         ours = cell.methods.get(OURS)
         entry = ours.vs_reference.get("psnr") if ours else None
-        beating = [m for m, r in cell.methods.items() if (e := r.vs_reference.get("psnr")) and e["significant"]
-                   and e["better"]]
-        rows.append([cell.scene, cell.engine, f"{min(ns)}-{max(ns)}" if ns and min(ns) != max(ns) else str(max(ns, default=0)),
-                     f"{winner} ({number(cell.methods[winner].median('psnr'), 2)} dB)" if winner else "n/a",
-                     _difference(entry, "psnr"), p_value(entry["p_bonferroni"]) if entry else "n/a",
-                     ", ".join(beating) or "none", "yes" if cell.complete else "**no**"])
-    notes = [("winner: the highest median test PSNR. ours - uniform: difference of median PSNR (dB) with a "
-              "percentile bootstrap 95% CI. p x k: two-sided Mann-Whitney U, Bonferroni over the k methods "
-              "compared with uniform in the cell. Significantly better than uniform: p x k < 0.05 and a higher "
-              "median PSNR.")]
-    return Table(["scene", "engine", "trials", "winner (median PSNR)", "ours - uniform PSNR [95% CI]", "p x k",
-                  "significantly better than uniform", "complete"], rows, notes)
+        beating = [
+            m for m, r in cell.methods.items() if (e := r.vs_reference.get("psnr")) and e["significant"] and e["better"]
+        ]
+        rows.append(
+            [
+                cell.scene,
+                cell.engine,
+                f"{min(ns)}-{max(ns)}" if ns and min(ns) != max(ns) else str(max(ns, default=0)),
+                f"{winner} ({number(cell.methods[winner].median('psnr'), 2)} dB)" if winner else "n/a",
+                _difference(entry, "psnr"),
+                p_value(entry["p_bonferroni"]) if entry else "n/a",
+                ", ".join(beating) or "none",
+                "yes" if cell.complete else "**no**",
+            ]
+        )
+    notes = [
+        (
+            "winner: the highest median test PSNR. ours - uniform: difference of median PSNR (dB) with a "
+            "percentile bootstrap 95% CI. p x k: two-sided Mann-Whitney U, Bonferroni over the k methods "
+            "compared with uniform in the cell. Significantly better than uniform: p x k < 0.05 and a higher "
+            "median PSNR."
+        )
+    ]
+    return Table(
+        [
+            "scene",
+            "engine",
+            "trials",
+            "winner (median PSNR)",
+            "ours - uniform PSNR [95% CI]",
+            "p x k",
+            "significantly better than uniform",
+            "complete",
+        ],
+        rows,
+        notes,
+    )
 
 
 def cell_tables(cell: Cell) -> list[Block]:
@@ -226,24 +276,48 @@ def cell_tables(cell: Cell) -> list[Block]:
         row = [method, str(len(result.values["psnr"]))]
         for metric in METRICS:
             entry = result.vs_reference.get(metric)
-            row += [number(result.median(metric), METRIC_DECIMALS[metric]), _difference(entry, metric),
-                    p_value(entry["p_bonferroni"]) if entry else "n/a"]
+            row += [
+                number(result.median(metric), METRIC_DECIMALS[metric]),
+                _difference(entry, metric),
+                p_value(entry["p_bonferroni"]) if entry else "n/a",
+            ]
         metrics_rows.append(row)
         shares = [c["unseen_share"] for c in result.coverage if c["unseen_share"] is not None]
-        coverage_rows.append([method, str(len(result.coverage)), number(result.coverage_median("unseen_share"), 2),
-                              (f"{number(min(shares), 2)}-{number(max(shares), 2)}" if shares else "n/a"),
-                              number(result.coverage_median("spread_deg"), 1), _verdict(result.vs_reference.get("psnr"))])
+        coverage_rows.append(
+            [
+                method,
+                str(len(result.coverage)),
+                number(result.coverage_median("unseen_share"), 2),
+                (f"{number(min(shares), 2)}-{number(max(shares), 2)}" if shares else "n/a"),
+                number(result.coverage_median("spread_deg"), 1),
+                _verdict(result.vs_reference.get("psnr")),
+            ]
+        )
     headers = ["method", "n"]
     for metric in METRICS:
         label = METRIC_LABELS[metric]
-        headers += [f"{label} {'↑' if HIGHER_IS_BETTER[metric] else '↓'} median", f"{label} - uniform [95% CI]",
-                    f"p x {cell.n_comparisons}"]
+        headers += [
+            f"{label} {'↑' if HIGHER_IS_BETTER[metric] else '↓'} median",
+            f"{label} - uniform [95% CI]",
+            f"p x {cell.n_comparisons}",
+        ]
     notes = [f"LPIPS n/a: {status}" for status in cell.lpips_notes]
     if cell.missing:
         notes.append("Incomplete: " + "; ".join(cell.missing) + ".")
     blocks: list[Block] = [Heading(f"{cell.scene}, engine {cell.engine}", 3), Table(headers, metrics_rows, notes)]
-    blocks.append(Table(["method", "trials", "unseen-half share (median)", "range over trials",
-                         "spread: mean pairwise angle (deg, median)", "PSNR vs uniform"], coverage_rows))
+    blocks.append(
+        Table(
+            [
+                "method",
+                "trials",
+                "unseen-half share (median)",
+                "range over trials",
+                "spread: mean pairwise angle (deg, median)",
+                "PSNR vs uniform",
+            ],
+            coverage_rows,
+        )
+    )
     return blocks
 
 
@@ -255,14 +329,19 @@ def _header(study: Study) -> list[Block]:
     items = [
         f"command{'s (one per sitting)' if len(commands) > 1 else ''}: {command}",
         f"study last started: {plan.get('written', 'n/a')}",
-        (f"machine: {host.get('platform', '?')}, {host.get('cpu_count', '?')} CPUs, torch {host.get('torch', '?')}, "
-         f"device {config.get('device', '?')}"),
+        (
+            f"machine: {host.get('platform', '?')}, {host.get('cpu_count', '?')} CPUs, torch {host.get('torch', '?')}, "
+            f"device {config.get('device', '?')}"
+        ),
         f"engines run: {', '.join(plan.get('engines', [])) or 'none'}",
         f"scenes: {', '.join(plan.get('scenes', []))}; methods: {', '.join(plan.get('methods', []))}",
-        f"trials per (scene, engine, method): {plan.get('trials', '?')} (trial k uses seed {config.get('seed', 0)} + k)",
-        (f"protocol: {config.get('n_initial', '?')} initial views, {config.get('n_new', '?')} added at step "
-         f"{config.get('add_at_step', '?')}, {config.get('steps', '?')} steps, {config.get('resolution', '?')} px, "
-         f"pool {config.get('pool', '?')}, {config.get('n_test', '?')} test views"),
+        f"trials per (scene, engine, method): {plan.get('trials', '?')} "
+        f"(trial k uses seed {config.get('seed', 0)} + k)",
+        (
+            f"protocol: {config.get('n_initial', '?')} initial views, {config.get('n_new', '?')} added at step "
+            f"{config.get('add_at_step', '?')}, {config.get('steps', '?')} steps, {config.get('resolution', '?')} px, "
+            f"pool {config.get('pool', '?')}, {config.get('n_test', '?')} test views"
+        ),
     ]
     return [Bullets(items)]
 
@@ -279,15 +358,21 @@ def _ours_section(study: Study) -> list[Block]:
     if best is None:
         verdict = "No method beats uniform with p < 0.05 (after the Bonferroni correction) on any cell."
     else:
-        verdict = ("Methods that beat uniform with p < 0.05 on median PSNR, by scenes: "
-                   + "; ".join(f"{m}: {', '.join(sorted(s))}" for m, s in sorted(counts.items())) + ".")
+        verdict = (
+            "Methods that beat uniform with p < 0.05 on median PSNR, by scenes: "
+            + "; ".join(f"{m}: {', '.join(sorted(s))}" for m, s in sorted(counts.items()))
+            + "."
+        )
     return [Heading("Does ours beat uniform?"), Bullets(lines or ["No cell has results yet."]), Paragraph(verdict)]
 
 
 def _incomplete_section(study: Study) -> list[Block]:
     items = [f"engine {engine}: {why}" for engine, why in study.not_run.items()]
     items += [f"{c.scene}, {c.engine}: " + "; ".join(c.missing) for c in study.cells if c.missing]
-    return [Heading("Incomplete cells"), Bullets(items) if items else Paragraph("None: every planned cell is complete.")]
+    return [
+        Heading("Incomplete cells"),
+        Bullets(items) if items else Paragraph("None: every planned cell is complete."),
+    ]
 
 
 # ----------------------------------------------------------------------------- figures
@@ -304,27 +389,38 @@ def plot_coverage(study: Study, engine: str, path: Path) -> Path | None:
     axes = figure.subplots(2, len(cells), squeeze=False)
     jitter = np.random.default_rng(0)
     for column, cell in enumerate(cells):
-        for row, (key, label) in enumerate((("unseen_share", "share of chosen views on the unseen half"),
-                                            ("spread_deg", "mean pairwise angle (deg)"))):
+        for row, (key, label) in enumerate(
+            (("unseen_share", "share of chosen views on the unseen half"), ("spread_deg", "mean pairwise angle (deg)"))
+        ):
             ax = axes[row, column]
             for i, method in enumerate(methods):
                 result = cell.methods.get(method)
-                values = [c[key] for c in (result.coverage if result else []) if c[key] is not None
-                          and np.isfinite(c[key])]
+                values = [
+                    c[key] for c in (result.coverage if result else []) if c[key] is not None and np.isfinite(c[key])
+                ]
                 if values:
-                    ax.scatter(i + jitter.uniform(-0.12, 0.12, len(values)), values, s=16, color=colours[method],
-                               edgecolor="black", linewidth=0.4, zorder=3)
+                    ax.scatter(
+                        i + jitter.uniform(-0.12, 0.12, len(values)),
+                        values,
+                        s=16,
+                        color=colours[method],
+                        edgecolor="black",
+                        linewidth=0.4,
+                        zorder=3,
+                    )
                     ax.plot([i - 0.3, i + 0.3], [np.median(values)] * 2, color="black", linewidth=1.5)
             if key == "unseen_share":
                 ax.axhline(0.5, color="0.5", linestyle="--", linewidth=1)
                 ax.set_ylim(-0.05, 1.05)
                 ax.set_title(f"{cell.scene}", fontsize=10)
-            ax.set_xticks(range(len(methods)), methods if row == 1 else [""] * len(methods), rotation=30,
-                          ha="right", fontsize=8)
+            ax.set_xticks(
+                range(len(methods)), methods if row == 1 else [""] * len(methods), rotation=30, ha="right", fontsize=8
+            )
             ax.set_ylabel(label if column == 0 else "", fontsize=9)
             ax.grid(axis="y", alpha=0.3)
-    figure.suptitle(f"Coverage of the chosen views, engine {engine} (bar: median; dashed: a uniform pool's 0.5)",
-                    fontsize=11)
+    figure.suptitle(
+        f"Coverage of the chosen views, engine {engine} (bar: median; dashed: a uniform pool's 0.5)", fontsize=11
+    )
     return save_figure(figure, path)
 
 
@@ -333,22 +429,29 @@ def study_blocks(study: Study, figures: dict) -> list[Block]:
     blocks += [Heading("Where each method wins"), where_wins_table(study)]
     blocks += _ours_section(study) + _incomplete_section(study)
     blocks.append(Heading("Per scene and engine"))
-    blocks.append(Paragraph(
-        "Medians over trials of each trial's mean over the test views. Differences are to uniform's median, "
-        "with a percentile bootstrap 95% CI (scipy.stats.bootstrap, 9999 resamples, each sample resampled on "
-        f"its own, seed {BOOTSTRAP_SEED}). Coverage: the share of a run's chosen views whose azimuth lies on "
-        "the half of the hemisphere opposite to the initial views (centred on the initial views' mean "
-        "azimuth), and the mean angle between the chosen views' directions from the centre."))
+    blocks.append(
+        Paragraph(
+            "Medians over trials of each trial's mean over the test views. Differences are to uniform's median, "
+            "with a percentile bootstrap 95% CI (scipy.stats.bootstrap, 9999 resamples, each sample resampled on "
+            f"its own, seed {BOOTSTRAP_SEED}). Coverage: the share of a run's chosen views whose azimuth lies on "
+            "the half of the hemisphere opposite to the initial views (centred on the initial views' mean "
+            "azimuth), and the mean angle between the chosen views' directions from the centre."
+        )
+    )
     for cell in study.cells:
         blocks += cell_tables(cell)
         if (path := figures.get(("box", cell.engine, cell.scene))) is not None:
-            blocks.append(Figure(path, f"{cell.scene}, engine {cell.engine}: PSNR, SSIM and LPIPS per method; "
-                                       "each dot is one trial."))
+            blocks.append(
+                Figure(
+                    path, f"{cell.scene}, engine {cell.engine}: PSNR, SSIM and LPIPS per method; each dot is one trial."
+                )
+            )
     coverage = [(e, p) for (kind, e, _), p in figures.items() if kind == "coverage"]
     if coverage:
         blocks.append(Heading("Coverage of the chosen views"))
-        blocks += [Figure(p, f"Engine {e}: unseen-half share and spread of each run's chosen views.")
-                   for e, p in coverage]
+        blocks += [
+            Figure(p, f"Engine {e}: unseen-half share and spread of each run's chosen views.") for e, p in coverage
+        ]
     return blocks
 
 
@@ -393,10 +496,14 @@ def write_results_doc(root: Path, path: Path = Path("docs/results.md")) -> Path:
         copied[key] = target
     blocks = study_blocks(study, copied)
     blocks[0] = Heading("Results: where each selection method wins", 1)
-    blocks.insert(1, Paragraph(
-        f"Generated from `{Path(root)}` on {datetime.now(UTC):%Y-%m-%d %H:%M UTC} by "
-        f"`nerfaug study --out {Path(root)} --summary-only --results-doc {path}`; every number below is "
-        "computed from the run folders."))
+    blocks.insert(
+        1,
+        Paragraph(
+            f"Generated from `{Path(root)}` on {datetime.now(UTC):%Y-%m-%d %H:%M UTC} by "
+            f"`nerfaug study --out {Path(root)} --summary-only --results-doc {path}`; every number below is "
+            "computed from the run folders."
+        ),
+    )
     atomic_write_bytes(path, to_markdown(blocks, path.parent).encode())
     return path
 

@@ -8,7 +8,11 @@ torch when imported, so the child stays free of torch; the rendering functions l
 BUILTIN_SCENES = ("lego", "chair", "materials")
 
 _RENDER_NAMES = (
-    "BlenderNotAvailable", "RenderError", "render_poses", "render_scene_dataset", "render_views",
+    "BlenderNotAvailable",
+    "RenderError",
+    "render_poses",
+    "render_scene_dataset",
+    "render_views",
 )
 
 __all__ = ["BUILTIN_SCENES", *_RENDER_NAMES]

@@ -16,9 +16,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+# isort: off
 import bpy  # first: importing bpy is what makes bmesh and mathutils importable
 import bmesh
 from mathutils import Matrix, Vector
+
+# isort: on
 
 RGB = tuple[float, float, float]
 HALF_EXTENT = 1.1
@@ -26,9 +29,15 @@ HALF_EXTENT = 1.1
 
 # ---- materials ---------------------------------------------------------------------------------
 
+
 def principled(
-    name: str, colour: RGB, roughness: float = 0.5, metallic: float = 0.0,
-    transmission: float = 0.0, coat: float = 0.0, ior: float = 1.45,
+    name: str,
+    colour: RGB,
+    roughness: float = 0.5,
+    metallic: float = 0.0,
+    transmission: float = 0.0,
+    coat: float = 0.0,
+    ior: float = 1.45,
 ) -> bpy.types.Material:
     """A Principled BSDF material with a flat base colour (linear RGB in [0, 1])."""
     material = bpy.data.materials.new(name)
@@ -43,7 +52,11 @@ def principled(
 
 
 def patterned(
-    name: str, colour_a: RGB, colour_b: RGB, pattern: str = "checker", scale: float = 8.0,
+    name: str,
+    colour_a: RGB,
+    colour_b: RGB,
+    pattern: str = "checker",
+    scale: float = 8.0,
     roughness: float = 0.6,
 ) -> bpy.types.Material:
     """A diffuse-ish material whose colour varies between two colours over the surface.
@@ -54,8 +67,9 @@ def patterned(
     material = principled(name, colour_a, roughness)
     nodes, links = material.node_tree.nodes, material.node_tree.links
     coords = nodes.new("ShaderNodeTexCoord")
-    texture = nodes.new({"checker": "ShaderNodeTexChecker", "noise": "ShaderNodeTexNoise",
-                         "wave": "ShaderNodeTexWave"}[pattern])
+    texture = nodes.new(
+        {"checker": "ShaderNodeTexChecker", "noise": "ShaderNodeTexNoise", "wave": "ShaderNodeTexWave"}[pattern]
+    )
     texture.inputs["Scale"].default_value = scale
     if pattern == "wave":
         texture.inputs["Distortion"].default_value = 4.0
@@ -70,8 +84,10 @@ def patterned(
 
 # ---- meshes ------------------------------------------------------------------------------------
 
-def mesh_object(name: str, bm: bmesh.types.BMesh, material, location=(0, 0, 0), rotation=(0, 0, 0),
-                smooth: bool = False) -> bpy.types.Object:
+
+def mesh_object(
+    name: str, bm: bmesh.types.BMesh, material, location=(0, 0, 0), rotation=(0, 0, 0), smooth: bool = False
+) -> bpy.types.Object:
     """Link a new object holding the mesh in `bm` (which is freed) to the scene."""
     for face in bm.faces:
         face.smooth = smooth
@@ -92,13 +108,25 @@ def box(name: str, size, location, material, rotation=(0, 0, 0)) -> bpy.types.Ob
     return mesh_object(name, bm, material, location, rotation)
 
 
-def cylinder(name: str, radius: float, depth: float, location, material, rotation=(0, 0, 0),
-             top_radius: float | None = None, segments: int = 20) -> bpy.types.Object:
+def cylinder(
+    name: str,
+    radius: float,
+    depth: float,
+    location,
+    material,
+    rotation=(0, 0, 0),
+    top_radius: float | None = None,
+    segments: int = 20,
+) -> bpy.types.Object:
     """A capped cylinder (a cone frustum if `top_radius` differs) along its local z axis."""
     bm = bmesh.new()
     bmesh.ops.create_cone(
-        bm, cap_ends=True, segments=segments, radius1=radius,
-        radius2=radius if top_radius is None else top_radius, depth=depth,
+        bm,
+        cap_ends=True,
+        segments=segments,
+        radius1=radius,
+        radius2=radius if top_radius is None else top_radius,
+        depth=depth,
     )
     return mesh_object(name, bm, material, location, rotation, smooth=True)
 
@@ -108,8 +136,9 @@ def rod(name: str, start, end, radius: float, material, end_radius: float | None
     start, end = Vector(start), Vector(end)
     axis = end - start
     rotation = axis.to_track_quat("Z", "Y").to_euler()
-    return cylinder(name, radius, axis.length, (start + end) / 2, material, rotation,
-                    top_radius=end_radius, segments=12)
+    return cylinder(
+        name, radius, axis.length, (start + end) / 2, material, rotation, top_radius=end_radius, segments=12
+    )
 
 
 def sphere(name: str, radius: float, location, material) -> bpy.types.Object:
@@ -123,8 +152,9 @@ def fit_to_box(half_extent: float = HALF_EXTENT) -> None:
     """Move and scale every object so their joint bounding box is centred at the origin with its
     largest half-side equal to `half_extent`. Objects must be unparented."""
     bpy.context.view_layer.update()
-    corners = [obj.matrix_world @ Vector(c) for obj in bpy.context.scene.objects
-               if obj.type == "MESH" for c in obj.bound_box]
+    corners = [
+        obj.matrix_world @ Vector(c) for obj in bpy.context.scene.objects if obj.type == "MESH" for c in obj.bound_box
+    ]
     low = Vector([min(c[k] for c in corners) for k in range(3)])
     high = Vector([max(c[k] for c in corners) for k in range(3)])
     centre, scale = (low + high) / 2, half_extent / (max(high - low) / 2)
@@ -134,6 +164,7 @@ def fit_to_box(half_extent: float = HALF_EXTENT) -> None:
 
 
 # ---- scenes ------------------------------------------------------------------------------------
+
 
 def build_lego() -> None:
     """A yellow bulldozer (front towards +x): treads with cleats and wheels, chassis, hood with
@@ -242,6 +273,7 @@ BUILDERS = {"lego": build_lego, "chair": build_chair, "materials": build_materia
 
 # ---- scene set-up shared by built-in and user scenes -------------------------------------------
 
+
 def add_lighting(scene: bpy.types.Scene) -> None:
     """A sun 40 degrees from the zenith plus a graded sky (ground brown, horizon white, zenith blue).
 
@@ -286,8 +318,7 @@ def load_scene(spec: dict) -> bpy.types.Scene:
     return scene
 
 
-def configure_render(scene: bpy.types.Scene, width: int, height: int, samples: int, seed: int,
-                     threads: int) -> None:
+def configure_render(scene: bpy.types.Scene, width: int, height: int, samples: int, seed: int, threads: int) -> None:
     """Cycles on the CPU, deterministic, transparent film, 8-bit RGBA PNG, no tone mapping."""
     scene.render.engine = "CYCLES"
     cycles = scene.cycles

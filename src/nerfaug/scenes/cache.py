@@ -46,8 +46,9 @@ def cache_path(cache_dir: str | Path, digest: str, split: str, downscale: int) -
     return Path(cache_dir) / f"{digest[:32]}-{split}-x{downscale}-v{CACHE_FORMAT}.pt"
 
 
-def load_split_cached(folder: str | Path, split: str, downscale: int, cache_dir: str | Path,
-                      digest: str | None = None) -> Views:
+def load_split_cached(
+    folder: str | Path, split: str, downscale: int, cache_dir: str | Path, digest: str | None = None
+) -> Views:
     """`load_dataset(folder, split, downscale=downscale)`, with the images read from, or written
     to, `cache_dir`.
 

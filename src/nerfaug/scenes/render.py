@@ -37,7 +37,11 @@ from nerfaug.cameras import Cameras
 from nerfaug.data import Views, write_blender_split
 from nerfaug.data.frames import read_image
 from nerfaug.hemisphere import (
-    BLENDER_CAMERA_ANGLE_X, BLENDER_RADIUS, fibonacci_angles, half_hemisphere_poses, pose_from_angles,
+    BLENDER_CAMERA_ANGLE_X,
+    BLENDER_RADIUS,
+    fibonacci_angles,
+    half_hemisphere_poses,
+    pose_from_angles,
     sample_uniform_poses,
 )
 from nerfaug.jsonio import atomic_write_json, read_json
@@ -78,9 +82,17 @@ def scene_spec(scene: str | Path) -> dict:
 
 
 def render_poses(
-    scene: str | Path, poses: Tensor, paths: list[Path], width: int, height: int,
-    camera_angle_x: float = BLENDER_CAMERA_ANGLE_X, samples: int = 16, seed: int = 0,
-    threads: int = 2, progress: bool = True, description: str = "rendering",
+    scene: str | Path,
+    poses: Tensor,
+    paths: list[Path],
+    width: int,
+    height: int,
+    camera_angle_x: float = BLENDER_CAMERA_ANGLE_X,
+    samples: int = 16,
+    seed: int = 0,
+    threads: int = 2,
+    progress: bool = True,
+    description: str = "rendering",
 ) -> None:
     """Render each pose to an RGBA PNG (straight alpha, 8-bit), in one Blender child process.
 
@@ -103,15 +115,25 @@ def render_poses(
     poses = torch.as_tensor(poses, dtype=torch.float64).reshape(-1, 4, 4)
     if len(paths) != len(poses):
         raise ValueError(f"got {len(poses)} poses but {len(paths)} output paths")
-    frames = [{"pose": pose.tolist(), "path": str(Path(path).resolve())}
-              for pose, path in zip(poses, paths) if not Path(path).is_file()]
+    frames = [
+        {"pose": pose.tolist(), "path": str(Path(path).resolve())}
+        for pose, path in zip(poses, paths)
+        if not Path(path).is_file()
+    ]
     if not frames:
         return
     for folder in {Path(frame["path"]).parent for frame in frames}:
         folder.mkdir(parents=True, exist_ok=True)
-    job = {"scene": scene_spec(scene), "width": int(width), "height": int(height),
-           "camera_angle_x": float(camera_angle_x), "samples": int(samples), "seed": int(seed),
-           "threads": int(threads), "frames": frames}
+    job = {
+        "scene": scene_spec(scene),
+        "width": int(width),
+        "height": int(height),
+        "camera_angle_x": float(camera_angle_x),
+        "samples": int(samples),
+        "seed": int(seed),
+        "threads": int(threads),
+        "frames": frames,
+    }
     with tempfile.TemporaryDirectory(prefix="nerfaug-render-") as folder:
         job_path = Path(folder) / "job.json"
         job_path.write_text(json.dumps(job))
@@ -127,10 +149,17 @@ def _run_worker(job_path: Path, n_frames: int, progress: bool, description: str)
     command = [sys.executable, "-m", "nerfaug.scenes.worker", str(job_path)]
     log = collections.deque(maxlen=40)
     done = 0
-    with Progress(disable=not progress, transient=False) as bar, subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        errors="replace", env=env,
-    ) as child:
+    with (
+        Progress(disable=not progress, transient=False) as bar,
+        subprocess.Popen(
+            command,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            errors="replace",
+            env=env,
+        ) as child,
+    ):
         task = bar.add_task(f"{description} (starting Blender)", total=n_frames)
         try:
             for line in child.stdout:
@@ -159,9 +188,16 @@ def read_rgba(paths: list[Path]) -> Tensor:
 
 
 def render_views(
-    scene: str | Path, poses: Tensor, width: int, height: int,
-    camera_angle_x: float = BLENDER_CAMERA_ANGLE_X, samples: int = 16, seed: int = 0,
-    background=(1.0, 1.0, 1.0), names: list[str] | None = None, threads: int = 2,
+    scene: str | Path,
+    poses: Tensor,
+    width: int,
+    height: int,
+    camera_angle_x: float = BLENDER_CAMERA_ANGLE_X,
+    samples: int = 16,
+    seed: int = 0,
+    background=(1.0, 1.0, 1.0),
+    names: list[str] | None = None,
+    threads: int = 2,
     progress: bool = True,
 ) -> Views:
     """Render poses and return them as Views composited over `background`, with alphas.
@@ -212,7 +248,14 @@ def val_indices(test: int, val: int) -> list[int]:
 
 
 def dataset_manifest(
-    spec: dict, resolution: int, pool: int, test: int, initial: int, val: int, samples: int, seed: int,
+    spec: dict,
+    resolution: int,
+    pool: int,
+    test: int,
+    initial: int,
+    val: int,
+    samples: int,
+    seed: int,
 ) -> dict:
     """Everything that determines a rendered dataset's content; equal manifests, equal datasets.
 
@@ -226,10 +269,19 @@ def dataset_manifest(
     if "blend" in spec:
         scene["sha256"] = hashlib.sha256(Path(spec["blend"]).read_bytes()).hexdigest()
     return {
-        "format": DATASET_FORMAT, "scene": scene, "resolution": resolution, "pool": pool,
-        "test": test, "initial": initial, "val": val, "samples": samples, "seed": seed,
-        "camera_angle_x": BLENDER_CAMERA_ANGLE_X, "radius": BLENDER_RADIUS,
-        "bpy": importlib.metadata.version("bpy"), "scene_code_sha256": digest.hexdigest(),
+        "format": DATASET_FORMAT,
+        "scene": scene,
+        "resolution": resolution,
+        "pool": pool,
+        "test": test,
+        "initial": initial,
+        "val": val,
+        "samples": samples,
+        "seed": seed,
+        "camera_angle_x": BLENDER_CAMERA_ANGLE_X,
+        "radius": BLENDER_RADIUS,
+        "bpy": importlib.metadata.version("bpy"),
+        "scene_code_sha256": digest.hexdigest(),
     }
 
 
@@ -248,8 +300,16 @@ def is_complete(root: Path, manifest: dict) -> bool:
 
 
 def render_scene_dataset(
-    scene: str | Path, out: Path, resolution: int = 200, pool: int = 300, test: int = 200,
-    initial: int = 6, samples: int = 16, seed: int = 0, progress: bool = True, val: int = 8,
+    scene: str | Path,
+    out: Path,
+    resolution: int = 200,
+    pool: int = 300,
+    test: int = 200,
+    initial: int = 6,
+    samples: int = 16,
+    seed: int = 0,
+    progress: bool = True,
+    val: int = 8,
     threads: int = 2,
 ) -> Path:
     """Render a scene into a NeRF-synthetic dataset folder; cached by its arguments.
@@ -298,8 +358,9 @@ def render_scene_dataset(
     with exclusive_lock(out.parent):
         if is_complete(out, manifest):
             return out
-        return _render_dataset(scene, out, manifest, resolution, pool, test, initial, val, samples, seed,
-                               threads, progress)
+        return _render_dataset(
+            scene, out, manifest, resolution, pool, test, initial, val, samples, seed, threads, progress
+        )
 
 
 @contextlib.contextmanager
@@ -314,8 +375,20 @@ def exclusive_lock(folder: Path):
         os.close(handle)  # releases the lock
 
 
-def _render_dataset(scene, out: Path, manifest: dict, resolution: int, pool: int, test: int, initial: int,
-                    val: int, samples: int, seed: int, threads: int, progress: bool) -> Path:
+def _render_dataset(
+    scene,
+    out: Path,
+    manifest: dict,
+    resolution: int,
+    pool: int,
+    test: int,
+    initial: int,
+    val: int,
+    samples: int,
+    seed: int,
+    threads: int,
+    progress: bool,
+) -> Path:
     """The body of `render_scene_dataset`, run while holding its lock."""
     staging = out.with_name(f".{out.name}.partial")
     renders = staging / "renders"
@@ -328,8 +401,16 @@ def _render_dataset(scene, out: Path, manifest: dict, resolution: int, pool: int
     rendered = ("train", "initial", "test")
     paths = {split: [renders / split / f"r_{i}.png" for i in range(len(poses[split]))] for split in rendered}
     render_poses(
-        scene, torch.cat([poses[s] for s in rendered]), [p for s in rendered for p in paths[s]],
-        resolution, resolution, BLENDER_CAMERA_ANGLE_X, samples, seed, threads, progress,
+        scene,
+        torch.cat([poses[s] for s in rendered]),
+        [p for s in rendered for p in paths[s]],
+        resolution,
+        resolution,
+        BLENDER_CAMERA_ANGLE_X,
+        samples,
+        seed,
+        threads,
+        progress,
         description=f"rendering {Path(str(scene)).stem}",
     )
     paths["val"] = [paths["test"][i] for i in val_indices(test, val)]

@@ -36,8 +36,13 @@ from nerfaug.uncertainty.so3 import so3_geodesic_sq
 
 
 def batch_posterior(
-    entropy: Tensor | None, base_distance: Tensor | None, pairwise: Tensor | None, accepted: list[int],
-    weights: tuple[float, float], normalisation: str, angle_sq: Tensor | None = None,
+    entropy: Tensor | None,
+    base_distance: Tensor | None,
+    pairwise: Tensor | None,
+    accepted: list[int],
+    weights: tuple[float, float],
+    normalisation: str,
+    angle_sq: Tensor | None = None,
     entropy_sigma: float | None = None,
 ) -> Tensor:
     """The posterior U after the views `accepted` joined the training set.
@@ -67,10 +72,18 @@ def batch_posterior(
 
 
 def batch_aware_sample(
-    entropy: Tensor | None, base_distance: Tensor | None, rotations: Tensor, k: int,
-    generator: torch.Generator | None = None, weights: tuple[float, float] = (1.0, 1.0),
-    normalisation: str = "minmax", metric: Tensor | None = None, exponent: float = 1.0,
-    entropy_sigma: float | None = None, eligible: Tensor | None = None, max_draws: int = MAX_DRAWS,
+    entropy: Tensor | None,
+    base_distance: Tensor | None,
+    rotations: Tensor,
+    k: int,
+    generator: torch.Generator | None = None,
+    weights: tuple[float, float] = (1.0, 1.0),
+    normalisation: str = "minmax",
+    metric: Tensor | None = None,
+    exponent: float = 1.0,
+    entropy_sigma: float | None = None,
+    eligible: Tensor | None = None,
+    max_draws: int = MAX_DRAWS,
 ) -> Tensor:
     """Choose k candidates one at a time, updating the posterior after each acceptance.
 
@@ -104,8 +117,9 @@ def batch_aware_sample(
     allowed = torch.ones(n, dtype=torch.bool) if eligible is None else eligible.clone().bool()
     chosen: list[int] = []
     for _ in range(k):
-        posterior = batch_posterior(entropy, base_distance, pairwise, chosen, weights, normalisation,
-                                    angle_sq, entropy_sigma)
+        posterior = batch_posterior(
+            entropy, base_distance, pairwise, chosen, weights, normalisation, angle_sq, entropy_sigma
+        )
         density = sharpen(posterior.clamp_min(0.0), exponent)
         pick = int(rejection_sample(density, 1, generator, None, max_draws, "paper", eligible=allowed)[0])
         chosen.append(pick)
@@ -126,8 +140,17 @@ def _batch_sampling(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring
     shaped = sampling_density(request, scoring)
     state = scoring.state
     indices = batch_aware_sample(
-        state["entropy"], state.get("distance"), state.get("rotations", request.candidates.rotations.cpu()),
-        request.n, request.generator, state["weights"], config.normalisation, state.get("metric"), shaped.state.get("exponent", 1.0),
-        config.batch_entropy_sigma, request.eligible, config.max_draws,
+        state["entropy"],
+        state.get("distance"),
+        state.get("rotations", request.candidates.rotations.cpu()),
+        request.n,
+        request.generator,
+        state["weights"],
+        config.normalisation,
+        state.get("metric"),
+        shaped.state.get("exponent", 1.0),
+        config.batch_entropy_sigma,
+        request.eligible,
+        config.max_draws,
     )
     return indices, shaped

@@ -36,7 +36,9 @@ def matching_poses(
 
 
 def pool_candidates(
-    pool: Cameras, training: Cameras | None = None, position_tolerance: float = 1e-3,
+    pool: Cameras,
+    training: Cameras | None = None,
+    position_tolerance: float = 1e-3,
     angle_tolerance: float = 1e-3,
 ) -> tuple[Cameras, Tensor]:
     """The cameras of a pool (e.g. a dataset's train split) that are not training views.
@@ -55,9 +57,14 @@ def pool_candidates(
 
 
 def hemisphere_candidates(
-    template: Cameras, n: int = N_CANDIDATES, generator: torch.Generator | None = None,
-    radius: float | None = None, centre=(0.0, 0.0, 0.0), training: Cameras | None = None,
-    position_tolerance: float = 1e-3, angle_tolerance: float = 1e-3,
+    template: Cameras,
+    n: int = N_CANDIDATES,
+    generator: torch.Generator | None = None,
+    radius: float | None = None,
+    centre=(0.0, 0.0, 0.0),
+    training: Cameras | None = None,
+    position_tolerance: float = 1e-3,
+    angle_tolerance: float = 1e-3,
 ) -> Cameras:
     """`n` poses uniform in area on the upper hemisphere, looking at `centre`, minus training views.
 
@@ -81,6 +88,11 @@ def hemisphere_candidates(
         poses = poses[~matching_poses(poses, training.camera_to_world.cpu(), position_tolerance, angle_tolerance)]
     first = template[0]
     return Cameras(
-        poses, float(first.fx[0]), float(first.fy[0]), float(first.cx[0]), float(first.cy[0]),
-        template.width, template.height,
+        poses,
+        float(first.fx[0]),
+        float(first.fy[0]),
+        float(first.cx[0]),
+        float(first.cy[0]),
+        template.width,
+        template.height,
     )

@@ -28,8 +28,7 @@ from nerfaug.uncertainty.so3 import coverage_distance
 DISTANCE_ROTATIONS = ("pose", "azimuth")
 
 
-def scoring_cameras(candidates: Cameras, resolution: int, fov_deg: float | None = None,
-                    crop: float = 1.0) -> Cameras:
+def scoring_cameras(candidates: Cameras, resolution: int, fov_deg: float | None = None, crop: float = 1.0) -> Cameras:
     """The cameras the entropy of `candidates` is rendered with.
 
     `resolution` pixels across (the height keeps the aspect ratio). With `fov_deg` the
@@ -53,8 +52,9 @@ def scoring_cameras(candidates: Cameras, resolution: int, fov_deg: float | None 
             raise ValueError(f"scoring_fov must be in (0, 180) degrees, got {fov_deg}")
         focal = torch.full_like(small.fx, 0.5 * small.width / math.tan(math.radians(fov_deg) / 2))
     focal = focal / crop
-    return Cameras(small.camera_to_world, focal, focal, small.width / 2.0, small.height / 2.0,
-                   small.width, small.height)
+    return Cameras(
+        small.camera_to_world, focal, focal, small.width / 2.0, small.height / 2.0, small.width, small.height
+    )
 
 
 def candidate_entropy(request: Request) -> Tensor:
@@ -63,10 +63,10 @@ def candidate_entropy(request: Request) -> Tensor:
     farther than `entropy_max_polar` from the pole get mean entropy 0 first (the authors'
     entropy NBV)."""
     config = request.config
-    cameras = scoring_cameras(request.candidates, config.entropy_resolution, config.scoring_fov,
-                              config.scoring_crop)
-    means = mean_view_entropy(request.require_model(), cameras, config.entropy_resolution, config.chunk,
-                              config.entropy_mode).cpu()
+    cameras = scoring_cameras(request.candidates, config.entropy_resolution, config.scoring_fov, config.scoring_crop)
+    means = mean_view_entropy(
+        request.require_model(), cameras, config.entropy_resolution, config.chunk, config.entropy_mode
+    ).cpu()
     if config.entropy_max_polar is not None:
         means = torch.where(request.polar > config.entropy_max_polar, 0.0, means.double()).to(means.dtype)
     return authors_view_scores(means) if config.entropy_mode == "authors" else means
@@ -105,9 +105,7 @@ def _terms(request: Request, a: float, b: float) -> Scoring:
         distance = coverage_distance(rotations, training, _metric(request))
         state.update(distance=distance, rotations=rotations, metric=_metric(request))
         components["distance"] = distance.float()
-    scores = combined_uncertainty(
-        state["entropy"], state.get("distance"), a, b, config.normalisation
-    ).float()
+    scores = combined_uncertainty(state["entropy"], state.get("distance"), a, b, config.normalisation).float()
     return Scoring(scores, components, state)
 
 

@@ -31,27 +31,37 @@ from nerfaug.selection.selectors import AUTHORS_THRESHOLD, MAX_DRAWS, SAMPLERS
 from nerfaug.uncertainty.combined import NORMALISATIONS
 from nerfaug.uncertainty.entropy import ENTROPY_MODES
 from nerfaug.uncertainty.fisher import (
-    CACHE_FLOATS, DEFAULT_METHOD, FISHER_LAMBDA, FISHER_METHODS, fisher_diagonal, fisherrf_view_scores,
+    CACHE_FLOATS,
+    DEFAULT_METHOD,
+    FISHER_LAMBDA,
+    FISHER_METHODS,
+    fisher_diagonal,
+    fisherrf_view_scores,
     stratified_pixel_rays,
 )
 
 # What the authors' code (Agaggar/nerfstudio-low-data) does where the paper is silent, as
 # `SelectionConfig` settings; `SelectionConfig.authors_variant()` applies them. See the
 # SelectionConfig docstring for what the project cannot copy exactly.
-AUTHORS_SETTINGS = MappingProxyType({
-    "entropy_mode": "authors",  # p = w / max(w) over the view's rays, -10 sum p log2(p + 1e-9)
-    "normalisation": "authors",  # per-view H cubed + min-max; D min-max; (H' + D') / max
-    "sampler": "authors",  # in-order sweep, nu ~ U(0.05, 1), accept if w > 15 nu
-    "min_polar": 0.4,  # candidates within 0.4 rad of the pole are never accepted
-    "scoring_fov": 75.0,  # their scoring renders: 75-degree field of view ...
-    "scoring_crop": 0.5,  # ... of which only the central 400x400 of 800x800 is used
-})
+AUTHORS_SETTINGS = MappingProxyType(
+    {
+        "entropy_mode": "authors",  # p = w / max(w) over the view's rays, -10 sum p log2(p + 1e-9)
+        "normalisation": "authors",  # per-view H cubed + min-max; D min-max; (H' + D') / max
+        "sampler": "authors",  # in-order sweep, nu ~ U(0.05, 1), accept if w > 15 nu
+        "min_polar": 0.4,  # candidates within 0.4 rad of the pole are never accepted
+        "scoring_fov": 75.0,  # their scoring renders: 75-degree field of view ...
+        "scoring_crop": 0.5,  # ... of which only the central 400x400 of 800x800 is used
+    }
+)
 # The authors' entropy NBV baseline: top-k of minmax(H^3) + minmax(D), H zeroed beyond 0.75 rad
 # from the pole, D over azimuth-only rotations (their code zeroes the candidates' polar angle).
-AUTHORS_NBV_SETTINGS = MappingProxyType({
-    **{k: v for k, v in AUTHORS_SETTINGS.items() if k not in ("sampler", "min_polar")},
-    "entropy_max_polar": 0.75, "distance_rotations": "azimuth",
-})
+AUTHORS_NBV_SETTINGS = MappingProxyType(
+    {
+        **{k: v for k, v in AUTHORS_SETTINGS.items() if k not in ("sampler", "min_polar")},
+        "entropy_max_polar": 0.75,
+        "distance_rotations": "azimuth",
+    }
+)
 # Batch-aware sampling (`selection.batch`). The entropy discount's width: a view within about
 # half a field of view of an accepted one sees mostly the same rays (NeRF-synthetic's field of
 # view is 0.69 rad, so 0.35). Chosen from the camera geometry, not from any result.
@@ -227,9 +237,19 @@ class SelectionConfig:
             ("distance_weight", self.distance_weight >= 0, ">= 0"),
             ("authors_threshold", self.authors_threshold >= 0, ">= 0"),
             ("scale_m", self.scale_m is None or self.scale_m > 0, "> 0"),
-            *[(name, getattr(self, name) >= 1, ">= 1") for name in (
-                "max_draws", "chunk", "fisher_train_pixels", "fisher_train_chunk", "fisher_train_probes",
-                "fisher_resolution", "fisher_probes", "fisher_cache_floats")],
+            *[
+                (name, getattr(self, name) >= 1, ">= 1")
+                for name in (
+                    "max_draws",
+                    "chunk",
+                    "fisher_train_pixels",
+                    "fisher_train_chunk",
+                    "fisher_train_probes",
+                    "fisher_resolution",
+                    "fisher_probes",
+                    "fisher_cache_floats",
+                )
+            ],
             ("fisher_lambda", self.fisher_lambda > 0, "> 0"),
         ]:
             if not ok:
@@ -257,55 +277,107 @@ class SelectionConfig:
         return cls(**values)
 
 
-def _line(name: str, estimator: str, selector: str, description: str, label: str = "",
-          **settings) -> MethodSpec:
+def _line(name: str, estimator: str, selector: str, description: str, label: str = "", **settings) -> MethodSpec:
     return MethodSpec(name, estimator, selector, description, label, settings)
 
 
 METHODS: dict[str, MethodSpec] = {
     spec.name: spec
     for spec in [
-        _line("ours", "combined", "sampling",
-              "the paper's method: entropy + SO(3) coverage, rejection sampling", "Ours"),
-        _line("ours-nbv", "combined", "top-k",
-              "entropy + coverage, top-k (Table II 'ours, NBV')", "Ours (NBV)"),
-        _line("ours-authors", "combined", "sampling",
-              "ours as the authors' code computes it: their entropy, normalisation, in-order sampler "
-              "with M = 15, polar >= 0.4 rad, 75-degree central-crop scoring views",
-              "Ours (authors' code)", **AUTHORS_SETTINGS),
-        _line("ours-batch", "combined", "batch-sampling",
-              "beyond the paper: ours with the coverage term updated after each accepted view",
-              "Ours (batch-aware)"),
-        _line("ours-batch-local", "combined", "batch-sampling",
-              "beyond the paper: batch-aware ours, also discounting the entropy near accepted views "
-              "(Gaussian local penalty, sigma 0.35 rad)", "Ours (batch-aware, local)",
-              batch_entropy_sigma=BATCH_ENTROPY_SIGMA),
-        _line("ours-batch-sharp", "combined", "batch-sampling",
-              "beyond the paper: ours-batch-local with a sharper posterior (ESS at the geometric mean "
-              "of uniform's and NBV's)", "Ours (batch-aware, sharp)", batch_entropy_sigma=BATCH_ENTROPY_SIGMA,
-              sharpness=BATCH_SHARPNESS),
-        _line("uniform", "none", "uniform",
-              "Uniform (Mildenhall et al.): k candidates uniformly at random", "Uniform"),
-        _line("entropy", "entropy", "top-k",
-              "Spatial Entropy (Lee et al. 2022): entropy only, top-k", "Entropy (NBV)"),
-        _line("entropy-sampling", "entropy", "sampling",
-              "entropy only, rejection sampling (Table I 'entropy only', Table II)", "Entropy (sampling)"),
-        _line("entropy-authors-nbv", "combined", "top-k",
-              "the authors' code's entropy NBV: top-k of minmax(H^3) + minmax(D), H zeroed beyond "
-              "0.75 rad polar, D from azimuth", "Entropy NBV (authors' code)", **AUTHORS_NBV_SETTINGS),
-        _line("fisherrf", "fisher", "greedy-fisher",
-              "FisherRF (Jiang et al. 2024): greedy next best views by information gain", "FisherRF"),
-        _line("fisherrf-sampling", "fisher", "sampling",
-              "rejection sampling over FisherRF's information gain (Table II)", "FisherRF (sampling)"),
-        _line("distance", "distance", "sampling",
-              "coverage term only, rejection sampling (Table I 'distance only')", "Distance only"),
-        _line("distance-nbv", "distance", "top-k",
-              "coverage term only, top-k", "Distance (NBV)"),
-        _line("distance-authors-nbv", "distance", "top-k",
-              "the authors' code's 'max distance': top-k of D over azimuth-only rotations",
-              "Max distance (authors' code)", distance_rotations="azimuth"),
-        _line("furthest", "none", "farthest",
-              "maximally apart: greedy farthest views by geodesic angle (Fig. 2d)", "Furthest"),
+        _line(
+            "ours", "combined", "sampling", "the paper's method: entropy + SO(3) coverage, rejection sampling", "Ours"
+        ),
+        _line("ours-nbv", "combined", "top-k", "entropy + coverage, top-k (Table II 'ours, NBV')", "Ours (NBV)"),
+        _line(
+            "ours-authors",
+            "combined",
+            "sampling",
+            "ours as the authors' code computes it: their entropy, normalisation, in-order sampler "
+            "with M = 15, polar >= 0.4 rad, 75-degree central-crop scoring views",
+            "Ours (authors' code)",
+            **AUTHORS_SETTINGS,
+        ),
+        _line(
+            "ours-batch",
+            "combined",
+            "batch-sampling",
+            "beyond the paper: ours with the coverage term updated after each accepted view",
+            "Ours (batch-aware)",
+        ),
+        _line(
+            "ours-batch-local",
+            "combined",
+            "batch-sampling",
+            "beyond the paper: batch-aware ours, also discounting the entropy near accepted views "
+            "(Gaussian local penalty, sigma 0.35 rad)",
+            "Ours (batch-aware, local)",
+            batch_entropy_sigma=BATCH_ENTROPY_SIGMA,
+        ),
+        _line(
+            "ours-batch-sharp",
+            "combined",
+            "batch-sampling",
+            "beyond the paper: ours-batch-local with a sharper posterior (ESS at the geometric mean "
+            "of uniform's and NBV's)",
+            "Ours (batch-aware, sharp)",
+            batch_entropy_sigma=BATCH_ENTROPY_SIGMA,
+            sharpness=BATCH_SHARPNESS,
+        ),
+        _line("uniform", "none", "uniform", "Uniform (Mildenhall et al.): k candidates uniformly at random", "Uniform"),
+        _line("entropy", "entropy", "top-k", "Spatial Entropy (Lee et al. 2022): entropy only, top-k", "Entropy (NBV)"),
+        _line(
+            "entropy-sampling",
+            "entropy",
+            "sampling",
+            "entropy only, rejection sampling (Table I 'entropy only', Table II)",
+            "Entropy (sampling)",
+        ),
+        _line(
+            "entropy-authors-nbv",
+            "combined",
+            "top-k",
+            "the authors' code's entropy NBV: top-k of minmax(H^3) + minmax(D), H zeroed beyond "
+            "0.75 rad polar, D from azimuth",
+            "Entropy NBV (authors' code)",
+            **AUTHORS_NBV_SETTINGS,
+        ),
+        _line(
+            "fisherrf",
+            "fisher",
+            "greedy-fisher",
+            "FisherRF (Jiang et al. 2024): greedy next best views by information gain",
+            "FisherRF",
+        ),
+        _line(
+            "fisherrf-sampling",
+            "fisher",
+            "sampling",
+            "rejection sampling over FisherRF's information gain (Table II)",
+            "FisherRF (sampling)",
+        ),
+        _line(
+            "distance",
+            "distance",
+            "sampling",
+            "coverage term only, rejection sampling (Table I 'distance only')",
+            "Distance only",
+        ),
+        _line("distance-nbv", "distance", "top-k", "coverage term only, top-k", "Distance (NBV)"),
+        _line(
+            "distance-authors-nbv",
+            "distance",
+            "top-k",
+            "the authors' code's 'max distance': top-k of D over azimuth-only rotations",
+            "Max distance (authors' code)",
+            distance_rotations="azimuth",
+        ),
+        _line(
+            "furthest",
+            "none",
+            "farthest",
+            "maximally apart: greedy farthest views by geodesic angle (Fig. 2d)",
+            "Furthest",
+        ),
     ]
 }
 
@@ -314,9 +386,12 @@ METHODS: dict[str, MethodSpec] = {
 TABLE_I_ROWS = (("Combined (ours)", "ours"), ("Entropy only", "entropy-sampling"), ("Distance only", "distance"))
 # Table II (NBV vs sampling), as (family, variant, method), in the paper's order.
 TABLE_II_ROWS = (
-    ("Ours", "NBV", "ours-nbv"), ("Ours", "Sampling", "ours"),
-    ("FisherRF", "NBV", "fisherrf"), ("FisherRF", "Sampling", "fisherrf-sampling"),
-    ("Entropy", "NBV", "entropy"), ("Entropy", "Sampling", "entropy-sampling"),
+    ("Ours", "NBV", "ours-nbv"),
+    ("Ours", "Sampling", "ours"),
+    ("FisherRF", "NBV", "fisherrf"),
+    ("FisherRF", "Sampling", "fisherrf-sampling"),
+    ("Entropy", "NBV", "entropy"),
+    ("Entropy", "Sampling", "entropy-sampling"),
 )
 TABLE_I = tuple(m for _, m in TABLE_I_ROWS)
 TABLE_II = ("ours", "ours-nbv", "fisherrf", "fisherrf-sampling", "entropy", "entropy-sampling")
@@ -329,8 +404,12 @@ BATCH_AWARE = ("ours", "ours-batch", "ours-batch-local", "ours-batch-sharp")
 # Issue 9's study: ours, its authors' variant, the batch-aware variant and the baselines.
 STUDY_METHODS = ("ours", "ours-authors", "ours-batch-sharp", "uniform", "entropy", "fisherrf", "furthest")
 FAMILIES: dict[str, tuple[str, ...]] = {
-    "table-i": TABLE_I, "table-ii": TABLE_II, "main": MAIN_COMPARISON, "authors": AUTHORS_VARIANTS,
-    "batch": BATCH_AWARE, "study": STUDY_METHODS,
+    "table-i": TABLE_I,
+    "table-ii": TABLE_II,
+    "main": MAIN_COMPARISON,
+    "authors": AUTHORS_VARIANTS,
+    "batch": BATCH_AWARE,
+    "study": STUDY_METHODS,
 }
 
 
@@ -369,8 +448,10 @@ class Selection:
     @classmethod
     def from_dict(cls, data: dict) -> Selection:
         return cls(
-            torch.tensor(data["indices"], dtype=torch.long), torch.tensor(data["scores"]),
-            {k: torch.tensor(v) for k, v in data.get("components", {}).items()}, data.get("method", ""),
+            torch.tensor(data["indices"], dtype=torch.long),
+            torch.tensor(data["scores"]),
+            {k: torch.tensor(v) for k, v in data.get("components", {}).items()},
+            data.get("method", ""),
         )
 
 
@@ -386,7 +467,10 @@ def _background(config: SelectionConfig) -> Tensor | None:
 
 
 def candidate_scores(
-    method: str, model: nn.Module | None, train_cameras: Cameras, candidates: Cameras,
+    method: str,
+    model: nn.Module | None,
+    train_cameras: Cameras,
+    candidates: Cameras,
     config: SelectionConfig | None = None,
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """The scores a method's estimator gives the candidates, and the terms behind them (with
@@ -409,11 +493,15 @@ def candidate_scores(
 
 
 def fisherrf_candidates(
-    model: nn.Module, train_cameras: Cameras, candidates: Cameras, config: SelectionConfig | None = None,
+    model: nn.Module,
+    train_cameras: Cameras,
+    candidates: Cameras,
+    config: SelectionConfig | None = None,
     generator: torch.Generator | None = None,
 ) -> tuple[Tensor, Tensor, Callable[[int], Tensor]]:
     """FisherRF's ingredients: H_train over about `config.fisher_train_pixels` pixels spread
-    evenly over the training views and weighted to estimate the sum over all their pixels, every candidate's score at `config.fisher_resolution`, and H_cand
+    evenly over the training views and weighted to estimate the sum over all their pixels, every
+    candidate's score at `config.fisher_resolution`, and H_cand
     on demand (kept within `config.fisher_cache_floats`, else recomputed) for the greedy selection.
 
     Returns:
@@ -427,12 +515,26 @@ def fisherrf_candidates(
     origins, directions, weights = stratified_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
     background = _background(config)
     h_train = fisher_diagonal(
-        model, origins, directions, config.fisher_method, config.fisher_train_probes, generator,
-        config.fisher_train_chunk, background, weights=weights,
+        model,
+        origins,
+        directions,
+        config.fisher_method,
+        config.fisher_train_probes,
+        generator,
+        config.fisher_train_chunk,
+        background,
+        weights=weights,
     )
     scores, h_of = fisherrf_view_scores(
-        model, candidates, h_train, config.fisher_lambda, config.fisher_cache_floats,
-        config.fisher_resolution, config.fisher_method, config.fisher_probes, generator,
+        model,
+        candidates,
+        h_train,
+        config.fisher_lambda,
+        config.fisher_cache_floats,
+        config.fisher_resolution,
+        config.fisher_method,
+        config.fisher_probes,
+        generator,
         background=background,
     )
     return h_train, scores, h_of

@@ -87,8 +87,9 @@ def exponent_for_ess(scores: Tensor, target_ess: float) -> float:
     return high
 
 
-def posterior_exponent(scores: Tensor, n: int, temperature: float, sharpness: float | None,
-                       eligible: Tensor | None = None) -> float:
+def posterior_exponent(
+    scores: Tensor, n: int, temperature: float, sharpness: float | None, eligible: Tensor | None = None
+) -> float:
     """The exponent 1/T a sampler applies to `scores` (shape (C,)): 1 / `temperature`, or, when
     `sharpness` s is given, the one that makes the posterior's ESS C^(1 - s) n^s over the
     `eligible` candidates (all when None)."""

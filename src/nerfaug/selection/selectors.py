@@ -16,6 +16,7 @@ import warnings
 import torch
 from torch import Tensor
 
+from nerfaug.selection.registry import Request, Scoring, register_selector
 from nerfaug.uncertainty.so3 import min_geodesic_angle
 
 SAMPLERS = ("paper", "authors")
@@ -40,7 +41,9 @@ def _check_eligible(eligible: Tensor | None, n_candidates: int, k: int) -> Tenso
     if eligible.numel() != n_candidates:
         raise ValueError(f"eligible has {eligible.numel()} entries for {n_candidates} candidates")
     if int(eligible.sum()) < k:
-        raise ValueError(f"cannot choose {k} views: only {int(eligible.sum())} of {n_candidates} candidates are eligible")
+        raise ValueError(
+            f"cannot choose {k} views: only {int(eligible.sum())} of {n_candidates} candidates are eligible"
+        )
     return eligible
 
 
@@ -70,9 +73,7 @@ def _check_scores(scores: Tensor) -> Tensor:
     if not torch.isfinite(scores).all():
         raise ValueError("scores must be finite to sample from them")
     if (scores < 0).any():
-        raise ValueError(
-            f"scores are an unnormalised density and must be >= 0; the smallest is {scores.min():.6g}"
-        )
+        raise ValueError(f"scores are an unnormalised density and must be >= 0; the smallest is {scores.min():.6g}")
     return scores
 
 
@@ -219,7 +220,7 @@ def _authors_sample(w: Tensor, k: int, generator, max_draws: int, threshold: flo
 def greedy_farthest(
     candidate_rotations: Tensor, training_rotations: Tensor, k: int, eligible: Tensor | None = None
 ) -> Tensor:
-    """"Maximally apart": k times, pick the candidate whose smallest geodesic angle to the training
+    """ "Maximally apart": k times, pick the candidate whose smallest geodesic angle to the training
     views and the views already picked is largest.
 
     Args:
@@ -251,7 +252,6 @@ def greedy_farthest(
 
 # The registered selectors (`nerfaug.selection.registry`): adapters from a `Request` and the
 # estimator's `Scoring` to the functions above. Every one honours `Request.eligible`.
-from nerfaug.selection.registry import Request, Scoring, register_selector
 
 
 def sampling_density(request: Request, scoring: Scoring) -> Scoring:
@@ -261,12 +261,14 @@ def sampling_density(request: Request, scoring: Scoring) -> Scoring:
     from nerfaug.selection.posterior import posterior_exponent, sharpen
 
     config = request.config
-    exponent = posterior_exponent(scoring.scores, request.n, config.temperature, config.sharpness,
-                                  request.eligible)
+    exponent = posterior_exponent(scoring.scores, request.n, config.temperature, config.sharpness, request.eligible)
     if exponent == 1.0:
         return scoring
-    components = {**scoring.components, "uncertainty": scoring.scores,
-                  "exponent": torch.full_like(scoring.scores, exponent)}
+    components = {
+        **scoring.components,
+        "uncertainty": scoring.scores,
+        "exponent": torch.full_like(scoring.scores, exponent),
+    }
     return Scoring(sharpen(scoring.scores, exponent), components, {**scoring.state, "exponent": exponent})
 
 
@@ -275,8 +277,16 @@ def _sampling(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
     """The paper's rejection sampler (or the authors' sweep, `config.sampler`)."""
     config = request.config
     scoring = sampling_density(request, scoring)
-    indices = rejection_sample(scoring.scores, request.n, request.generator, config.scale_m, config.max_draws,
-                               config.sampler, config.authors_threshold, request.eligible)
+    indices = rejection_sample(
+        scoring.scores,
+        request.n,
+        request.generator,
+        config.scale_m,
+        config.max_draws,
+        config.sampler,
+        config.authors_threshold,
+        request.eligible,
+    )
     return indices, scoring
 
 
@@ -313,6 +323,7 @@ def _greedy_fisher(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]
     if request.eligible is not None:
         _check_eligible(request.eligible, scores.shape[0], request.n)
         scores = torch.where(request.eligible, scores.double(), -math.inf)
-    indices, _ = fisherrf_greedy(scoring.state["h_train"], scoring.state["h_of"], request.n,
-                                 request.config.fisher_lambda, scores)
+    indices, _ = fisherrf_greedy(
+        scoring.state["h_train"], scoring.state["h_of"], request.n, request.config.fisher_lambda, scores
+    )
     return indices, scoring

@@ -21,7 +21,6 @@ Entropy-only and distance-only are the weights (1, 0) and (0, 1).
 
 from __future__ import annotations
 
-import torch
 from torch import Tensor
 
 from nerfaug.uncertainty.entropy import minmax_normalise
@@ -52,9 +51,7 @@ def combined_uncertainty(
         tensor([0.0000, 1.5000, 1.5000])
     """
     if normalisation not in NORMALISATIONS:
-        raise ValueError(
-            f"unknown normalisation {normalisation!r}; valid: {', '.join(NORMALISATIONS)}"
-        )
+        raise ValueError(f"unknown normalisation {normalisation!r}; valid: {', '.join(NORMALISATIONS)}")
     if entropy_weight < 0 or distance_weight < 0:
         raise ValueError(f"weights must be >= 0, got a={entropy_weight}, b={distance_weight}")
     terms = [(t, w) for t, w in ((entropy, entropy_weight), (distance, distance_weight)) if w != 0]

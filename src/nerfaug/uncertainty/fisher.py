@@ -51,7 +51,7 @@ from torch import Tensor, nn
 from torch.func import functional_call, jacrev, vmap
 
 from nerfaug.cameras import Cameras, generate_rays
-from nerfaug.uncertainty.rays import model_device, reduced_cameras, views_rays
+from nerfaug.uncertainty.rays import model_device
 
 FISHER_METHODS = ("random-sign", "exact")
 DEFAULT_METHOD = "random-sign"
@@ -149,7 +149,9 @@ def _probe_squares(rgb: Tensor, params: dict[str, Tensor], signs: Tensor) -> Ten
     return total
 
 
-def _random_sign(model, params, origins, directions, groups, n_groups, background, weights, n_probes, generators, chunk):
+def _random_sign(
+    model, params, origins, directions, groups, n_groups, background, weights, n_probes, generators, chunk
+):
     """Rademacher estimate of sum_i w_i (d c_i / d theta)^2 per group; squares taken per chunk of
     at most `chunk` rays of one group; group g's probes drawn from generators[g].
 
@@ -203,8 +205,11 @@ def fisher_diagonal_groups(
         Tensor with shape (n_groups, P), sum over each group's rays of w_i (d c_i / d theta)^2 summed
         over the colour channels, P = number of trainable parameters, on the model's device.
     """
-    generators = [torch.Generator().manual_seed(s) for s in _group_seeds(generator, n_groups)] if (
-        method == "random-sign") else []
+    generators = (
+        [torch.Generator().manual_seed(s) for s in _group_seeds(generator, n_groups)]
+        if (method == "random-sign")
+        else []
+    )
     return _fisher_groups(
         model, origins, directions, groups, n_groups, method, n_probes, generators, chunk, background, weights
     )
@@ -227,8 +232,17 @@ def _fisher_groups(
     with _eval_mode(model):
         if method == "random-sign":
             return _random_sign(
-                model, params, origins, directions, groups, n_groups, background, weights, n_probes,
-                generators, chunk,
+                model,
+                params,
+                origins,
+                directions,
+                groups,
+                n_groups,
+                background,
+                weights,
+                n_probes,
+                generators,
+                chunk,
             )
         try:
             return _exact_vmap(model, params, origins, directions, groups, n_groups, background, weights)
@@ -280,8 +294,17 @@ def fisher_diagonal(
     # One chunk at a time, so that only one P-vector is held whatever the number of chunks.
     return sum(
         _fisher_groups(
-            model, origins[s : s + chunk], directions[s : s + chunk], one_group[s : s + chunk], 1,
-            method, n_probes, [torch.Generator().manual_seed(seed)], chunk, background, weights[s : s + chunk],
+            model,
+            origins[s : s + chunk],
+            directions[s : s + chunk],
+            one_group[s : s + chunk],
+            1,
+            method,
+            n_probes,
+            [torch.Generator().manual_seed(seed)],
+            chunk,
+            background,
+            weights[s : s + chunk],
         )[0]
         for s, seed in zip(starts, seeds)
     )
@@ -397,8 +420,9 @@ def fisher_views(
     Returns:
         Tensor with shape (n_views, P).
     """
-    return _views_fisher(model, cameras, resolution, method, n_probes, _group_seeds(generator, len(cameras)),
-                         chunk, background)
+    return _views_fisher(
+        model, cameras, resolution, method, n_probes, _group_seeds(generator, len(cameras)), chunk, background
+    )
 
 
 def _views_fisher(model, cameras, resolution, method, n_probes, seeds, chunk, background) -> Tensor:
@@ -411,7 +435,16 @@ def _views_fisher(model, cameras, resolution, method, n_probes, seeds, chunk, ba
     origins, directions = generate_rays(cameras, views, xs, ys)
     # Each view's probes continue from the generator its pixels came from.
     return _fisher_groups(
-        model, origins, directions, views, len(cameras), method, n_probes, generators, chunk, background,
+        model,
+        origins,
+        directions,
+        views,
+        len(cameras),
+        method,
+        n_probes,
+        generators,
+        chunk,
+        background,
         weights.float(),
     )
 
@@ -467,7 +500,13 @@ def fisherrf_view_scores(
 
     def compute(indices: list[int]) -> Tensor:
         return _views_fisher(
-            model, cameras[indices], resolution, method, n_probes, [seeds[i] for i in indices], chunk,
+            model,
+            cameras[indices],
+            resolution,
+            method,
+            n_probes,
+            [seeds[i] for i in indices],
+            chunk,
             background,
         )
 

@@ -45,12 +45,15 @@ def views_rays(cameras: Cameras, indices: Tensor | list[int]) -> tuple[Tensor, T
     device = cameras.camera_to_world.device
     indices = torch.as_tensor(indices, device=device).long().reshape(-1)
     ys, xs = torch.meshgrid(
-        torch.arange(cameras.height, device=device), torch.arange(cameras.width, device=device),
+        torch.arange(cameras.height, device=device),
+        torch.arange(cameras.width, device=device),
         indexing="ij",
     )
     n_pixels = cameras.height * cameras.width
     return generate_rays(
-        cameras, indices.repeat_interleave(n_pixels), xs.reshape(-1).repeat(len(indices)),
+        cameras,
+        indices.repeat_interleave(n_pixels),
+        xs.reshape(-1).repeat(len(indices)),
         ys.reshape(-1).repeat(len(indices)),
     )
 
@@ -100,8 +103,7 @@ def render_no_grad(model: nn.Module, origins: Tensor, directions: Tensor, chunk:
     model.eval()
     try:
         parts = [
-            model(origins[i : i + chunk], directions[i : i + chunk]).detach()
-            for i in range(0, origins.shape[0], chunk)
+            model(origins[i : i + chunk], directions[i : i + chunk]).detach() for i in range(0, origins.shape[0], chunk)
         ]
     finally:
         model.train(was_training)

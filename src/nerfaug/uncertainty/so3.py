@@ -63,7 +63,7 @@ def so3_log(rotation: Tensor) -> Tensor:
 
     # Large angles: axis from a a^T = (sym - cos I) / (1 - cos), 1 - cos >= 1 here.
     sym = 0.5 * (rotation + rotation.transpose(-1, -2))
-    outer = (sym - cos[..., None, None] * torch.eye(3, dtype=rotation.dtype, device=rotation.device))
+    outer = sym - cos[..., None, None] * torch.eye(3, dtype=rotation.dtype, device=rotation.device)
     outer = outer / (1.0 - cos).clamp_min(1.0)[..., None, None]
     column = outer.diagonal(dim1=-2, dim2=-1).argmax(dim=-1)
     axis = torch.take_along_dim(outer, column[..., None, None].expand(*column.shape, 3, 1), dim=-1)[..., 0]
@@ -94,9 +94,7 @@ def so3_geodesic_sq(rotation1: Tensor, rotation2: Tensor, metric: Tensor | None 
     return torch.einsum("...i,ij,...j->...", log, metric, log)
 
 
-def coverage_distance(
-    candidate_rotations: Tensor, training_rotations: Tensor, metric: Tensor | None = None
-) -> Tensor:
+def coverage_distance(candidate_rotations: Tensor, training_rotations: Tensor, metric: Tensor | None = None) -> Tensor:
     """The paper's out-of-distribution term: D(g) = sum_n 1/2 || log(g_n^-1 g) ||_M^2.
 
     Args:
