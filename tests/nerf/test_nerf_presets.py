@@ -20,7 +20,9 @@ from nerfaug.nerf.trainer import Trainer
 # any value (or a new NerfConfig field) changes these, and invalidates the study's results.
 FROZEN = {
     "cpu": "a94e724a8129081a5c3399cdb7d71d5af270d1a90bef9b3dd7f96663777080a7",
-    "paper": "b25af8e90e5cf336aa422f0e883e1c072a2b9b6b898ad1b8b3a677dd736a462a",
+    "nerfacto-cpu": "5fc61d1dc7d76484c8e9727e6a191ab78749eb09092903dd1aa900e54cfabaf0",
+    # with nerfacto's proposal-update schedule (2026-11-23; no study has run it: it needs a GPU)
+    "paper": "8f96efad7a06e95f23e92ab1b584d78145cde0e523a7045fd0a7b13edcccaf05",
 }
 
 

@@ -182,7 +182,15 @@ class NerfConfig:
 
 
 PRESETS: dict[str, NerfConfig] = {
-    "paper": NerfConfig(encoding="hash", sampler="proposal", background_mode="last_sample", batch_size=4096),
+    "paper": NerfConfig(
+        encoding="hash",
+        sampler="proposal",
+        background_mode="last_sample",
+        batch_size=4096,
+        # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
+        proposal_update_every=5,
+        proposal_warmup_steps=5000,
+    ),
     "cpu": NerfConfig(
         encoding="kplanes",
         plane_resolutions=(64, 128),
