@@ -44,6 +44,7 @@ bench-gpu-pack: $(STAMP)
 
 bench-gpu:
 	$(GPU_PYTHON) benchmarks/bench_gpu.py trial --data $(GPU_DATA) $(GPU_ARGS)
+	$(GPU_PYTHON) benchmarks/bench_gpu.py trial --data $(GPU_DATA) $(GPU_ARGS) --compile inductor --out results/bench_gpu/trial-compiled
 	$(GPU_PYTHON) benchmarks/bench_gpu.py protocol --data $(GPU_DATA) $(GPU_ARGS) --trials 10 --budget-s 420
 
 clean:

@@ -283,10 +283,11 @@ def experiment_config(args, folder: Path, meta: dict, methods, trials: int):
         threads_per_run=args.threads,
         save_renders=args.save_renders,
         device=args.device,
+        compile=args.compile,
     )
 
 
-def warm_up(folder: Path, engine: str, device: torch.device, steps: int) -> float:
+def warm_up(folder: Path, engine: str, device: torch.device, steps: int, compile: str | None = None) -> float:
     """Seconds to start the device (CUDA context, kernels, allocator) with a throwaway training
     and one render, so that the trial's time is the trial's."""
     from nerfaug.data import load_dataset
@@ -298,7 +299,7 @@ def warm_up(folder: Path, engine: str, device: torch.device, steps: int) -> floa
     split = "initial" if (folder / "transforms_initial.json").exists() else "train"
     views = load_dataset(folder, split)
     views = views.subset(range(min(3, len(views))))
-    trainer = Trainer(views, NerfConfig.preset(engine), seed=12345, device=device, progress=False)
+    trainer = Trainer(views, NerfConfig.preset(engine), seed=12345, device=device, progress=False, compile=compile)
     trainer.train(steps)
     trainer.model.render_image(trainer.train_views.cameras.to(device), 0)
     synchronize(device)
@@ -340,7 +341,7 @@ def trial(args) -> dict:
     configure_process(threads=args.threads)
     folder, meta = unpack(args.data, args.unpack_to)
     config = experiment_config(args, folder, meta, (args.method,), 1)
-    warm = warm_up(folder, args.engine, device, args.warmup_steps) if args.warmup_steps else 0.0
+    warm = warm_up(folder, args.engine, device, args.warmup_steps, args.compile) if args.warmup_steps else 0.0
     _fresh(args.out)
     if device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(device)
@@ -356,6 +357,7 @@ def trial(args) -> dict:
         "mode": "trial",
         **environment(device),
         "engine": config.engine,
+        "compile": config.compile,
         "method": args.method,
         "resolution": f"{meta['width']}x{meta['height']}",
         "train_views": f"{config.n_initial} + {config.n_new}",
@@ -386,7 +388,8 @@ def _fmt(value, spec: str) -> str:
 
 def _print_trial(f: dict) -> None:
     print(
-        f"\n== bench_gpu trial: {f['engine']} preset, {f['method']}, {f['resolution']}, {f['steps']} steps, "
+        f"\n== bench_gpu trial: {f['engine']} preset ({f['compile'] or 'pure PyTorch'}), {f['method']}, "
+        f"{f['resolution']}, {f['steps']} steps, "
         f"{f['test_views']} test views on {f['device']} (torch {f['torch']})"
     )
     rows = [
@@ -526,6 +529,11 @@ def parser() -> argparse.ArgumentParser:
         s.add_argument("--n-new", type=int, default=6)
         s.add_argument("--test-views", type=int, default=200)
         s.add_argument("--seed", type=int, default=0)
+        s.add_argument(
+            "--compile",
+            default=None,
+            help="torch.compile backend for the engine's networks (inductor on a GPU); default: pure PyTorch",
+        )
         s.add_argument("--threads", type=int, default=max(1, min(8, os.cpu_count() or 1)), help="torch CPU threads")
         s.add_argument("--save-renders", type=int, default=3)
         s.add_argument("--progress", action="store_true")

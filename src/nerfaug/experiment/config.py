@@ -72,6 +72,9 @@ class ExperimentConfig:
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     """Options of the selection methods' estimators and selectors (each method applies its own
     settings over them, e.g. ours-authors the authors' code's)."""
+    compile: str | None = None
+    """A torch.compile backend for the engine's networks ("inductor", on a GPU), or None for the
+    pure PyTorch path. Fingerprinted when set: compiled kernels round differently."""
 
     def fingerprinted(self) -> dict:
         """The settings that change a run's numbers; results made under others are not mixed.
@@ -100,6 +103,8 @@ class ExperimentConfig:
             "threads_per_run",
         )
         record = {k: getattr(self, k) for k in keep} | {"device": device_kind(self.device)}
+        if self.compile is not None:  # absent by default, so results made before it stay valid
+            record["compile"] = self.compile
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).to_dict().items()})
         return json.loads(json.dumps(record, default=str))

@@ -215,7 +215,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     start = time.perf_counter()
     data = load_scene_data(dataset_dir, config, cache_dir=dataset_cache_dir(root))
     engine = engine_config(config, key.scene)
-    trainer = Trainer(data.initial, engine, seed=seed, device=config.device, progress=progress)
+    trainer = Trainer(data.initial, engine, seed=seed, device=config.device, progress=progress, compile=config.compile)
     timing["setup"] = time.perf_counter() - start
 
     start = time.perf_counter()
