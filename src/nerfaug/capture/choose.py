@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from torch import Tensor
 
 from nerfaug.cameras import Cameras
 from nerfaug.capture.frame import ENGINE_RADIUS
@@ -15,6 +14,7 @@ from nerfaug.capture.images import as_array
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.state import PROPOSALS_DIR, ProposalRecord, now
 from nerfaug.data.frames import check_pose
+from nerfaug.selection.candidates import with_poses
 
 
 def check_method(method: str) -> None:
@@ -26,20 +26,6 @@ def check_method(method: str) -> None:
             f"unknown selection method {method!r}; choose one of {', '.join(METHODS)} "
             "(`nerfaug methods` describes them)"
         )
-
-
-def with_poses(template: Cameras, poses: Tensor) -> Cameras:
-    """Cameras at `poses` (n, 4, 4) with the intrinsics of `template`'s first camera."""
-    first = template[0]
-    return Cameras(
-        poses,
-        float(first.fx[0]),
-        float(first.fy[0]),
-        float(first.cx[0]),
-        float(first.cy[0]),
-        template.width,
-        template.height,
-    )
 
 
 def describe_candidates(candidates) -> str:

@@ -49,6 +49,7 @@ from nerfaug.data import DatasetError, Views, load_dataset
 from nerfaug.data.frames import read_image
 from nerfaug.errors import FolderRefused
 from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.selection.candidates import with_poses
 
 
 class CaptureSession:
@@ -441,7 +442,7 @@ class CaptureSession:
         if width is not None:
             camera = camera.resized(width, max(1, round(width * train.height / train.width)))
         engine = self.hemisphere.to_engine(torch.as_tensor(as_array(poses), dtype=torch.float32).reshape(-1, 4, 4))
-        cameras = choose.with_poses(camera, engine).to(self.trainer.device)
+        cameras = with_poses(camera, engine).to(self.trainer.device)
         background = torch.tensor(self.state.background, dtype=torch.float32, device=self.trainer.device)
         return torch.stack(
             [self.trainer.model.render_image(cameras, i, background)["rgb"].cpu() for i in range(len(cameras))]

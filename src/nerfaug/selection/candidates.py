@@ -13,6 +13,20 @@ from nerfaug.uncertainty.so3 import so3_geodesic_sq
 N_CANDIDATES = 500
 
 
+def with_poses(template: Cameras, poses: Tensor) -> Cameras:
+    """Cameras at `poses` (n, 4, 4) with the intrinsics of `template`'s first camera."""
+    first = template[0]
+    return Cameras(
+        poses,
+        float(first.fx[0]),
+        float(first.fy[0]),
+        float(first.cx[0]),
+        float(first.cy[0]),
+        template.width,
+        template.height,
+    )
+
+
 def matching_poses(
     poses: Tensor, reference: Tensor, position_tolerance: float = 1e-3, angle_tolerance: float = 1e-3
 ) -> Tensor:
@@ -86,13 +100,4 @@ def hemisphere_candidates(
     poses = sample_uniform_poses(n, generator, radius=radius, centre=centre)
     if training is not None:
         poses = poses[~matching_poses(poses, training.camera_to_world.cpu(), position_tolerance, angle_tolerance)]
-    first = template[0]
-    return Cameras(
-        poses,
-        float(first.fx[0]),
-        float(first.fy[0]),
-        float(first.cx[0]),
-        float(first.cy[0]),
-        template.width,
-        template.height,
-    )
+    return with_poses(template, poses)
