@@ -84,10 +84,18 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
         if not (folder / "transforms_test.json").exists():
             raise DatasetError(folder / "transforms_test.json", "a test split is needed for evaluation: file not found")
         return folder
-    from nerfaug.scenes import BUILTIN_SCENES, render_scene_dataset
+    from nerfaug.scenes import BUILTIN_SCENES
 
     if scene not in BUILTIN_SCENES:
         raise ValueError(f"unknown scene {scene!r}: not a folder and not one of the built-in scenes {BUILTIN_SCENES}")
+    return render_builtin(scene, folder, config, progress)
+
+
+def render_builtin(scene: str, folder: Path, config: ExperimentConfig, progress: bool = True) -> Path:
+    """Render built-in `scene` into `folder` as the protocol needs it (its resolution, pool,
+    test and initial views); cached by the dataset's manifest, so a second call does nothing."""
+    from nerfaug.scenes import render_scene_dataset
+
     return render_scene_dataset(
         scene,
         folder,

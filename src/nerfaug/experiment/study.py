@@ -140,25 +140,13 @@ def prepare_datasets(
     manifest) into OUT/datasets/<res>px/<scene>/, a folder named by the scene so that results and
     per-scene settings (the field learning rate) know it by its name; a dataset folder is used
     as it is, named by its folder."""
-    from nerfaug.experiment.protocol import scene_folder
+    from nerfaug.experiment.protocol import render_builtin, scene_folder
 
     found = {}
     for scene in scenes:
         folder = scene_folder(scene)
         if folder is None:
-            from nerfaug.scenes import render_scene_dataset
-
-            folder = render_scene_dataset(
-                scene,
-                Path(out) / "datasets" / f"{config.resolution}px" / scene,
-                resolution=config.resolution,
-                pool=config.pool,
-                test=config.n_test,
-                initial=config.n_initial,
-                samples=config.render_samples,
-                seed=config.seed,
-                progress=progress,
-            )
+            folder = render_builtin(scene, Path(out) / "datasets" / f"{config.resolution}px" / scene, config, progress)
         name = Path(folder).name
         if name in found:
             raise ValueError(f"two scenes are named {name!r} ({found[name]} and {folder}); rename a dataset folder")
