@@ -225,3 +225,19 @@ def test_bad_study_options_are_refused_before_any_dataset_is_rendered(tmp_path):
         main(["study", "--out", str(out), "--engines", "test", "--scenes", "lego", "--trials", "0", "--device", "cpu"])
     assert refused.value.code == 2
     assert not (out / "datasets").exists()
+
+
+def test_the_hand_written_reading_is_kept_when_the_page_is_regenerated(study_out, tmp_path):
+    from nerfaug.report.study import READING_END, READING_START, write_results_doc
+
+    out, _ = study_out
+    page = tmp_path / "results.md"
+    write_results_doc(out, page)
+    reading = f"{READING_START}\nOurs did not beat uniform here; see the coverage figure.\n{READING_END}"
+    page.write_text(page.read_text() + "\n" + reading + "\n")
+    write_results_doc(out, page)
+    text = page.read_text()
+    assert text.count("Ours did not beat uniform here") == 1
+    assert text.index(READING_END) < text.index("## Where each method wins")
+    write_results_doc(out, page)  # and again: still once
+    assert page.read_text().count(READING_START) == 1

@@ -479,9 +479,25 @@ def write_study(root: Path) -> list[Path]:
     return [path, *figures.values()]
 
 
+READING_START, READING_END = "<!-- reading: written by hand, kept when the page is regenerated -->", "<!-- /reading -->"
+
+
+def kept_reading(path: Path) -> str | None:
+    """The hand-written reading of the numbers in an earlier version of the page at `path`: the
+    text between `READING_START` and `READING_END`, markers included; None if there is none."""
+    try:
+        text = Path(path).read_text()
+    except OSError:
+        return None
+    start, end = text.find(READING_START), text.find(READING_END)
+    return text[start : end + len(READING_END)] if 0 <= start < end else None
+
+
 def write_results_doc(root: Path, path: Path = Path("docs/results.md")) -> Path:
     """Write the study's summary as a Markdown page at `path` (e.g. docs/results.md), its figures
-    copied into a folder beside it (`<stem>/`), with how it was made (command, date, machine)."""
+    copied into a folder beside it (`<stem>/`), with how it was made (command, date, machine).
+    A hand-written reading of the numbers, between `READING_START` and `READING_END` in the
+    page, is kept (after the header) when the page is regenerated."""
     from datetime import UTC, datetime
 
     study = collect_study(root)
@@ -504,7 +520,12 @@ def write_results_doc(root: Path, path: Path = Path("docs/results.md")) -> Path:
             "computed from the run folders."
         ),
     )
-    atomic_write_bytes(path, to_markdown(blocks, path.parent).encode())
+    markdown = to_markdown(blocks, path.parent)
+    reading = kept_reading(path)
+    if reading is not None:  # after the header's first two blocks (title, provenance)
+        head, _, rest = markdown.partition("\n## ")
+        markdown = f"{head.rstrip()}\n\n{reading}\n\n## {rest}" if rest else f"{markdown.rstrip()}\n\n{reading}\n"
+    atomic_write_bytes(path, markdown.encode())
     return path
 
 
