@@ -362,7 +362,7 @@ def test_random_sign_with_weights_is_unbiased_for_the_weighted_sum():
 def test_fisherrf_training_sum_is_on_the_candidates_whole_image_scale():
     """H_train in `fisherrf_candidates` estimates the sum over every pixel of the training views,
     the scale of the whole-image H_cand the greedy batch adds to it (not a subsample's sum)."""
-    from nerfaug.selection.methods import SelectionConfig, fisherrf_candidates
+    from nerfaug.selection import SelectionConfig, fisherrf_candidates
 
     model = TinyNerf()
     train, candidates = cameras(2).resized(6, 5), cameras(3, seed=1).resized(6, 5)

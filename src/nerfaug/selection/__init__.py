@@ -18,11 +18,11 @@ from nerfaug.selection.methods import (
     Selection,
     SelectionConfig,
     candidate_scores,
-    fisherrf_candidates,
     get_method,
     method_label,
     select_views,
 )
+from nerfaug.selection.estimators import fisherrf_candidates
 from nerfaug.selection.registry import ESTIMATORS, SELECTORS, Request, Scoring, register_estimator, register_selector
 from nerfaug.selection.selectors import (
     greedy_farthest,

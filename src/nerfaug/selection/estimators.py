@@ -2,7 +2,7 @@
 
 - "combined": the paper's U = a H + b D (`combined_uncertainty`), with the config's weights.
 - "entropy": H only (weights (1, 0)); "distance": D only (weights (0, 1)).
-- "fisher": FisherRF's expected information gain (`methods.fisherrf_candidates`).
+- "fisher": FisherRF's expected information gain (`fisherrf_candidates`).
 - "none": no scores (ones), for selectors that ignore them.
 
 The entropy is taken over `scoring_cameras`: the candidates rendered `entropy_resolution` pixels
@@ -13,17 +13,23 @@ across, optionally with another field of view and only the central part of the i
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import angles_from_pose, pose_from_angles
 from nerfaug.selection.registry import Request, Scoring, register_estimator
 from nerfaug.uncertainty.combined import combined_uncertainty
 from nerfaug.uncertainty.entropy import authors_view_scores, mean_view_entropy
+from nerfaug.uncertainty.fisher import fisher_diagonal, fisherrf_view_scores, stratified_pixel_rays
 from nerfaug.uncertainty.rays import reduced_cameras
 from nerfaug.uncertainty.so3 import coverage_distance
+
+if TYPE_CHECKING:  # only for annotations: methods.py imports this module
+    from nerfaug.selection.methods import SelectionConfig
 
 DISTANCE_ROTATIONS = ("pose", "azimuth")
 
@@ -136,10 +142,60 @@ def no_scores(request: Request) -> Scoring:
 @register_estimator("fisher")
 def fisher(request: Request) -> Scoring:
     """FisherRF's information gain per candidate; H_train and H_cand on demand in the state."""
-    from nerfaug.selection.methods import fisherrf_candidates
-
     h_train, scores, h_of = fisherrf_candidates(
         request.require_model(), request.train_cameras, request.candidates, request.config, request.generator
     )
     scores = scores.cpu()
     return Scoring(scores, {"fisher": scores}, {"h_train": h_train, "h_of": h_of})
+
+
+def fisher_background(config: SelectionConfig) -> Tensor | None:
+    """The colour FisherRF composites behind rendered rays (None: the model's own)."""
+    return None if config.background is None else torch.tensor(config.background, dtype=torch.float32)
+
+
+def fisherrf_candidates(
+    model: nn.Module,
+    train_cameras: Cameras,
+    candidates: Cameras,
+    config: SelectionConfig,
+    generator: torch.Generator | None = None,
+) -> tuple[Tensor, Tensor, Callable[[int], Tensor]]:
+    """FisherRF's ingredients: H_train over about `config.fisher_train_pixels` pixels spread
+    evenly over the training views and weighted to estimate the sum over all their pixels, every
+    candidate's score at `config.fisher_resolution`, and H_cand
+    on demand (kept within `config.fisher_cache_floats`, else recomputed) for the greedy selection.
+
+    Returns:
+        h_train: Tensor with shape (P,).
+        scores: Tensor with shape (n_candidates,).
+        h_of: candidate index -> H_cand, Tensor with shape (P,).
+    """
+    # Stratified pixels with weights: H_train estimates the sum over every pixel of the training
+    # images, the scale of each candidate's whole-image H_cand that the greedy batch adds to it.
+    origins, directions, weights = stratified_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
+    background = fisher_background(config)
+    h_train = fisher_diagonal(
+        model,
+        origins,
+        directions,
+        config.fisher_method,
+        config.fisher_train_probes,
+        generator,
+        config.fisher_train_chunk,
+        background,
+        weights=weights,
+    )
+    scores, h_of = fisherrf_view_scores(
+        model,
+        candidates,
+        h_train,
+        config.fisher_lambda,
+        config.fisher_cache_floats,
+        config.fisher_resolution,
+        config.fisher_method,
+        config.fisher_probes,
+        generator,
+        background=background,
+    )
+    return h_train, scores, h_of

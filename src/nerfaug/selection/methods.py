@@ -16,7 +16,6 @@ belongs in a table).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields, replace
 from types import MappingProxyType
 
@@ -25,7 +24,9 @@ from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras
 from nerfaug.selection.batch import batch_aware_sample  # noqa: F401 (importing registers "batch-sampling")
-from nerfaug.selection.estimators import DISTANCE_ROTATIONS  # importing it registers the estimators
+from nerfaug.selection.estimators import (  # importing it registers the estimators
+    DISTANCE_ROTATIONS,
+)
 from nerfaug.selection.registry import ESTIMATORS, SELECTOR_NEEDS, SELECTORS, Request
 from nerfaug.selection.selectors import AUTHORS_THRESHOLD, MAX_DRAWS, SAMPLERS
 from nerfaug.uncertainty.combined import NORMALISATIONS
@@ -35,9 +36,6 @@ from nerfaug.uncertainty.fisher import (
     DEFAULT_METHOD,
     FISHER_LAMBDA,
     FISHER_METHODS,
-    fisher_diagonal,
-    fisherrf_view_scores,
-    stratified_pixel_rays,
 )
 
 # What the authors' code (Agaggar/nerfstudio-low-data) does where the paper is silent, as
@@ -462,10 +460,6 @@ def get_method(name: str) -> MethodSpec:
     return METHODS[name]
 
 
-def _background(config: SelectionConfig) -> Tensor | None:
-    return None if config.background is None else torch.tensor(config.background, dtype=torch.float32)
-
-
 def candidate_scores(
     method: str,
     model: nn.Module | None,
@@ -490,54 +484,6 @@ def candidate_scores(
     request = Request(spec.name, model, train_cameras, candidates, 0, None, spec.effective_config(config))
     scoring = ESTIMATORS[spec.estimator](request)
     return scoring.scores.cpu(), dict(scoring.components)
-
-
-def fisherrf_candidates(
-    model: nn.Module,
-    train_cameras: Cameras,
-    candidates: Cameras,
-    config: SelectionConfig | None = None,
-    generator: torch.Generator | None = None,
-) -> tuple[Tensor, Tensor, Callable[[int], Tensor]]:
-    """FisherRF's ingredients: H_train over about `config.fisher_train_pixels` pixels spread
-    evenly over the training views and weighted to estimate the sum over all their pixels, every
-    candidate's score at `config.fisher_resolution`, and H_cand
-    on demand (kept within `config.fisher_cache_floats`, else recomputed) for the greedy selection.
-
-    Returns:
-        h_train: Tensor with shape (P,).
-        scores: Tensor with shape (n_candidates,).
-        h_of: candidate index -> H_cand, Tensor with shape (P,).
-    """
-    config = config or SelectionConfig()
-    # Stratified pixels with weights: H_train estimates the sum over every pixel of the training
-    # images, the scale of each candidate's whole-image H_cand that the greedy batch adds to it.
-    origins, directions, weights = stratified_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
-    background = _background(config)
-    h_train = fisher_diagonal(
-        model,
-        origins,
-        directions,
-        config.fisher_method,
-        config.fisher_train_probes,
-        generator,
-        config.fisher_train_chunk,
-        background,
-        weights=weights,
-    )
-    scores, h_of = fisherrf_view_scores(
-        model,
-        candidates,
-        h_train,
-        config.fisher_lambda,
-        config.fisher_cache_floats,
-        config.fisher_resolution,
-        config.fisher_method,
-        config.fisher_probes,
-        generator,
-        background=background,
-    )
-    return h_train, scores, h_of
 
 
 def select_views(
