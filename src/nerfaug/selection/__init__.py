@@ -2,6 +2,7 @@
 
 from nerfaug.selection.batch import batch_aware_sample, batch_posterior
 from nerfaug.selection.candidates import hemisphere_candidates, matching_poses, pool_candidates
+from nerfaug.selection.estimators import fisherrf_candidates
 from nerfaug.selection.methods import (
     AUTHORS_SETTINGS,
     AUTHORS_VARIANTS,
@@ -22,7 +23,6 @@ from nerfaug.selection.methods import (
     method_label,
     select_views,
 )
-from nerfaug.selection.estimators import fisherrf_candidates
 from nerfaug.selection.registry import ESTIMATORS, SELECTORS, Request, Scoring, register_estimator, register_selector
 from nerfaug.selection.selectors import (
     greedy_farthest,
