@@ -1,40 +1,6 @@
 """The active-capture API under its earlier name: `from nerfaug.session import CaptureSession` keeps
-working. The code lives in `nerfaug.capture`."""
+working. The code lives in `nerfaug.capture`; this module re-exports its public names (one list,
+`nerfaug.capture.__all__`)."""
 
-from nerfaug.capture import (
-    CHECKPOINT_FILE,
-    DATASET_DIR,
-    ENGINE_RADIUS,
-    PROPOSALS_DIR,
-    SESSION_FILE,
-    SESSION_FORMAT,
-    CaptureSession,
-    Hemisphere,
-    Proposal,
-    SessionError,
-    SessionState,
-    estimate_centre,
-    estimate_hemisphere,
-    estimate_up,
-    proposal_seed,
-    read_poses,
-)
-
-__all__ = [
-    "CHECKPOINT_FILE",
-    "DATASET_DIR",
-    "ENGINE_RADIUS",
-    "PROPOSALS_DIR",
-    "SESSION_FILE",
-    "SESSION_FORMAT",
-    "CaptureSession",
-    "Hemisphere",
-    "Proposal",
-    "SessionError",
-    "SessionState",
-    "estimate_centre",
-    "estimate_hemisphere",
-    "estimate_up",
-    "proposal_seed",
-    "read_poses",
-]
+from nerfaug.capture import *  # noqa: F403
+from nerfaug.capture import __all__  # noqa: F401
