@@ -12,6 +12,7 @@ from nerfaug.statistics import (
     markdown_table,
     mean_pairwise_angle,
     min_attainable_p,
+    paired_comparison,
     seen_half_start,
     summarise,
     summary_table,
@@ -252,3 +253,40 @@ def test_view_coverage_of_poses():
     )
     assert coverage["spread_deg"] == pytest.approx(expected, abs=1e-4)
     assert view_coverage(initial, initial)["unseen_share"] == 0.0
+
+
+# ---- paired comparison (the study's pooled, secondary analysis) -------------------------------
+
+
+def test_paired_comparison_equals_scipy_and_a_direct_bootstrap():
+    x = np.array([25.1, 24.0, 26.3, 23.9, 25.5, 24.8, 26.0])
+    y = np.array([24.2, 24.5, 25.0, 23.0, 24.1, 24.9, 24.6])
+    found = paired_comparison(x, y, n_comparisons=6, n_resamples=3000, seed=5)
+    d = x - y
+    p = stats.wilcoxon(d, alternative="two-sided", method="exact").pvalue
+    assert found["p_value"] == pytest.approx(p) and found["p_bonferroni"] == pytest.approx(min(1.0, 6 * p))
+    assert (found["wins"], found["ties"], found["losses"]) == (5, 0, 2)
+    assert found["difference"] == pytest.approx(np.median(d)) and found["better"]
+    # The same resamples drawn by hand: pairs resampled together, one batch.
+    rng = np.random.default_rng(5)
+    medians = np.median(d[rng.integers(0, d.size, (3000, d.size))], axis=1)
+    low, high = np.percentile(medians, [2.5, 97.5])
+    assert found["low"] == pytest.approx(low, abs=1e-12) and found["high"] == pytest.approx(high, abs=1e-12)
+
+
+def test_paired_comparison_direction_zeros_and_bad_input():
+    # LPIPS: lower is better, so x below y wins.
+    lower = paired_comparison([0.1, 0.2, 0.15], [0.2, 0.3, 0.1], higher_is_better=False)
+    assert (lower["wins"], lower["losses"], lower["better"]) == (2, 1, True)
+    # Zero differences are dropped from the test but counted as ties.
+    zeros = paired_comparison([1.0, 2.0, 3.0, 4.0], [1.0, 1.0, 1.0, 1.0])
+    assert zeros["ties"] == 1 and zeros["p_value"] == pytest.approx(stats.wilcoxon([1.0, 2.0, 3.0]).pvalue)
+    same = paired_comparison([1.0, 2.0], [1.0, 2.0])
+    assert same["p_value"] == 1.0 and not same["significant"] and not same["better"]
+    # Eight pairs all one way: 2 / 2^8 = 0.0078, significant after x6.
+    eight = paired_comparison(np.arange(8) + 1.0, np.zeros(8), n_comparisons=6)
+    assert eight["p_value"] == pytest.approx(2 / 2**8) and eight["significant"]
+    with pytest.raises(ValueError, match="differ in length"):
+        paired_comparison([1.0, 2.0], [1.0])
+    with pytest.raises(ValueError, match="NaN"):
+        paired_comparison([1.0, math.nan], [1.0, 2.0])

@@ -241,3 +241,46 @@ def test_the_hand_written_reading_is_kept_when_the_page_is_regenerated(study_out
     assert text.index(READING_END) < text.index("## Where each method wins")
     write_results_doc(out, page)  # and again: still once
     assert page.read_text().count(READING_START) == 1
+
+
+def test_pooled_pairs_are_matched_by_trial_and_shown_as_computed(study_out):
+    from nerfaug.report.collect import Results, Run
+    from nerfaug.report.pooled import paired_values, pooled_comparisons
+    from nerfaug.report.study import BOOTSTRAP_SEED
+    from nerfaug.statistics import paired_comparison
+
+    out, _ = study_out
+    ours, uniform = psnrs(out, "ours"), psnrs(out, "uniform")
+    results = collect_results_of(out)
+    pooled = pooled_comparisons([(results, "sphere")], ["ours", "uniform"], "uniform", seed=BOOTSTRAP_SEED)
+    expected = paired_comparison(ours, uniform, 1, seed=BOOTSTRAP_SEED)
+    assert set(pooled) == {"ours"} and pooled["ours"]["psnr"] == {**expected, "cells": 1}
+    shown = round(expected["difference"], 2) + 0.0
+    assert "## Pooled over cells, paired by trial (secondary)" in (out / "study.md").read_text()
+    assert f"{shown:+.2f}" in (out / "study.md").read_text().split("## Pooled over cells", 1)[1]
+
+    # A trial one method lacks, or whose metric is missing, pairs with nothing.
+    def run(method, trial, psnr):
+        return Run("s", method, trial, Path("."), {"metrics": {"psnr": psnr}})
+
+    fake = Results(
+        Path("."),
+        {},
+        [
+            run("a", 0, 20.0),
+            run("a", 2, 22.0),
+            run("a", 3, None),
+            run("u", 3, 19.0),
+            run("u", 2, 21.0),
+            run("u", 0, 18.0),
+        ],
+        [],
+        [],
+    )
+    assert paired_values(fake, "s", "a", "u", "psnr") == ([20.0, 22.0], [18.0, 21.0], [0, 2])
+
+
+def collect_results_of(out: Path):
+    from nerfaug.report.collect import collect_results
+
+    return collect_results(out / "test")
