@@ -120,7 +120,7 @@ def test_study_writes_every_run_and_a_summary(study_out):
     for method in ("ours", "uniform"):
         assert len(run_folders(out, method)) == 2
     assert (out / "study.md").is_file() and (out / "figures" / "coverage_test.png").is_file()
-    assert (out / "figures" / "boxplots_test_sphere.png").is_file()
+    assert (out / "figures" / "boxplots_test_sphere.png").is_file() and (out / "figures" / "paired_psnr.png").is_file()
     text = docs.read_text()
     assert "nerfaug study --out" in text and "torch " + torch.__version__ in text
     assert (docs.parent / "results" / "coverage_test.png").is_file()  # figures copied beside the page
@@ -245,7 +245,7 @@ def test_the_hand_written_reading_is_kept_when_the_page_is_regenerated(study_out
 
 def test_pooled_pairs_are_matched_by_trial_and_shown_as_computed(study_out):
     from nerfaug.report.collect import Results, Run
-    from nerfaug.report.pooled import paired_values, pooled_comparisons
+    from nerfaug.report.pooled import paired_values, plot_paired_differences, pooled_comparisons
     from nerfaug.report.study import BOOTSTRAP_SEED
     from nerfaug.statistics import paired_comparison
 
@@ -278,6 +278,7 @@ def test_pooled_pairs_are_matched_by_trial_and_shown_as_computed(study_out):
         [],
     )
     assert paired_values(fake, "s", "a", "u", "psnr") == ([20.0, 22.0], [18.0, 21.0], [0, 2])
+    assert plot_paired_differences([(fake, "s", "s")], ["b", "u"], "u", Path("never.png")) is None  # no pairs
 
 
 def collect_results_of(out: Path):

@@ -12,8 +12,12 @@ different question from the per-cell test and is reported beside it, not in its 
 from __future__ import annotations
 
 from collections.abc import Iterable
+from pathlib import Path
 
-from nerfaug.metrics import HIGHER_IS_BETTER, METRICS
+import numpy as np
+
+from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_LABELS, METRICS
+from nerfaug.plotting import new_figure, save_figure
 from nerfaug.report.collect import Results
 from nerfaug.statistics import paired_comparison
 
@@ -72,4 +76,67 @@ def pooled_comparisons(
     return found
 
 
-__all__ = ["paired_values", "pooled_comparisons"]
+def plot_paired_differences(
+    cells: Iterable[tuple[Results, str, str]],
+    methods: list[str],
+    reference: str,
+    path: Path,
+    metric: str = "psnr",
+) -> Path | None:
+    """One column per method: each pair's difference to the reference (one dot per trial,
+    coloured by cell), the median over all pairs as a bar, and zero as a dashed line.
+
+    Args:
+        cells: (an engine's results, scene, label) per cell.
+        methods: in display order; the reference is left out.
+        reference: the method subtracted (uniform).
+        path: where the PNG goes.
+        metric: the metric compared.
+
+    Returns:
+        `path`, or None when no method has a pair.
+    """
+    from matplotlib import colormaps
+
+    cells = list(cells)
+    compared = [m for m in methods if m != reference]
+    differences = {
+        (m, label): np.subtract(*paired_values(results, scene, m, reference, metric)[:2])
+        for m in compared
+        for results, scene, label in cells
+    }
+    if not any(d.size for d in differences.values()):
+        return None
+    palette = colormaps["tab10"].colors
+    figure = new_figure(max(6.0, 1.0 * len(compared)), 4.2)
+    ax = figure.subplots()
+    jitter = np.random.default_rng(0)
+    for i, method in enumerate(compared):
+        pooled = []
+        for j, (_, _, label) in enumerate(cells):
+            d = differences[(method, label)]
+            pooled += d.tolist()
+            ax.scatter(
+                i + (j - (len(cells) - 1) / 2) * 0.08 + jitter.uniform(-0.02, 0.02, d.size),
+                d,
+                s=16,
+                color=palette[j % len(palette)],
+                edgecolor="black",
+                linewidth=0.3,
+                label=label if i == 0 else None,
+                zorder=3,
+            )
+        if pooled:
+            ax.plot([i - 0.35, i + 0.35], [np.median(pooled)] * 2, color="black", linewidth=2)
+    ax.axhline(0.0, color="0.4", linestyle="--", linewidth=1)
+    ax.set_xticks(range(len(compared)), compared, rotation=20, ha="right")
+    unit = " (dB)" if metric == "psnr" else ""
+    better = "higher" if HIGHER_IS_BETTER[metric] else "lower"
+    ax.set_ylabel(f"{METRIC_LABELS[metric]} - {reference}, same trial{unit}")
+    ax.set_title(f"Paired differences to {reference} ({better} is better; bar: median over all pairs)", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, title="cell", title_fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return save_figure(figure, path)
+
+
+__all__ = ["paired_values", "plot_paired_differences", "pooled_comparisons"]

@@ -35,7 +35,7 @@ from nerfaug.report.document import (
     to_markdown,
 )
 from nerfaug.report.figures import method_colours, plot_boxplots
-from nerfaug.report.pooled import pooled_comparisons
+from nerfaug.report.pooled import plot_paired_differences, pooled_comparisons
 from nerfaug.statistics import (
     bootstrap_median_difference,
     compare,
@@ -367,7 +367,7 @@ def _ours_section(study: Study) -> list[Block]:
     return [Heading("Does ours beat uniform?"), Bullets(lines or ["No cell has results yet."]), Paragraph(verdict)]
 
 
-def _pooled_section(study: Study) -> list[Block]:
+def _pooled_section(study: Study, figures: dict) -> list[Block]:
     methods = list(dict.fromkeys(m for c in study.cells for m in c.methods))
     cells = [(study.results[c.engine], c.scene) for c in study.cells]
     pooled = pooled_comparisons(cells, methods, REFERENCE, ALPHA, BOOTSTRAP_SEED)
@@ -403,7 +403,11 @@ def _pooled_section(study: Study) -> list[Block]:
         f"seed {BOOTSTRAP_SEED}). p: two-sided Wilcoxon signed-rank test, Bonferroni x{k}. Wins: pairs where "
         "the method is better than uniform in the metric's direction."
     )
-    return [Heading("Pooled over cells, paired by trial (secondary)"), Paragraph(text), Table(headers, rows)]
+    blocks: list[Block] = [Heading("Pooled over cells, paired by trial (secondary)"), Paragraph(text)]
+    blocks.append(Table(headers, rows))
+    if (path := figures.get(("paired", "", ""))) is not None:
+        blocks.append(Figure(path, "PSNR of each method minus uniform's on the same trial; one dot per pair."))
+    return blocks
 
 
 def _incomplete_section(study: Study) -> list[Block]:
@@ -467,7 +471,7 @@ def plot_coverage(study: Study, engine: str, path: Path) -> Path | None:
 def study_blocks(study: Study, figures: dict) -> list[Block]:
     blocks: list[Block] = [Heading("nerfaug study: where each method wins", 1)] + _header(study)
     blocks += [Heading("Where each method wins"), where_wins_table(study)]
-    blocks += _ours_section(study) + _pooled_section(study) + _incomplete_section(study)
+    blocks += _ours_section(study) + _pooled_section(study, figures) + _incomplete_section(study)
     blocks.append(Heading("Per scene and engine"))
     blocks.append(
         Paragraph(
@@ -506,6 +510,10 @@ def make_study_figures(study: Study) -> dict:
         path = plot_coverage(study, engine, folder / f"coverage_{slug(engine)}.png")
         if path is not None:
             figures[("coverage", engine, "")] = path
+    methods = list(dict.fromkeys(m for c in study.cells for m in c.methods))
+    cells = [(study.results[c.engine], c.scene, f"{c.scene}, {c.engine}") for c in study.cells]
+    if (path := plot_paired_differences(cells, methods, REFERENCE, folder / "paired_psnr.png")) is not None:
+        figures[("paired", "", "")] = path
     return figures
 
 
