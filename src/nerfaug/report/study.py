@@ -104,6 +104,11 @@ class Study:
     not_run: dict[str, str]
     results: dict[str, Results]
 
+    @property
+    def methods(self) -> list[str]:
+        """Every method with results in some cell, in the order the cells list them."""
+        return list(dict.fromkeys(m for c in self.cells for m in c.methods))
+
 
 def _coverage(results: Results, scene: str, method: str) -> list[dict]:
     found = []
@@ -368,18 +373,14 @@ def _ours_section(study: Study) -> list[Block]:
 
 
 def _pooled_section(study: Study, figures: dict) -> list[Block]:
-    methods = list(dict.fromkeys(m for c in study.cells for m in c.methods))
     cells = [(study.results[c.engine], c.scene) for c in study.cells]
-    pooled = pooled_comparisons(cells, methods, REFERENCE, ALPHA, BOOTSTRAP_SEED)
+    pooled = pooled_comparisons(cells, study.methods, REFERENCE, ALPHA, BOOTSTRAP_SEED)
     if not pooled:
         return []
     rows = []
     for method, by_metric in pooled.items():
-        row = (
-            [method, f"{by_metric['psnr']['n_pairs']} ({by_metric['psnr']['cells']})"]
-            if "psnr" in by_metric
-            else [method, "0"]
-        )
+        counted = next(iter(by_metric.values()))  # pooled_comparisons keeps only metrics with pairs
+        row = [method, f"{counted['n_pairs']} ({counted['cells']})"]
         for metric in METRICS:
             entry = by_metric.get(metric)
             row += [
@@ -510,9 +511,8 @@ def make_study_figures(study: Study) -> dict:
         path = plot_coverage(study, engine, folder / f"coverage_{slug(engine)}.png")
         if path is not None:
             figures[("coverage", engine, "")] = path
-    methods = list(dict.fromkeys(m for c in study.cells for m in c.methods))
     cells = [(study.results[c.engine], c.scene, f"{c.scene}, {c.engine}") for c in study.cells]
-    if (path := plot_paired_differences(cells, methods, REFERENCE, folder / "paired_psnr.png")) is not None:
+    if (path := plot_paired_differences(cells, study.methods, REFERENCE, folder / "paired_psnr.png")) is not None:
         figures[("paired", "", "")] = path
     return figures
 
