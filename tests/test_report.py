@@ -19,7 +19,7 @@ from nerfaug.experiment.runfolder import (
     write_progress,
     write_selection,
 )
-from nerfaug.experiment.store import RunKey, write_result
+from nerfaug.experiment.store import RunKey, run_fingerprint, write_result
 from nerfaug.experiment.sweep import sweep_record
 from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses, sample_uniform_poses
 from nerfaug.jsonio import atomic_write_json
@@ -82,7 +82,8 @@ def write_run(root, record, scene, method, trial, psnr, lpips_available=True, ge
             "method": method,
             "trial": trial,
             "seed": trial,
-            "fingerprint": record["fingerprint"],
+            "fingerprint": run_fingerprint(record["fingerprint"], record["methods"].get(method)),
+            "code_version": "test",
             "metrics": {"psnr": psnr, "ssim": ssim, "lpips": lpips},
             "lpips_status": "available: test" if lpips_available else LPIPS_MISSING,
             "chosen": chosen,

@@ -92,6 +92,17 @@ def min_attainable_p(n1: int, n2: int) -> float:
     return float(stats.mannwhitneyu(np.arange(n1), np.arange(n1, n1 + n2), method=method).pvalue)
 
 
+def min_attainable_paired_p(n_pairs: int) -> float:
+    """The smallest two-sided p the exact Wilcoxon signed-rank test can give on `n_pairs` pairs:
+    every difference of one sign, 2 / 2^n (capped at 1).
+
+    Example:
+        >>> min_attainable_paired_p(10)
+        0.001953125
+    """
+    return min(1.0, 2.0 / 2.0 ** max(0, n_pairs))
+
+
 def compare(
     ours: Iterable[float],
     baseline: Iterable[float],
@@ -549,6 +560,7 @@ __all__ = [
     "markdown_table",
     "mean_pairwise_angle",
     "min_attainable_p",
+    "min_attainable_paired_p",
     "paired_comparison",
     "seen_half_start",
     "summarise",

@@ -25,6 +25,7 @@ def complete_result(fp="abc", psnr=20.0):
         "fingerprint": fp,
         "metrics": {"psnr": psnr, "ssim": 0.8, "lpips": None},
         "timing": {"total": 1.0},
+        "code_version": "test",
     }
 
 

@@ -4,7 +4,9 @@ presets are fixed (their values are part of every results fingerprint)."""
 import hashlib
 import json
 import math
+import re
 
+import pytest
 import torch
 
 from nerfaug.experiment.config import ExperimentConfig
@@ -23,6 +25,8 @@ FROZEN = {
     "nerfacto-cpu": "5fc61d1dc7d76484c8e9727e6a191ab78749eb09092903dd1aa900e54cfabaf0",
     # with nerfacto's proposal-update schedule (2026-11-23; no study has run it: it needs a GPU)
     "paper": "8f96efad7a06e95f23e92ab1b584d78145cde0e523a7045fd0a7b13edcccaf05",
+    # nerfacto-cpu with nerfacto's "last_sample" background (2026-11-24): the paper's regime
+    "nerfacto-cpu-last-sample": "8ada352845b41b53a82309c2724986ffaaf733291f9baa8b86eb48687769a00d",
 }
 
 
@@ -91,7 +95,7 @@ def test_nerfacto_cpu_trains_with_its_proposal_losses(sphere_views):
 
 def test_the_study_runs_every_preset_but_the_test_one():
     engines, left_out = default_engines("cpu")
-    assert "nerfacto-cpu" in engines and "cpu" in engines
+    assert {"nerfacto-cpu", "cpu", "nerfacto-cpu-last-sample"} <= set(engines)
     assert set(left_out) == {"test", "paper"}
     record = ExperimentConfig(engine="nerfacto-cpu").fingerprinted()
     assert record["engine"] == "nerfacto-cpu" and record["engine.num_samples"] == 16
@@ -99,3 +103,41 @@ def test_the_study_runs_every_preset_but_the_test_one():
 
 def test_the_study_presets_are_unchanged():
     assert {name: preset_digest(name) for name in FROZEN} == FROZEN
+
+
+def test_the_last_sample_engine_differs_from_nerfacto_cpu_in_its_background_only():
+    base, variant = PRESETS["nerfacto-cpu"].to_dict(), PRESETS["nerfacto-cpu-last-sample"].to_dict()
+    assert {k for k in base if base[k] != variant[k]} == {"background_mode"}
+    assert (base["background_mode"], variant["background_mode"]) == ("fixed", "last_sample")
+    # The same variant written as BASE+FIELD=VALUE is the same engine, fingerprinted alike.
+    ad_hoc = "nerfacto-cpu+background_mode=last_sample"
+    assert NerfConfig.preset(ad_hoc) == PRESETS["nerfacto-cpu-last-sample"]
+    named = ExperimentConfig(engine="nerfacto-cpu-last-sample").fingerprinted()
+    written = ExperimentConfig(engine=ad_hoc).fingerprinted()
+    assert {k: v for k, v in named.items() if k != "engine"} == {k: v for k, v in written.items() if k != "engine"}
+    assert named["engine.background_mode"] == "last_sample"
+
+
+@pytest.mark.parametrize(
+    "name, message",
+    [
+        ("nerfacto", "unknown engine preset 'nerfacto'"),
+        ("cpu+colour=red", "unknown setting 'colour'"),
+        ("cpu+batch_size=many", "batch_size='many' is not a valid value"),
+        ("cpu+background_mode=grey", "background_mode must be 'fixed' or 'last_sample'"),
+        ("cpu+batch_size", "'batch_size' is not FIELD=VALUE"),
+    ],
+)
+def test_bad_engine_variants_are_refused_by_name(name, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        NerfConfig.preset(name)
+
+
+def test_engine_variants_type_their_values():
+    config = NerfConfig.preset("nerfacto-cpu+batch_size=256+proposal_samples=16,8+random_background=true+lr=0.005")
+    assert (config.batch_size, config.proposal_samples, config.random_background, config.lr) == (
+        256,
+        (16, 8),
+        True,
+        0.005,
+    )

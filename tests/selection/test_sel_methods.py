@@ -20,6 +20,7 @@ from nerfaug.selection import (
 
 EXPECTED = {
     "ours",
+    "ours-paper-sum",
     "ours-nbv",
     "uniform",
     "entropy",
@@ -180,6 +181,26 @@ def test_selection_round_trips_through_json(scene):
 
 
 # --- The authors' code's variants, the registries and the families -------------------------
+
+
+def test_ours_paper_sum_scores_by_the_raw_sum_as_the_paper_writes_it(scene):
+    """U = H + D with H in bits and D in rad^2, no normalisation: its scores are the sum of the
+    raw components, while ours (min-max) rescales each term to [0, 1] first."""
+    model, train, candidates = scene
+    raw = select_views("ours-paper-sum", model, train, candidates, 3, torch.Generator().manual_seed(0), FAST)
+    torch.testing.assert_close(raw.scores, raw.components["entropy"] + raw.components["distance"])
+    normalised = select_views("ours", model, train, candidates, 3, torch.Generator().manual_seed(0), FAST)
+
+    def minmax(x):
+        return (x - x.min()) / (x.max() - x.min())
+
+    torch.testing.assert_close(
+        normalised.scores, minmax(normalised.components["entropy"]) + minmax(normalised.components["distance"])
+    )
+    assert not torch.allclose(raw.scores, normalised.scores)
+    from nerfaug.selection import method_label
+
+    assert "raw sum" in method_label("ours-paper-sum") and "min-max" in method_label("ours")
 
 
 def test_ours_authors_is_ours_with_the_authors_settings(scene):

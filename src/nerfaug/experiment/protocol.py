@@ -24,7 +24,14 @@ from nerfaug.experiment.runfolder import (
     write_progress,
     write_selection,
 )
-from nerfaug.experiment.store import RunKey, fingerprint, start_run_folder, write_result
+from nerfaug.experiment.store import (
+    RunKey,
+    code_version,
+    fingerprint,
+    run_fingerprint,
+    start_run_folder,
+    write_result,
+)
 from nerfaug.hemisphere import half_hemisphere_poses
 
 PROGRESS_EVERY = 50
@@ -296,7 +303,8 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
         "method": key.method,
         "trial": key.trial,
         "seed": seed,
-        "fingerprint": fingerprint(config.fingerprinted()),
+        "fingerprint": run_fingerprint(fingerprint(config.fingerprinted()), spec.definition()),
+        "code_version": code_version(),
         "metrics": evaluation.mean,
         "lpips_status": evaluation.lpips_status,
         "chosen": chosen,

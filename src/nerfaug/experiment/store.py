@@ -24,9 +24,11 @@ while runs exist is refused, as are runs made with another configuration or anot
 from __future__ import annotations
 
 import datetime
+import functools
 import hashlib
 import json
 import shutil
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,7 +37,7 @@ from nerfaug.errors import FolderRefused, NerfaugError
 from nerfaug.jsonio import atomic_write_json
 
 RESULT_FILE = "result.json"
-RESULT_KEYS = ("scene", "method", "trial", "seed", "fingerprint", "metrics", "timing")
+RESULT_KEYS = ("scene", "method", "trial", "seed", "fingerprint", "metrics", "timing", "code_version")
 SWEEP_FILE = "sweep.json"
 SUPERSEDED_DIR = "superseded"
 RESULTS_KIND, RUN_KIND = "experiment-results", "experiment-run"
@@ -73,11 +75,53 @@ def fingerprint(config: dict) -> str:
     return hashlib.sha256(json.dumps(config, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def run_fingerprint(sweep_fingerprint: str, method_definition: dict | None) -> str:
+    """The fingerprint of one run: its sweep's (every setting of the protocol, the engine and the
+    selection options) combined with its method's own definition (estimator, selector and the
+    settings it fixes, `MethodSpec.definition`), so a change to one method's settings sets apart
+    that method's runs only."""
+    return fingerprint({"sweep": sweep_fingerprint, "method": method_definition})
+
+
+@functools.lru_cache(maxsize=1)
+def code_version() -> str:
+    """The version of the code that computes results: `git describe --always --dirty` of the
+    checkout the package runs from (e.g. "1c94345" or "1c94345-dirty"), or "nerfaug <version>"
+    when it does not run from a git checkout."""
+    from importlib import metadata
+
+    package = Path(__file__).resolve().parents[1]
+    try:
+        found = subprocess.run(
+            ["git", "-C", str(package), "describe", "--always", "--dirty", "--abbrev=12"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        top = subprocess.run(
+            ["git", "-C", str(package), "rev-parse", "--show-toplevel"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        if found and package.is_relative_to(Path(top).resolve()):
+            return found
+    except (OSError, subprocess.SubprocessError, ValueError):
+        pass
+    try:
+        return f"nerfaug {metadata.version('nerfaug')}"
+    except metadata.PackageNotFoundError:
+        return "nerfaug (unknown version)"
+
+
 def read_result(folder: Path, expected_fingerprint: str | None = None) -> dict | None:
     """The run's result if the run is complete and valid, else None.
 
     Invalid means: unreadable or truncated JSON, missing keys, non-finite metrics, or a
-    fingerprint that differs from the sweep's (the run was made with another config).
+    fingerprint that differs from `expected_fingerprint` (the run's `run_fingerprint`: it was
+    made with another config or another definition of its method).
     """
     path = Path(folder) / RESULT_FILE
     try:
@@ -224,6 +268,10 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
         if folders or previous is not None:
             moved = move_aside(root)
     elif previous is not None:
+        # Methods may be added over sittings: the record keeps every method's definition, the
+        # latest for a method run again (whose earlier runs `_check_compatible` then refuses if
+        # that definition changed).
+        sweep = {**sweep, "methods": {**previous.get("methods", {}), **sweep.get("methods", {})}}
         _check_compatible(path, previous, sweep, root)
     elif folders:
         raise IncompatibleResults(
@@ -256,8 +304,14 @@ def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> No
                 f"{path}, scene '{scene}': its runs were made on the dataset {old_data[scene].get('path')!r}, "
                 f"this sweep uses {new_data[scene].get('path')!r} with different content. {how}."
             )
+    methods = sweep.get("methods", {})
     others = sorted(
-        {r["scene"] + "/" + r["method"] for r in finished_runs(root) if r["fingerprint"] != sweep["fingerprint"]}
+        {
+            r["scene"] + "/" + r["method"]
+            for r in finished_runs(root)
+            if r["method"] in methods
+            and r["fingerprint"] != run_fingerprint(sweep["fingerprint"], methods[r["method"]])
+        }
     )
     if others:
         raise IncompatibleResults(

@@ -28,11 +28,13 @@ from nerfaug.experiment.store import (
     RunKey,
     check_sweep,
     clear_incomplete,
+    code_version,
     dataset_content_digest,
     dataset_digest,
     fingerprint,
     is_run_folder,
     read_result,
+    run_fingerprint,
 )
 
 Backend = Literal["local", "ray"]
@@ -194,7 +196,7 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
 
 
 def versions() -> dict[str, str]:
-    found = {"python": platform.python_version(), "platform": platform.platform()}
+    found = {"python": platform.python_version(), "platform": platform.platform(), "code": code_version()}
     for package in ("nerfaug", "torch", "numpy", "scipy", "torchmetrics", "bpy", "ray"):
         try:
             found[package] = metadata.version(package)
@@ -205,10 +207,14 @@ def versions() -> dict[str, str]:
 
 def sweep_record(config: ExperimentConfig, command: list[str] | None = None, datasets: dict | None = None) -> dict:
     """sweep.json: the fingerprint, the config, and what each scene ran on (`check_config`)."""
+    from nerfaug.selection import get_method
+
     fingerprinted = config.fingerprinted()
     return {
         "fingerprint": fingerprint(fingerprinted),
         "fingerprinted": fingerprinted,
+        # Each method's own definition: a run's fingerprint combines the sweep's with its method's.
+        "methods": {m: get_method(m).definition() for m in config.methods},
         "config": asdict(config),
         "command": command or sys.argv,
         "versions": versions(),
@@ -250,7 +256,8 @@ def run_sweep(
     keys = plan_runs(config)
     for key in [] if force else keys:  # refuse before anything is written, removed or rendered
         folder = key.folder(root)
-        if folder.exists() and read_result(folder, record["fingerprint"]) is None and not is_run_folder(folder):
+        expected = run_fingerprint(record["fingerprint"], record["methods"][key.method])
+        if folder.exists() and read_result(folder, expected) is None and not is_run_folder(folder):
             raise IncompatibleResults(
                 f"{folder}: holds files nerfaug did not write; move them away or use another --out folder"
             )
@@ -262,7 +269,7 @@ def run_sweep(
     results, todo = [], []
     for key in keys:
         folder = key.folder(root)
-        result = read_result(folder, record["fingerprint"])
+        result = read_result(folder, run_fingerprint(record["fingerprint"], record["methods"][key.method]))
         if result is not None:
             results.append(result)
             continue

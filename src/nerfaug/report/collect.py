@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from nerfaug.experiment.runfolder import FILES, read_error, read_progress
-from nerfaug.experiment.store import RESULT_KEYS, read_result
+from nerfaug.experiment.store import RESULT_KEYS, SWEEP_FILE, read_result, run_fingerprint
 
 
 class ReportError(RuntimeError):
@@ -117,7 +117,10 @@ def why_not_valid(folder: Path, fingerprint: str) -> str:
     if missing:
         return f"result.json lacks {', '.join(missing)}"
     if result["fingerprint"] != fingerprint:
-        return f"made with another configuration (fingerprint {result['fingerprint']}, sweep {fingerprint})"
+        return (
+            f"made with another configuration or method definition (fingerprint {result['fingerprint']}, "
+            f"expected {fingerprint})"
+        )
     return "result.json has no numeric PSNR"
 
 
@@ -125,11 +128,14 @@ def _run_folders(root: Path) -> list[Path]:
     return sorted(p for p in (root / "runs").glob("*/*/*") if p.is_dir())
 
 
-def _read_run(folder: Path, fingerprint: str) -> Run | NotAggregated:
+def _read_run(folder: Path, sweep: dict) -> Run | NotAggregated:
     scene, method, name = folder.parts[-3:]
     match = re.fullmatch(r"trial_(\d+)", name)
     if match is None:
         return NotAggregated(folder, "folder name is not trial_<k>")
+    if method not in sweep.get("methods", {}):
+        return NotAggregated(folder, f"method {method!r} is not in {SWEEP_FILE} (its definition is unknown)")
+    fingerprint = run_fingerprint(sweep["fingerprint"], sweep["methods"][method])
     result = read_result(folder, fingerprint)
     if result is None:
         return NotAggregated(folder, why_not_valid(folder, fingerprint))
@@ -153,7 +159,7 @@ def collect_results(results_dir: Path) -> Results:
     sweep = read_sweep(root)
     runs, skipped = [], []
     for folder in _run_folders(root):
-        item = _read_run(folder, sweep["fingerprint"])
+        item = _read_run(folder, sweep)
         (runs if isinstance(item, Run) else skipped).append(item)
     config = sweep.get("config", {})
     # Results name a user dataset by its folder's name (sweep.scene_name).

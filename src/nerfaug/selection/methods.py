@@ -283,7 +283,21 @@ METHODS: dict[str, MethodSpec] = {
     spec.name: spec
     for spec in [
         _line(
-            "ours", "combined", "sampling", "the paper's method: entropy + SO(3) coverage, rejection sampling", "Ours"
+            "ours",
+            "combined",
+            "sampling",
+            "the paper's method with each term min-max normalised over the candidates before the sum "
+            "(U = H' + D'), rejection sampling",
+            "Ours (min-max H + D)",
+        ),
+        _line(
+            "ours-paper-sum",
+            "combined",
+            "sampling",
+            "the paper's method as its text writes it: the raw sum U = H + D (entropy in bits, coverage "
+            "in rad^2, no normalisation), rejection sampling",
+            "Ours (raw sum H + D, as written)",
+            normalisation="none",
         ),
         _line("ours-nbv", "combined", "top-k", "entropy + coverage, top-k (Table II 'ours, NBV')", "Ours (NBV)"),
         _line(
@@ -399,8 +413,17 @@ MAIN_COMPARISON = ("ours", "uniform", "entropy", "fisherrf")
 AUTHORS_VARIANTS = ("ours", "ours-authors", "entropy-authors-nbv", "distance-authors-nbv")
 # Beyond the paper: batch-aware sampling beside plain sampling.
 BATCH_AWARE = ("ours", "ours-batch", "ours-batch-local", "ours-batch-sharp")
-# Issue 9's study: ours, its authors' variant, the batch-aware variant and the baselines.
-STUDY_METHODS = ("ours", "ours-authors", "ours-batch-sharp", "uniform", "entropy", "fisherrf", "furthest")
+# The study: ours (min-max and the raw sum as written), its authors' variant, the batch-aware variant and the baselines.
+STUDY_METHODS = (
+    "ours",
+    "ours-paper-sum",
+    "ours-authors",
+    "ours-batch-sharp",
+    "uniform",
+    "entropy",
+    "fisherrf",
+    "furthest",
+)
 FAMILIES: dict[str, tuple[str, ...]] = {
     "table-i": TABLE_I,
     "table-ii": TABLE_II,
