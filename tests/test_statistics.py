@@ -1,3 +1,4 @@
+import itertools
 import math
 
 import numpy as np
@@ -12,8 +13,11 @@ from nerfaug.statistics import (
     markdown_table,
     mean_pairwise_angle,
     min_attainable_p,
+    min_attainable_paired_p,
     paired_comparison,
+    seed_level_comparison,
     seen_half_start,
+    sign_flip_p,
     summarise,
     summary_table,
     unseen_half_share,
@@ -290,3 +294,63 @@ def test_paired_comparison_direction_zeros_and_bad_input():
         paired_comparison([1.0, 2.0], [1.0])
     with pytest.raises(ValueError, match="NaN"):
         paired_comparison([1.0, math.nan], [1.0, 2.0])
+
+
+# ---- seed-level tests across cells (trials that share a seed are not independent) ----------
+
+
+def test_sign_flip_p_equals_a_direct_enumeration_of_every_sign_pattern():
+    values = np.array([0.8, -0.3, 1.1, 0.4, 0.9, -0.2, 0.6, 1.3, 0.05])
+    patterns = np.array(list(itertools.product([-1.0, 1.0], repeat=values.size)))
+    means = (patterns * values).mean(axis=1)
+    expected = np.mean(np.abs(means) >= abs(values.mean()) - 1e-12)
+    assert sign_flip_p(values) == pytest.approx(expected)
+    assert sign_flip_p(np.zeros(5)) == 1.0
+    assert sign_flip_p(np.arange(1.0, 11.0)) == pytest.approx(2 / 2**10)  # all one sign: the smallest p
+
+
+def test_min_attainable_paired_p_is_scipys_exact_signed_rank_at_complete_agreement():
+    for n in (3, 6, 10):
+        scipy_p = stats.wilcoxon(np.arange(1.0, n + 1.0), alternative="two-sided", method="exact").pvalue
+        assert min_attainable_paired_p(n) == pytest.approx(scipy_p)
+
+
+def test_seed_level_comparison_takes_one_value_per_seed():
+    differences = {
+        "lego": {0: 1.0, 1: 0.5, 2: -0.2, 3: 0.7},
+        "chair": {0: 0.2, 1: 0.9, 2: 0.1, 3: 0.3, 4: 5.0},  # seed 4 is not in every cell: left out
+        "materials": {0: 0.3, 1: -0.1, 2: 0.4, 3: 0.2},
+    }
+    found = seed_level_comparison(differences, n_comparisons=7, higher_is_better=True)
+    means = np.array([np.mean([differences[c][s] for c in differences]) for s in range(4)])
+    assert found["seeds"] == [0, 1, 2, 3] and found["n_cells"] == 3
+    np.testing.assert_allclose(found["seed_means"], means)
+    assert found["p_value"] == pytest.approx(sign_flip_p(means))
+    assert found["p_wilcoxon"] == pytest.approx(stats.wilcoxon(means).pvalue)
+    assert found["p_bonferroni"] == pytest.approx(min(1.0, 7 * found["p_value"]))
+    assert (found["wins"], found["losses"], found["better"]) == (4, 0, True)
+    lower = seed_level_comparison({"a": {0: -1.0, 1: -2.0}}, higher_is_better=False)
+    assert lower["better"] and lower["wins"] == 2
+
+
+def _null_cells(rng, n_cells, n_seeds, seed_sd, noise_sd):
+    """Paired differences under the null: a zero-mean effect shared by every cell of a seed (the
+    seed's picks and initialisation) plus independent zero-mean noise per cell."""
+    shared = rng.normal(0.0, seed_sd, n_seeds)
+    return {c: {k: shared[k] + rng.normal(0.0, noise_sd) for k in range(n_seeds)} for c in range(n_cells)}
+
+
+@pytest.mark.slow
+def test_seed_level_test_holds_its_false_positive_rate_where_pooling_pairs_does_not():
+    rng = np.random.default_rng(0)
+    simulations, alpha = 2000, 0.05
+    seed_level = pooled = 0
+    for _ in range(simulations):
+        cells = _null_cells(rng, n_cells=3, n_seeds=10, seed_sd=1.0, noise_sd=0.3)
+        seed_level += seed_level_comparison(cells)["p_value"] < alpha
+        pairs = np.array([d for cell in cells.values() for d in cell.values()])
+        pooled += stats.wilcoxon(pairs).pvalue < alpha
+    # At the nominal rate (binomial sd at 2000 draws: 0.005) ...
+    assert 0.035 <= seed_level / simulations <= 0.065
+    # ... while treating the 30 pairs as independent rejects a true null far too often.
+    assert pooled / simulations > 0.15

@@ -415,6 +415,112 @@ def paired_comparison(
     }
 
 
+def sign_flip_p(values: Iterable[float]) -> float:
+    """Two-sided p of the sign-flip permutation test that the values are centred on zero: under
+    the null each value's sign is a fair coin, so the statistic (the mean) is compared with its
+    value under every one of the 2^n sign patterns (`scipy.stats.permutation_test`, one sample,
+    permutation_type "samples", enumerated exactly up to 2^16 patterns, else 100k random ones).
+
+    Args:
+        values: one number per independent unit (in the study: per seed), at least one, no NaN.
+
+    Example:
+        >>> sign_flip_p([1.0, 2.0, 3.0])  # 2 of the 8 patterns reach |mean| = 2
+        0.25
+    """
+    x = _values(values, "sign_flip_p")
+    if not np.any(x):
+        return 1.0
+    exact = x.size <= 16
+    result = stats.permutation_test(
+        (x,),
+        lambda sample, axis: np.mean(sample, axis=axis),
+        permutation_type="samples",
+        vectorized=True,
+        n_resamples=np.inf if exact else 100_000,
+        alternative="two-sided",
+        rng=np.random.default_rng(0),
+    )
+    return float(min(1.0, result.pvalue))
+
+
+def seed_level_comparison(
+    differences: Mapping[str, Mapping[int, float]],
+    n_comparisons: int = 1,
+    higher_is_better: bool = True,
+    alpha: float = 0.05,
+) -> dict:
+    """Across cells, one value per seed: the paired differences of a method to a reference in
+    several cells (scene, engine) that share their seeds, reduced to each seed's mean over the
+    cells, then tested on those per-seed values. The cells' pairs are not independent units (trial
+    k of every cell shares the seed, hence uniform's picks and the NeRF's initialisation), so
+    pooling them would overstate the evidence; the seeds are the independent units.
+
+    Args:
+        differences: cell -> seed -> (method - reference) on that seed's trial. Only seeds
+            present in every cell are used.
+        n_comparisons: Bonferroni factor (methods compared with the reference).
+        higher_is_better: direction of the metric; only used for `better` and wins.
+        alpha: significance level after the correction.
+
+    Returns:
+        dict with n_seeds, n_cells, seeds; seed_means (per seed, in seed order); difference (the
+        mean over seeds of the seed means), median (their median); wins, ties, losses (seeds whose
+        mean favours the method, is zero, favours the reference); p_value (`sign_flip_p`, the
+        decision), p_wilcoxon (two-sided signed-rank on the seed means, beside it), n_comparisons,
+        p_bonferroni, significant, better. Empty differences give n_seeds 0 and p_value 1.
+
+    Example:
+        >>> r = seed_level_comparison({"a": {0: 1.0, 1: 2.0}, "b": {0: 3.0, 1: 0.0}})
+        >>> r["seed_means"], r["difference"]
+        ([2.0, 1.0], 1.5)
+    """
+    if n_comparisons < 1:
+        raise ValueError(f"n_comparisons must be at least 1, got {n_comparisons}")
+    cells = [dict(d) for d in differences.values() if d]
+    seeds = sorted(set.intersection(*(set(d) for d in cells))) if cells else []
+    sign = 1.0 if higher_is_better else -1.0
+    if not seeds:
+        return {
+            "n_seeds": 0,
+            "n_cells": len(cells),
+            "seeds": [],
+            "seed_means": [],
+            "p_value": 1.0,
+            "p_bonferroni": 1.0,
+            "significant": False,
+            "better": False,
+            "n_comparisons": int(n_comparisons),
+        }
+    means = np.array([np.mean([d[seed] for d in cells]) for seed in seeds], dtype=np.float64)
+    if np.isnan(means).any():
+        raise ValueError("seed_level_comparison: contains NaN")
+    p = sign_flip_p(means)
+    nonzero = means[means != 0]
+    p_wilcoxon = float(stats.wilcoxon(nonzero, alternative="two-sided").pvalue) if nonzero.size else 1.0
+    p_bonferroni = min(1.0, p * n_comparisons)
+    difference = float(means.mean())
+    return {
+        "n_seeds": len(seeds),
+        "n_cells": len(cells),
+        "seeds": seeds,
+        "seed_means": [float(m) for m in means],
+        "difference": difference,
+        "median": float(np.median(means)),
+        "wins": int((sign * means > 0).sum()),
+        "ties": int((means == 0).sum()),
+        "losses": int((sign * means < 0).sum()),
+        "p_value": p,
+        "p_wilcoxon": p_wilcoxon,
+        "test_method": "sign-flip permutation test on the per-seed mean (exact)",
+        "n_comparisons": int(n_comparisons),
+        "p_bonferroni": p_bonferroni,
+        "alpha": float(alpha),
+        "significant": bool(p_bonferroni < alpha),
+        "better": bool(sign * difference > 0),
+    }
+
+
 def seen_half_start(initial_azimuth) -> float:
     """Where the half of the hemisphere the initial views look from begins: their circular-mean
     azimuth minus pi/2, so the seen half is [start, start + pi) (`hemisphere.in_azimuth_window`).
@@ -561,6 +667,8 @@ __all__ = [
     "mean_pairwise_angle",
     "min_attainable_p",
     "min_attainable_paired_p",
+    "seed_level_comparison",
+    "sign_flip_p",
     "paired_comparison",
     "seen_half_start",
     "summarise",
