@@ -6,16 +6,22 @@ render-proposals (a simulated capture with Blender).
     nerfaug add RUN --images DIR --poses poses.json --steps 1000
     nerfaug train RUN --steps 1000                 train an existing session further
     nerfaug export RUN --format nerfstudio --out DIR
+    nerfaug eval RUN --data DATASET --split test   PSNR/SSIM/LPIPS on held-out views
 """
 
 from __future__ import annotations
 
+import contextlib
+import sys
+import warnings
 from pathlib import Path
+from time import monotonic
 from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.capture.state import SESSION_FILE, SessionState
+from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
+from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset
 from nerfaug.selection.methods import SelectionConfig
 
@@ -41,9 +47,38 @@ def _open(run: Path, device: str):
     return CaptureSession.open(run, device=_device(device), progress=True)
 
 
-# `nerfaug train` and `add` save the session this often, and when Ctrl-C stops them.
-CHECKPOINT_EVERY = 500
-_CHUNK = 10  # steps between checks for Ctrl-C
+# `nerfaug train` and `add` save the session this often (seconds of training; a killed command
+# loses at most this much), at the end, and when Ctrl-C stops them.
+CHECKPOINT_EVERY_S = 60.0
+_CHUNK = 10  # steps between checks for Ctrl-C and the clock
+# Torch threads of a session's training: a sweep's policy (one per run unless told), so a session
+# and a study sharing a machine do not oversubscribe its cores.
+THREADS = ExperimentConfig.__dataclass_fields__["threads_per_run"].default
+
+
+def _configure(threads: int) -> None:
+    from nerfaug.device import configure_process
+
+    if threads < 1:
+        raise ValueError(f"--threads {threads}: must be >= 1 (torch threads for training)")
+    configure_process(threads=threads)
+
+
+@contextlib.contextmanager
+def _warning_lines():
+    """Show the capture's warnings (`DuplicateViews`) as one line each, `warning: ...` on stderr."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", DuplicateViews)
+        default = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, DuplicateViews):
+                print(f"warning: {message}", file=sys.stderr)
+            else:
+                default(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
 
 
 def _check_steps(steps: int) -> None:
@@ -51,15 +86,20 @@ def _check_steps(steps: int) -> None:
         raise ValueError(f"--steps {steps}: must be >= 0 (training steps to run)")
 
 
-def _train(session, steps: int) -> dict:
-    """Train `steps` more steps, saving every CHECKPOINT_EVERY steps and at the end. A first Ctrl-C
-    stops at the next step boundary and saves; a second stops at once, keeping the last save.
+def _check_period(seconds: float) -> None:
+    if not seconds > 0:
+        raise ValueError(f"--checkpoint-every {seconds}: must be > 0 (seconds between saves)")
+
+
+def _train(session, steps: int, every_s: float = CHECKPOINT_EVERY_S) -> dict:
+    """Train `steps` more steps, saving once `every_s` seconds passed since the last save, and at
+    the end. A first Ctrl-C stops at the next step boundary and saves; a second stops at once,
+    keeping the last save.
 
     Raises:
         Interrupted: after Ctrl-C, saying at which step the session was saved.
     """
     import signal
-    import sys
 
     from rich.progress import (
         BarColumn,
@@ -81,6 +121,7 @@ def _train(session, steps: int) -> dict:
 
     show, session.trainer.progress = session.trainer.progress, False  # one bar over the chunks
     target, saved, last = session.step + steps, session.step, {"step": session.step}
+    saved_at = monotonic()
     previous = signal.signal(signal.SIGINT, stop)
     bar = Progress(
         TextColumn("training"),
@@ -96,9 +137,9 @@ def _train(session, steps: int) -> dict:
             while session.step < target and not asked:
                 last = session.train(min(_CHUNK, target - session.step))
                 bar.update(task, completed=steps - (target - session.step), psnr=last.get("psnr", float("nan")))
-                if session.step - saved >= CHECKPOINT_EVERY:
+                if monotonic() - saved_at >= every_s:
                     session.save()
-                    saved = session.step
+                    saved, saved_at = session.step, monotonic()
         session.save()
     except KeyboardInterrupt:
         raise Interrupted(
@@ -116,28 +157,47 @@ def _train(session, steps: int) -> dict:
     return last
 
 
-def _check_poses_out(out: Path) -> None:
-    """Refuse to write a proposal over a file that is not an earlier proposal (or its map)."""
-    import json
-
+def _check_poses_out(out: Path, force: bool) -> None:
+    """Refuse to write a proposal over a file that is not an earlier, unedited proposal (or its
+    map), unless `force`."""
+    from nerfaug.capture.proposal import written_by_nerfaug
     from nerfaug.errors import FolderRefused
 
-    ours = False
-    if out.is_file():
-        try:
-            ours = isinstance(json.loads(out.read_text()).get("nerfaug", {}).get("proposal"), int)
-        except (OSError, ValueError, AttributeError):
-            ours = False
-        if not ours:
-            raise FolderRefused(
-                f"{out}: exists and is not a poses file nerfaug wrote, so it is not overwritten; choose another --out"
-            )
     if out.exists() and not out.is_file():
         raise FolderRefused(f"{out}: not a file; give --out a .json file name")
+    ours = out.is_file() and written_by_nerfaug(out)
+    if force:
+        return
+    if out.is_file() and not ours:
+        raise FolderRefused(
+            f"{out}: exists and is not a poses file nerfaug wrote (or was edited since), so it is not "
+            "overwritten; choose another --out (or --force to overwrite it)"
+        )
     if out.with_suffix(".png").exists() and not ours:
         raise FolderRefused(
-            f"{out.with_suffix('.png')}: exists and would be overwritten by the proposal's map; choose another --out"
+            f"{out.with_suffix('.png')}: exists and would be overwritten by the proposal's map; choose another "
+            "--out (or --force to overwrite it)"
         )
+
+
+def _create(data: Path, out: Path, split: str | None, **options):
+    """A new session on `data` in `out`, after one line saying how many views it trains on and why."""
+    from nerfaug.capture import CaptureSession
+    from nerfaug.capture.dataset import default_split
+    from nerfaug.data import load_dataset
+
+    why = f"split '{split}' of {data}"
+    if split is None:
+        split, why = default_split(data)
+    print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
+    with _warning_lines():
+        session = CaptureSession.create(data, out, split=split, progress=True, **options)
+    h = session.hemisphere
+    print(
+        f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
+        f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}"
+    )
+    return session
 
 
 def train(
@@ -146,13 +206,15 @@ def train(
     steps: int = 1000,
     preset: EnginePreset = "cpu",
     seed: int = 0,
-    split: str = "train",
+    split: str | None = None,
     downscale: int = 1,
     centre: tuple[float, float, float] | None = None,
     radius: float | None = None,
     up: tuple[float, float, float] = (0.0, 0.0, 1.0),
     estimate_up: bool = False,
     device: Device = "auto",
+    checkpoint_every: float = CHECKPOINT_EVERY_S,
+    threads: int = THREADS,
 ) -> None:
     """Start an active-capture session on a dataset and train it, or train an existing session further.
 
@@ -166,24 +228,27 @@ def train(
         steps: training steps to run now.
         preset: NeRF engine preset (new sessions only).
         seed: seeds the model, its training and every proposal (new sessions only).
-        split: the Blender split holding the captured views ("initial" for built-in scenes).
+        split: the Blender split holding the captured views; default: "initial" for a dataset
+            `nerfaug scene render` wrote (its train split is the candidate pool), else "train".
         downscale: train on images shrunk by this integer factor.
         centre: the hemisphere's centre, world space; default: the point the cameras look at.
         radius: the hemisphere's radius; default: the cameras' mean distance to the centre.
         up: the hemisphere's pole direction, world space (the world is z-up by default).
         estimate_up: take the pole from the cameras' mean up axis instead of --up.
         device: where the NeRF trains: auto (cuda when this machine has a GPU, else cpu), cpu, cuda.
+        checkpoint_every: save the session after this many seconds of training (and at the end).
+        threads: torch threads for training (as a sweep's runs: one by default).
     """
-    from nerfaug.capture import CaptureSession
-
     _check_steps(steps)
+    _check_period(checkpoint_every)
+    _configure(threads)
     if (path / SESSION_FILE).exists():
         if out is not None:
             raise SystemExit(f"{path} is already a session folder; drop --out to train it further")
         given = {
             "preset": preset != "cpu",
             "seed": seed != 0,
-            "split": split != "train",
+            "split": split is not None,
             "downscale": downscale != 1,
             "centre": centre is not None,
             "radius": radius is not None,
@@ -197,10 +262,11 @@ def train(
                 "settings, so drop them (or start a new session with `nerfaug train DATA --out NEW_RUN`)"
             )
         session = _open(path, device)
+        print(f"training {path} further: {len(session.trainer.train_views)} views, from step {session.step}")
     else:
         if out is None:
             raise SystemExit(f"{path} is a dataset: give the run folder to create with --out RUN")
-        session = CaptureSession.create(
+        session = _create(
             path,
             out,
             preset=preset,
@@ -211,14 +277,8 @@ def train(
             up="estimate" if estimate_up else up,
             downscale=downscale,
             device=_device(device),
-            progress=True,
         )
-        h = session.hemisphere
-        print(
-            f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
-            f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}"
-        )
-    last = _train(session, steps)
+    last = _train(session, steps, checkpoint_every)
     psnr = f", training PSNR {last['psnr']:.2f} dB" if "psnr" in last else ""
     print(f"{session.run_dir}: step {session.step}{psnr}")
 
@@ -233,6 +293,7 @@ def propose(
     seed: int | None = None,
     device: Device = "auto",
     selection: SelectionConfig = DEFAULT_SELECTION,
+    force: bool = False,
 ) -> None:
     """Propose the next views to capture and write their poses as a Blender-style JSON.
 
@@ -254,6 +315,7 @@ def propose(
         device: where candidates are scored: auto (cuda when available, else cpu), cpu, cuda.
         selection: options of the selection method (recorded with the proposal in session.json);
             a method's own settings (e.g. ours-authors') apply over them.
+        force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
     """
     from nerfaug.capture.choose import check_method
 
@@ -263,7 +325,7 @@ def propose(
             raise ValueError(f"--{name} {value}: must be >= 1")
     if seed is not None and seed < 0:
         raise ValueError(f"--seed {seed}: must be >= 0")
-    _check_poses_out(out)
+    _check_poses_out(out, force)
     session = _open(run, device)
     proposal = session.propose(n, method, candidates=candidates, n_candidates=n_candidates, seed=seed, config=selection)
     path = proposal.write(out)
@@ -282,6 +344,8 @@ def add(
     poses: Path,
     steps: int = 1000,
     device: Device = "auto",
+    checkpoint_every: float = CHECKPOINT_EVERY_S,
+    threads: int = THREADS,
 ) -> None:
     """Add captured images at the poses of a poses JSON, then train on.
 
@@ -296,15 +360,20 @@ def add(
             the same format).
         steps: training steps to run after adding (0: add only).
         device: where the NeRF trains: auto (cuda when available, else cpu), cpu, cuda.
+        checkpoint_every: save the session after this many seconds of training (and at the end).
+        threads: torch threads for training (as a sweep's runs: one by default).
     """
     _check_steps(steps)  # before anything is written: a refused call changes nothing
+    _check_period(checkpoint_every)
+    _configure(threads)
     session = _open(run, device)
-    names = session.add_views(images, poses)
+    with _warning_lines():
+        names = session.add_views(images, poses)
     session.save()  # the addition's record is kept even if training is stopped at once
     print(
         f"added {len(names)} views ({', '.join(names)}); the dataset now has {len(session.trainer.train_views)} views"
     )
-    last = _train(session, steps)
+    last = _train(session, steps, checkpoint_every)
     if steps:
         print(f"step {session.step}, training PSNR {last['psnr']:.2f} dB")
 
@@ -330,6 +399,79 @@ def export(
     session = CaptureSession.open(run, load_model=False)  # exporting reads only the dataset folder
     path = session.export(out, format)
     print(f"exported {len(session.cameras)} views to {path}")
+
+
+EVAL_KIND = "session-eval"  # the key marking a JSON `nerfaug eval` wrote (and may overwrite)
+
+
+def _check_eval_out(out: Path, data: Path) -> None:
+    """Refuse an --out inside the dataset, or over a file that `nerfaug eval` did not write."""
+    import json
+
+    from nerfaug import owned
+    from nerfaug.errors import FolderRefused
+
+    if owned.overlaps(out, data):
+        raise FolderRefused(f"{out}: lies inside the dataset {data}; nothing is written into an input folder")
+    if out.exists():
+        try:
+            ours = json.loads(out.read_text()).get("nerfaug", {}).get("kind") == EVAL_KIND
+        except (OSError, ValueError, AttributeError):
+            ours = False
+        if not ours:
+            raise FolderRefused(
+                f"{out}: exists and is not an evaluation nerfaug wrote, so it is not overwritten; choose another --out"
+            )
+
+
+def _metric(value, digits: int) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
+
+
+def evaluate(
+    run: RunFolder,
+    data: Path,
+    split: str = "test",
+    out: Path | None = None,
+    lpips: bool = True,
+    device: Device = "auto",
+) -> None:
+    """Score the session's NeRF on held-out views: PSNR, SSIM and LPIPS of its renders against
+    a dataset split, at the session's training resolution (as nerfstudio's ns-eval).
+
+    Args:
+        run: the session's run folder.
+        data: a dataset folder of the same scene and world frame (e.g. the one the session started from).
+        split: the split to score ("test": a dataset `nerfaug scene render` wrote has 200 held-out views).
+        out: write the metrics, mean and per view, to this JSON file.
+        lpips: compute LPIPS (when its weights are installed; otherwise reported as n/a).
+        device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
+    """
+    from nerfaug import __version__
+    from nerfaug.capture.evaluate import evaluate_session, load_held_out
+    from nerfaug.jsonio import atomic_write_json
+
+    if out is not None:
+        _check_eval_out(out, data)
+    session = _open(run, device)
+    views = load_held_out(session, data, split)
+    result = evaluate_session(session, views, lpips="auto" if lpips else None, progress=True)
+    m = result.mean
+    print(f"{run} (step {session.step}) on split '{split}' of {data}: {len(views)} views")
+    print(f"  PSNR {_metric(m['psnr'], 2)} dB   SSIM {_metric(m['ssim'], 4)}   LPIPS {_metric(m['lpips'], 4)}")
+    if m["lpips"] is None:
+        print(f"  LPIPS {result.lpips_status}")
+    if out is not None:
+        record = {
+            "nerfaug": {"kind": EVAL_KIND, "version": __version__},
+            "session": str(run),
+            "step": session.step,
+            "data": str(data),
+            "split": split,
+            **result.to_dict(),
+        }
+        atomic_write_json(out, record)
+        print(f"  written to {out}")
 
 
 def render_proposals(
@@ -375,5 +517,6 @@ COMMANDS: dict = {
     "propose": propose,
     "add": add,
     "export": export,
+    "eval": evaluate,
     "render-proposals": render_proposals,
 }

@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from cases import Bases, case, copy_dataset, edit_json, train_on
-from harness import Case, copy, write_images
+from harness import Case, copy, run_cli, write_images
 
 
 def _session(tmp, bases) -> Path:
@@ -530,3 +530,117 @@ def train_session_with_new_session_options(tmp, bases):
         [run],
         says=("--preset", "--seed", "session.json"),
     )
+
+
+@case
+def train_over_a_session_that_lost_its_session_json(tmp, bases):
+    """A tester's data loss: `train DATA --out RUN` over a damaged session rebuilt RUN/dataset,
+    deleting the user's notes and the captured images in it."""
+    data = copy_dataset(tmp, bases)
+    run = _session(tmp, bases)
+    (run / "session.json").unlink()
+    (run / "dataset" / "my_notes.txt").write_text("mine")
+    argv = ["train", data, "--out", run, "--preset", "test", "--steps", "1", "--device", "cpu"]
+    return Case(argv, [data, run], says=(str(run), "session.json"))
+
+
+@case
+def checkpoint_copied_from_another_session(tmp, bases):
+    run = _session(tmp, bases)
+    other = tmp / "other"
+    argv = [
+        "train",
+        bases.dataset,
+        "--out",
+        other,
+        "--preset",
+        "test",
+        "--steps",
+        "2",
+        "--seed",
+        "1",
+        "--device",
+        "cpu",
+    ]
+    outcome = run_cli(argv)
+    assert outcome.code == 0, outcome.err
+    (run / "checkpoint.pt").write_bytes((other / "checkpoint.pt").read_bytes())
+    return Case(["train", run, "--steps", "1", "--device", "cpu"], [run], says=("checkpoint.pt", "another session"))
+
+
+@case
+def captured_image_deleted_before_train(tmp, bases):
+    run = _session(tmp, bases)
+    image = sorted((run / "dataset" / "train").glob("*.png"))[1]
+    image.unlink()
+    return Case(["train", run, "--steps", "1", "--device", "cpu"], [run], says=(image.stem, "deleted"))
+
+
+@case
+def captured_image_edited_before_train(tmp, bases):
+    run = _session(tmp, bases)
+    image = sorted((run / "dataset" / "train").glob("*.png"))[0]
+    write_images(tmp / "other", [image.stem])
+    image.write_bytes((tmp / "other" / image.name).read_bytes())
+    return Case(["train", run, "--steps", "1", "--device", "cpu"], [run], says=(image.name, "changed"))
+
+
+@case
+def transforms_file_linking_outside_the_dataset(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    (tmp / "elsewhere.json").write_text((data / "transforms_train.json").read_text())
+    (data / "transforms_train.json").unlink()
+    (data / "transforms_train.json").symlink_to(tmp / "elsewhere.json")
+    return Case(train_on(data, tmp, "--split", "train").argv, [data], says=("transforms_train.json", "outside"))
+
+
+@case
+def train_out_inside_the_dataset(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    argv = ["train", data, "--out", data / "run", "--preset", "test", "--steps", "1", "--device", "cpu"]
+    return Case(argv, [data], says=(str(data / "run"), "inside the dataset"))
+
+
+@case
+def train_checkpoint_every_zero(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    return Case(train_on(data, tmp, "--checkpoint-every", "0").argv, [data, tmp], says=("--checkpoint-every",))
+
+
+@case
+def train_zero_threads(tmp, bases):
+    run = _session(tmp, bases)
+    return Case(["train", run, "--threads", "0", "--device", "cpu"], [run], says=("--threads", "0"))
+
+
+@case
+def propose_over_an_edited_poses_file(tmp, bases):
+    """README: edit transform_matrix to the pose the robot reached; a later propose must not erase that."""
+    run = _session(tmp, bases)
+    first = run_cli(_propose(run, tmp, "--n", "1"))
+    assert first.code == 0, first.err
+    edit_json(tmp / "poses.json", lambda d: d["frames"][0]["transform_matrix"][0].__setitem__(3, 0.5))
+    return Case(_propose(run, tmp), [run, tmp / "poses.json"], says=("poses.json", "--force"))
+
+
+@case
+def eval_out_over_a_users_file(tmp, bases):
+    run = _session(tmp, bases)
+    (tmp / "metrics.json").write_text('{"mine": 1}')
+    argv = ["eval", run, "--data", bases.dataset, "--out", tmp / "metrics.json", "--device", "cpu"]
+    return Case(argv, [run, tmp / "metrics.json"], says=("metrics.json",))
+
+
+@case
+def eval_out_inside_the_dataset(tmp, bases):
+    run = _session(tmp, bases)
+    data = copy_dataset(tmp, bases)
+    argv = ["eval", run, "--data", data, "--out", data / "metrics.json", "--device", "cpu"]
+    return Case(argv, [run, data], says=("metrics.json", "inside the dataset"))
+
+
+@case
+def eval_split_missing(tmp, bases):
+    run = _session(tmp, bases)
+    argv = ["eval", run, "--data", bases.dataset, "--split", "nosuch", "--device", "cpu"]
+    return Case(argv, [run], says=("nosuch",))

@@ -5,6 +5,7 @@ Ctrl-C is a real SIGINT sent by this process to itself at a chosen training step
 is deterministic: Python runs the handler before the next bytecode of the main thread.
 """
 
+import itertools
 import json
 import os
 import signal
@@ -29,7 +30,9 @@ def _interrupt_at(monkeypatch, step: int, times: int = 1) -> None:
         return last
 
     monkeypatch.setattr(CaptureSession, "train", train_then_interrupt)
-    monkeypatch.setattr(session_cli, "CHECKPOINT_EVERY", 20)
+    # A clock that advances one second per reading: read once at the start, once after each
+    # 10-step chunk and once after each save, so with a 2 s period the session saves every 20 steps.
+    monkeypatch.setattr(session_cli, "monotonic", itertools.count().__next__)
 
 
 def _saved_step(run) -> tuple[int, int]:
@@ -51,7 +54,7 @@ def test_first_ctrl_c_saves_the_session_where_training_stopped(bases, tmp_path, 
     run = copy(bases.session, tmp_path / "run")
     start = _saved_step(run)[0]
     _interrupt_at(monkeypatch, start + 30)
-    line = _one_line(run_cli(["train", run, "--steps", "100", "--device", "cpu"]))
+    line = _one_line(run_cli(["train", run, "--steps", "100", "--device", "cpu", "--checkpoint-every", "2"]))
     assert f"saved at step {start + 30}" in line and str(run) in line
     assert _saved_step(run) == (start + 30, start + 30)
     assert CaptureSession.open(run).step == start + 30
@@ -61,7 +64,7 @@ def test_second_ctrl_c_stops_at_once_and_keeps_the_periodic_checkpoint(bases, tm
     run = copy(bases.session, tmp_path / "run")
     start = _saved_step(run)[0]
     _interrupt_at(monkeypatch, start + 30, times=2)  # checkpoints every 20 steps: the last one at +20
-    line = _one_line(run_cli(["train", run, "--steps", "100", "--device", "cpu"]))
+    line = _one_line(run_cli(["train", run, "--steps", "100", "--device", "cpu", "--checkpoint-every", "2"]))
     assert f"interrupted at step {start + 30}" in line and f"saved at step {start + 20}" in line
     assert _saved_step(run) == (start + 20, start + 20)
     assert CaptureSession.open(run).step == start + 20
@@ -79,6 +82,7 @@ def test_ctrl_c_while_training_after_add_keeps_the_added_views(bases, tmp_path, 
     _one_line(
         run_cli(
             ["add", run, "--images", images, "--poses", tmp_path / "poses.json", "--steps", "100", "--device", "cpu"]
+            + ["--checkpoint-every", "2"]
         )
     )
     state = json.loads((run / "session.json").read_text())

@@ -3,6 +3,7 @@ then the transforms file, then training sees them (what `CaptureSession.add_view
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -11,8 +12,9 @@ import torch
 
 from nerfaug.capture.dataset import NAME, file_path, unique_stem
 from nerfaug.capture.images import as_array, check_capture, collect_images, stored_bytes
+from nerfaug.capture.integrity import sha256_bytes
 from nerfaug.capture.proposal import Proposal, read_poses
-from nerfaug.capture.state import AdditionRecord, now
+from nerfaug.capture.state import AdditionRecord, DuplicateViews, now
 from nerfaug.data import DatasetError, Views
 from nerfaug.data.frames import check_pose
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
@@ -87,12 +89,14 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
             raise DatasetError(pose_source, "two new images share this name", field=f"names[{i}]", value=name)
         seen.add(name)
 
+    warn_repeated_poses(frames, checked, expected_names, pose_source)
     fmt, folder = session.state.dataset.format, session.state.dataset.folder
     new_frames = []
     for name, capture, pose in zip(expected_names, captures, checked):
         data, suffix = stored_bytes(capture, png_only=fmt == "blender")
         atomic_write_bytes(session.dataset_dir / folder / f"{name}{suffix}", data)
         frame = {"file_path": file_path(fmt, folder, name, suffix), "transform_matrix": pose.double().tolist()}
+        session.state.integrity.captures[frame["file_path"]] = sha256_bytes(data)
         if fmt == "nerfstudio":
             frame.update({"fl_x": k.fx, "fl_y": k.fy, "cx": k.cx, "cy": k.cy, "w": k.width, "h": k.height})
         new_frames.append(frame)
@@ -111,3 +115,28 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
         )
     )
     return list(expected_names)
+
+
+def warn_repeated_poses(frames: list, poses: torch.Tensor, names: Sequence[str], source: str) -> None:
+    """Warn (`DuplicateViews`) for each new pose equal to a pose already in the dataset or to
+    another new one: the same view added twice trains on one viewpoint as if it were two.
+
+    Args:
+        frames: the dataset's frames (each with a `transform_matrix`).
+        poses: Tensor with shape (n, 4, 4), the new world-frame poses.
+        names: n names of the new frames.
+        source: where the poses came from, for the message.
+    """
+    old_names = [Path(str(f["file_path"])).stem for f in frames]
+    old = torch.tensor([f["transform_matrix"] for f in frames], dtype=torch.float64).reshape(len(frames), 16)
+    new = poses.double().reshape(len(names), 16)
+    every = torch.cat([old, new])
+    labels = [f"{n} (in the dataset)" for n in old_names] + list(names)
+    close = (new[:, None] - every[None]).abs().amax(-1) <= 1e-5  # float32 poses read back
+    for i, j in close.nonzero().tolist():
+        if j < len(old) or j - len(old) > i:
+            warnings.warn(
+                f"{source}: new view {names[i]} has the same pose as {labels[j]} (the same view added twice)",
+                DuplicateViews,
+                stacklevel=3,
+            )

@@ -41,13 +41,58 @@ DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 
 def dataset_json(root: Path, split: str = "train") -> tuple[Path, str]:
-    """The transforms file of a dataset folder and its format ("blender" or "nerfstudio")."""
-    if (root / f"transforms_{split}.json").exists():
-        return root / f"transforms_{split}.json", "blender"
-    if (root / "transforms.json").exists():
-        return root / "transforms.json", "nerfstudio"
+    """The transforms file of a dataset folder and its format ("blender" or "nerfstudio").
+
+    Raises:
+        DatasetError: no transforms file, or one that is a link to a file outside `root` (a
+            session copies and later trusts what it reads there; a link could point anywhere).
+    """
+    for path, fmt in ((root / f"transforms_{split}.json", "blender"), (root / "transforms.json", "nerfstudio")):
+        if path.exists():
+            if root.resolve() not in path.resolve().parents:
+                raise DatasetError(
+                    path, "the transforms file links to a file outside the dataset folder", value=str(path.resolve())
+                )
+            return path, fmt
     load_dataset(root, split)  # raises the dataset layer's own error, naming what is missing
     raise DatasetError(root, "no transforms file")
+
+
+# A dataset nerfaug rendered (`nerfaug scene render`) records its settings here; its
+# `transforms_initial.json` holds the views taken as already captured, its train split the pool.
+RENDER_MANIFEST = "scene.json"
+
+
+def default_split(root: Path) -> tuple[str, str]:
+    """The split a new session trains on when none is given, and why (for the user).
+
+    A dataset nerfaug rendered has a candidate pool of hundreds of views as its train split and
+    the views taken as already captured as its initial split: the initial split is the default.
+    Any other dataset trains on its train split (or its single nerfstudio transforms file).
+
+    Returns:
+        (split, reason): e.g. ("initial", "a dataset nerfaug rendered: ...").
+    """
+    root = Path(root)
+    if (root / RENDER_MANIFEST).is_file() and (root / "transforms_initial.json").is_file():
+        return "initial", (
+            f"the initial views of a dataset nerfaug rendered ({root / RENDER_MANIFEST}); its train split is "
+            "the pool of candidate views, use --split train to train on all of them"
+        )
+    return "train", "the dataset's train split (--split chooses another)"
+
+
+def duplicate_frames(cameras: Cameras, names: Sequence[str], tolerance: float = 1e-5) -> list[tuple[str, str]]:
+    """Pairs of frames (by name) whose camera poses coincide: the same view twice.
+
+    Args:
+        cameras: n cameras; their `camera_to_world` (n, 4, 4) are compared.
+        names: n frame names.
+        tolerance: largest difference between matrix entries still taken as the same pose.
+    """
+    poses = cameras.camera_to_world.reshape(len(names), -1).double()
+    close = (poses[:, None] - poses[None]).abs().amax(-1) <= tolerance
+    return [(names[i], names[j]) for i, j in close.triu(1).nonzero().tolist()]
 
 
 def frame_files(root: Path, json_path: Path, frames: list) -> list[Path]:

@@ -121,8 +121,30 @@ class Proposal:
             if Path(self.map_path).resolve() != map_copy.resolve():
                 atomic_write_bytes(map_copy, Path(self.map_path).read_bytes())
             data["nerfaug"]["map"] = map_copy.name
+        data["nerfaug"]["frames_sha256"] = frames_digest(data["frames"])
         atomic_write_json(path, data)
         return path
+
+
+def frames_digest(frames: list) -> str:
+    """A digest of a poses file's frames: a file whose frames no longer match the digest written
+    with them was edited (e.g. poses a robot actually reached) and is not nerfaug's to overwrite."""
+    import hashlib
+    import json
+
+    return hashlib.sha256(json.dumps(frames, sort_keys=True).encode()).hexdigest()
+
+
+def written_by_nerfaug(path: str | Path) -> bool:
+    """Whether `path` is a poses file `Proposal.write` wrote and nobody edited since."""
+    import json
+
+    try:
+        data = json.loads(Path(path).read_text())
+        info = data["nerfaug"]
+        return isinstance(info["proposal"], int) and info["frames_sha256"] == frames_digest(data["frames"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
 
 
 def read_poses(path: str | Path) -> tuple[Tensor, list[str]]:

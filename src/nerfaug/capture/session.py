@@ -18,6 +18,7 @@ the engine frame of the session's hemisphere (`nerfaug.capture.frame`).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -26,8 +27,15 @@ from torch import Tensor
 
 from nerfaug import owned
 from nerfaug.cameras import Cameras
-from nerfaug.capture import add, choose, export
-from nerfaug.capture.dataset import blender_compatible, copy_split, dataset_json, frame_files, has_distortion
+from nerfaug.capture import add, choose, export, integrity
+from nerfaug.capture.dataset import (
+    blender_compatible,
+    copy_split,
+    dataset_json,
+    duplicate_frames,
+    frame_files,
+    has_distortion,
+)
 from nerfaug.capture.frame import Hemisphere, estimate_hemisphere
 from nerfaug.capture.images import as_array
 from nerfaug.capture.proposal import Proposal
@@ -38,6 +46,7 @@ from nerfaug.capture.state import (
     RUN_KIND,
     SESSION_FILE,
     DatasetInfo,
+    DuplicateViews,
     Intrinsics,
     ProposalRecord,
     SessionError,
@@ -48,7 +57,7 @@ from nerfaug.capture.state import (
 from nerfaug.data import DatasetError, Views, load_dataset
 from nerfaug.data.frames import read_image
 from nerfaug.errors import FolderRefused
-from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
 from nerfaug.selection.candidates import with_poses
 
 
@@ -118,7 +127,8 @@ class CaptureSession:
         Raises:
             DatasetError: the dataset is missing or malformed (naming the file, frame and value).
             SessionError: `run_dir` already holds a session.
-            FolderRefused: `run_dir` is not empty and was not made by nerfaug, or holds the dataset.
+            FolderRefused: `run_dir` is not empty and was not made by nerfaug, holds the dataset
+                or lies inside it, or is a session folder that lost its session.json.
         """
         from nerfaug.nerf.config import NerfConfig
         from nerfaug.nerf.trainer import Trainer
@@ -139,6 +149,9 @@ class CaptureSession:
         source = load_dataset(data_dir, split, lazy=True)  # validates the JSON and every path
         json_path, fmt = dataset_json(data_dir, split)
         cameras = source.cameras
+        for a, b in duplicate_frames(cameras, source.names):
+            same = f"{json_path}: frames {a} and {b} have the same pose (the same view twice)"
+            warnings.warn(same, DuplicateViews, stacklevel=2)
         if int(downscale) > min(cameras.width, cameras.height):
             raise ValueError(
                 f"downscale must be at most the image size ({cameras.width}x{cameras.height}), got {downscale}"
@@ -153,9 +166,8 @@ class CaptureSession:
 
         # Everything is checked: from here on the run folder is written, and marked as nerfaug's first.
         owned.mark(run_dir, RUN_KIND)
-        dataset = run_dir / DATASET_DIR
-        owned.remove_owned(dataset, DATASET_KIND, f"move it out of {run_dir} or choose another run folder")
-        owned.mark(dataset, DATASET_KIND)  # a half-made copy (no session.json) is redone next time
+        dataset = run_dir / DATASET_DIR  # new: check_new_run refused a run folder holding anything
+        owned.mark(dataset, DATASET_KIND)
         folder = "train" if fmt_out == "blender" else "images"
         copied = copy_split(data_dir, json_path, dataset, folder, fmt_out, float(cameras.camera_angle_x[0]))
         out_json = dataset / ("transforms_train.json" if fmt_out == "blender" else "transforms.json")
@@ -181,6 +193,7 @@ class CaptureSession:
             hemisphere=hemisphere,
             hemisphere_estimated={"centre": centre is None, "radius": radius is None, "up": isinstance(up, str)},
         )
+        state.integrity.captures = integrity.capture_digests(dataset, out_json, copied["frames"])
         session = cls(run_dir, None, state)
         views = session.engine_views(0)
         session.trainer = Trainer(
@@ -208,11 +221,13 @@ class CaptureSession:
         state = SessionState.read(run_dir)
         session = cls(run_dir, None, state)
         json_path = session.json_path()  # checks it stays inside the run folder
+        integrity.check_captures(session.dataset_dir, json_path, session.frames(), state.integrity.captures)
         if not load_model:
             return session
         checkpoint = run_dir / CHECKPOINT_FILE
         if not checkpoint.exists():
             raise SessionError(f"{checkpoint}: checkpoint not found; the run folder is incomplete")
+        integrity.check_checkpoint(checkpoint, state.integrity)
         try:
             trainer = Trainer.load_checkpoint(checkpoint, device=device, progress=progress)
         except Exception as error:  # noqa: BLE001 -- torch.load and the state dicts raise many types
@@ -233,6 +248,8 @@ class CaptureSession:
             )
         if len(frames) > in_model:  # added after the last save: train on them too
             trainer.add_views(session.engine_views(in_model))
+            added = integrity.capture_digests(session.dataset_dir, json_path, frames[in_model:])
+            state.integrity.captures.update({k: v for k, v in added.items() if k not in state.integrity.captures})
         state.views_in_model = len(frames)
         state.step = trainer.step
         return session
@@ -244,12 +261,18 @@ class CaptureSession:
         """
         self.require_model()
         current = (self.trainer.step, len(self.trainer.train_views))
-        if self._saved != current or not (self.run_dir / CHECKPOINT_FILE).exists():
-            self.trainer.save_checkpoint(self.run_dir / CHECKPOINT_FILE)
-            self._saved = current
         self.state.step = self.trainer.step
         self.state.views_in_model = len(self.trainer.train_views)
         self.state.saved = now()
+        if self._saved != current or not (self.run_dir / CHECKPOINT_FILE).exists():
+            data = integrity.checkpoint_bytes(self.trainer)
+            # The new digest is recorded before the file is replaced: killed between the two
+            # writes, the session still recognises whichever checkpoint is on disk as its own.
+            self.state.integrity.pending = integrity.sha256_bytes(data)
+            atomic_write_json(self.run_dir / SESSION_FILE, self.state.to_dict())
+            atomic_write_bytes(self.run_dir / CHECKPOINT_FILE, data)
+            self.state.integrity.checkpoint, self.state.integrity.pending = self.state.integrity.pending, None
+            self._saved = current
         atomic_write_json(self.run_dir / SESSION_FILE, self.state.to_dict())
         return self.run_dir
 
@@ -469,7 +492,9 @@ class CaptureSession:
 
 
 def check_new_run(data_dir: Path, run_dir: Path) -> None:
-    """Refuse a run folder that would hold or hide the dataset, or that holds files nerfaug did not write.
+    """Refuse a run folder that would hold or hide the dataset or lie inside it, that holds files
+    nerfaug did not write, or that holds anything at all without a session.json: a damaged session
+    is never rebuilt over (its dataset may hold captures and the user's own files).
 
     Raises:
         FolderRefused: saying which folder and what to choose instead.
@@ -481,6 +506,18 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
             f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
             f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset"
         )
+    if data_dir in run_dir.resolve().parents:
+        raise FolderRefused(
+            f"{run_dir}: the run folder lies inside the dataset {data_dir}; nothing is written into an "
+            "input folder, so choose a run folder outside the dataset"
+        )
     if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
         what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
         raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder for --out")
+    left = sorted(p.name for p in run_dir.iterdir() if p.name != owned.MARKER) if run_dir.is_dir() else []
+    if left:
+        raise FolderRefused(
+            f"{run_dir}: a capture session without its {SESSION_FILE} (damaged or unfinished; it holds "
+            f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
+            f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
+        )

@@ -2,7 +2,9 @@
 it checked to stay inside the run folder.
 
 The file's layout (format 1) is unchanged from before the typed state: the same 17 keys, so files
-written by earlier versions load, and earlier versions can read the files written now.
+written by earlier versions load, and earlier versions can read the files written now. One optional
+key was added since, `integrity` (`Integrity`): earlier versions ignore it, and a file without it
+is checked from its next save on.
 """
 
 from __future__ import annotations
@@ -30,6 +32,10 @@ DATASET_FORMATS = ("blender", "nerfstudio")
 
 class SessionError(NerfaugError, RuntimeError):
     """A run folder is missing, incomplete or inconsistent; the message says which file and why."""
+
+
+class DuplicateViews(UserWarning):
+    """The same view (camera pose) twice in a dataset or an addition; the message names the frames."""
 
 
 def now() -> str:
@@ -99,6 +105,26 @@ class AdditionRecord:
 
 
 @dataclass
+class Integrity:
+    """What the session wrote, by content (sha256 hex digests), so that `open` can tell its own
+    files from files replaced, edited or deleted since.
+
+    Attributes:
+        checkpoint: digest of the checkpoint last saved (None: not recorded yet).
+        pending: digest of a checkpoint being saved: `save` records it before writing the file, so
+            a process killed between the two writes leaves a checkpoint the session still knows.
+        captures: each frame's `file_path` -> digest of its image in the run's dataset.
+    """
+
+    checkpoint: str | None = None
+    pending: str | None = None
+    captures: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"checkpoint": self.checkpoint, "pending": self.pending, "captures": dict(self.captures)}
+
+
+@dataclass
 class SessionState:
     """Everything `session.json` records about a session besides the checkpoint."""
 
@@ -120,6 +146,7 @@ class SessionState:
     nerfaug: str = nerfaug.__version__
     created: str = field(default_factory=now)
     saved: str | None = None
+    integrity: Integrity = field(default_factory=Integrity)
 
     def to_dict(self) -> dict:
         """The JSON object written to session.json (the historic key layout)."""
@@ -144,6 +171,8 @@ class SessionState:
         }
         if self.saved is not None:
             data["saved"] = self.saved
+        if self.integrity.checkpoint is not None or self.integrity.captures:
+            data["integrity"] = self.integrity.to_dict()
         return data
 
     @classmethod
@@ -213,6 +242,7 @@ class SessionState:
             nerfaug=str(data.get("nerfaug", "")),
             created=str(data.get("created", "")),
             saved=data.get("saved"),
+            integrity=reader.integrity(data),
         )
 
     @classmethod
@@ -289,6 +319,22 @@ class _Reader:
         values = {k: data.get(k) for k in known}
         extra = {k: v for k, v in data.items() if k not in known}
         return cls(**values, extra=extra)
+
+    def integrity(self, data: dict) -> Integrity:
+        """The optional `integrity` section (absent in files of earlier versions)."""
+        part = data.get("integrity")
+        if part is None:
+            return Integrity()
+        if not isinstance(part, dict):
+            self.fail("integrity", part, "expected an object")
+        digests = {k: part.get(k) for k in ("checkpoint", "pending")}
+        for key, value in digests.items():
+            if value is not None and not isinstance(value, str):
+                self.fail(f"integrity.{key}", value, "expected a sha256 digest")
+        captures = part.get("captures") or {}
+        if not isinstance(captures, dict) or not all(isinstance(v, str) for v in captures.values()):
+            self.fail("integrity.captures", captures, "expected an object of file paths to sha256 digests")
+        return Integrity(digests["checkpoint"], digests["pending"], dict(captures))
 
     def relative_name(self, name: str, value: str) -> None:
         """A path the session joins to its run folder: relative, and never leaving it."""

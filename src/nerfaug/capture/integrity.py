@@ -1,0 +1,94 @@
+"""Whether a run folder's checkpoint and captured images are the ones its session wrote: their
+sha256 digests, recorded in session.json (`Integrity`), checked when the session is opened.
+
+A session trains on what it finds in its folder; a checkpoint copied in from another session, or
+an image deleted or edited by hand, would silently change what it is. Each check names the file
+and what changed, and says what to do.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from pathlib import Path
+
+import torch
+
+from nerfaug.capture.dataset import frame_files
+from nerfaug.capture.state import SESSION_FILE, Integrity, SessionError
+from nerfaug.data import DatasetError
+from nerfaug.data.frames import resolve_image
+
+_RESTORE = "put the session's own file back, or start a new session with `nerfaug train DATA --out NEW_RUN`"
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def sha256_file(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def checkpoint_bytes(trainer) -> bytes:
+    """The trainer's whole state (`Trainer.state_dict`) as `torch.save` writes it: hashed, then
+    written, so the digest is of exactly the bytes on disk."""
+    buffer = io.BytesIO()
+    torch.save(trainer.state_dict(), buffer)
+    return buffer.getvalue()
+
+
+def check_checkpoint(path: Path, integrity: Integrity) -> None:
+    """Refuse a checkpoint the session did not write (no-op for sessions saved before digests were kept).
+
+    Raises:
+        SessionError: naming the checkpoint, its digest and the one session.json records.
+    """
+    if integrity.checkpoint is None:
+        return
+    found = sha256_file(path)
+    if found not in (integrity.checkpoint, integrity.pending):
+        raise SessionError(
+            f"{path}: not this session's checkpoint (sha256 {found[:12]}..., session.json records "
+            f"{integrity.checkpoint[:12]}...): it was replaced, e.g. copied from another session; {_RESTORE}"
+        )
+
+
+def capture_digests(root: Path, json_path: Path, frames: list) -> dict[str, str]:
+    """Each frame's `file_path` -> the digest of its image file (found as the dataset reader finds it)."""
+    files = frame_files(root, json_path, frames)
+    return {str(frame["file_path"]): sha256_file(path) for frame, path in zip(frames, files)}
+
+
+def check_captures(root: Path, json_path: Path, frames: list, recorded: dict[str, str]) -> None:
+    """Refuse a dataset whose recorded images were deleted, edited or unlisted since the session stored them.
+
+    Frames without a recorded digest (added after the last save) are not checked here.
+
+    Raises:
+        SessionError: naming the first image (or transforms entry) that changed and how.
+    """
+    listed = {str(frame["file_path"]): i for i, frame in enumerate(frames)}
+    for file_path, digest in recorded.items():
+        if file_path not in listed:
+            raise SessionError(
+                f"{json_path} lists {len(frames)} frames, without the captured view {file_path!r}, one of the "
+                f"{len(recorded)} {SESSION_FILE} records (the dataset was edited outside the session); {_RESTORE}"
+            )
+        index = listed[file_path]
+        try:
+            path = resolve_image(root, file_path, json_path, f"frames[{index}].file_path")
+        except DatasetError as error:
+            raise SessionError(
+                f"{error}: the captured image was deleted or moved since nerfaug stored it; {_RESTORE}"
+            ) from None
+        found = sha256_file(path)
+        if found != digest:
+            raise SessionError(
+                f"{path}: the captured image of frame {index} changed since nerfaug stored it (sha256 "
+                f"{found[:12]}..., recorded {digest[:12]}...); {_RESTORE}"
+            )

@@ -1,0 +1,168 @@
+"""`nerfaug train/add/eval` beyond the bad inputs of tests/reliability: which split a new session
+trains on, warnings for repeated views, the thread policy, periodic checkpoints that survive a
+SIGKILL, a save interrupted between its two writes, and `eval` on a known case."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from nerfaug.cameras import Cameras
+from nerfaug.capture import CaptureSession
+from nerfaug.cli import main
+from nerfaug.data import Views, write_blender_split
+from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
+
+SIZE = 8
+
+
+def views(n: int, seed: int, poses=None) -> Views:
+    generator = torch.Generator().manual_seed(seed)
+    poses = sample_uniform_poses(n, generator) if poses is None else poses
+    images = (torch.rand(n, SIZE, SIZE, 3, generator=generator) * 255).round() / 255
+    return Views(Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, SIZE, SIZE), images, [f"./x/r_{i}" for i in range(n)])
+
+
+def dataset(root: Path, rendered: bool = True, train=None) -> Path:
+    """A Blender dataset with a 12-view train split and a 3-view initial split; `rendered` adds the
+    manifest `nerfaug scene render` writes."""
+    write_blender_split(root, "train", views(12, 0) if train is None else train)
+    write_blender_split(root, "initial", views(3, 1))
+    write_blender_split(root, "test", views(3, 2))
+    if rendered:
+        (root / "scene.json").write_text(json.dumps({"format": 1, "scene": {"builtin": "lego"}}))
+    return root
+
+
+def train_new(data: Path, run: Path, *extra) -> None:
+    main(["train", str(data), "--out", str(run), "--preset", "test", "--steps", "2", "--device", "cpu", *extra])
+
+
+@pytest.mark.parametrize(
+    ("rendered", "extra", "expected"),
+    [(True, (), 3), (True, ("--split", "train"), 12), (False, (), 12)],
+)
+def test_a_new_session_trains_on_a_rendered_scenes_initial_views(tmp_path, capsys, rendered, extra, expected):
+    data = dataset(tmp_path / "data", rendered)
+    train_new(data, tmp_path / "run", *extra)
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith(f"training on {expected} views: ")
+    assert ("initial views" in first) == (expected == 3)
+    assert len(CaptureSession.open(tmp_path / "run").trainer.train_views) == expected
+
+
+def test_duplicate_frames_in_a_dataset_are_named_in_a_warning(tmp_path, capsys):
+    poses = views(12, 0).cameras.camera_to_world.clone()
+    poses[7] = poses[2]
+    data = dataset(tmp_path / "data", rendered=False, train=views(12, 0, poses))
+    train_new(data, tmp_path / "run")
+    warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1
+    assert all(name in warnings[0] for name in ("r_2", "r_7", "transforms_train.json"))
+
+
+def test_the_same_view_added_twice_is_named_in_a_warning(tmp_path, capsys):
+    data = dataset(tmp_path / "data", rendered=False)
+    run = tmp_path / "run"
+    train_new(data, run)
+    frames = json.loads((run / "dataset" / "transforms_train.json").read_text())["frames"]
+    new = [frames[4]["transform_matrix"], frames[4]["transform_matrix"]]  # already there, and twice
+    poses = {"camera_angle_x": BLENDER_CAMERA_ANGLE_X, "frames": [{"file_path": f"./new_{i}"} for i in range(2)]}
+    for frame, matrix in zip(poses["frames"], new):
+        frame["transform_matrix"] = matrix
+    (tmp_path / "poses.json").write_text(json.dumps(poses))
+    captures = tmp_path / "captures"
+    captures.mkdir()
+    for i in range(2):
+        iio.imwrite(captures / f"new_{i}.png", np.full((SIZE, SIZE, 3), 100 + i, np.uint8))
+    capsys.readouterr()
+    main(["add", str(run), "--images", str(captures), "--poses", str(tmp_path / "poses.json"), "--steps", "0"])
+    warnings = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
+    stem = Path(frames[4]["file_path"]).stem
+    assert any("new_0" in w and stem in w for w in warnings), warnings
+    assert any("new_1" in w and "new_0" in w for w in warnings), warnings
+
+
+def test_session_training_takes_one_torch_thread_unless_told(tmp_path, monkeypatch):
+    import nerfaug.device
+
+    calls = []
+    monkeypatch.setattr(nerfaug.device, "configure_process", lambda threads=None: calls.append(threads))
+    data = dataset(tmp_path / "data")
+    train_new(data, tmp_path / "run")
+    main(["train", str(tmp_path / "run"), "--steps", "1", "--threads", "2", "--device", "cpu"])
+    assert [c for c in calls if c is not None] == [1, 2]  # cli.main's own call sets no threads
+
+
+def test_a_session_saved_between_its_two_writes_still_opens(tmp_path):
+    """`save` records the new checkpoint's digest as pending before replacing the file: a process
+    killed after session.json but before the checkpoint keeps a checkpoint the session knows."""
+    run = tmp_path / "run"
+    train_new(dataset(tmp_path / "data"), run)
+    state = json.loads((run / "session.json").read_text())
+    state["integrity"]["pending"], state["integrity"]["checkpoint"] = state["integrity"]["checkpoint"], "0" * 64
+    (run / "session.json").write_text(json.dumps(state))
+    assert CaptureSession.open(run).step == 2
+
+
+def test_a_killed_train_loses_at_most_the_checkpoint_period(tmp_path):
+    """A real SIGKILL of `nerfaug train` once a periodic (1 s) checkpoint is on disk: the session
+    resumes from it."""
+    data, run = dataset(tmp_path / "data"), tmp_path / "run"
+    argv = ["train", data, "--out", run, "--preset", "test", "--steps", "1000000", "--device", "cpu"]
+    command = [sys.executable, "-m", "nerfaug.cli", *map(str, argv), "--checkpoint-every", "1"]
+    child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 300  # a guard against a hang, not a timing assertion
+        while time.monotonic() < deadline and child.poll() is None:
+            try:
+                if json.loads((run / "session.json").read_text())["step"] > 0:
+                    break
+            except (OSError, ValueError, KeyError):
+                pass
+            time.sleep(0.2)
+        assert child.poll() is None, child.stderr.read().decode()
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait()
+    saved = json.loads((run / "session.json").read_text())["step"]
+    assert saved > 0
+    session = CaptureSession.open(run)
+    assert session.step >= saved
+    main(["train", str(run), "--steps", "3", "--device", "cpu"])
+    assert CaptureSession.open(run).step == session.step + 3
+
+
+def test_eval_scores_renders_of_the_nerf_itself_as_near_perfect(tmp_path, capsys):
+    """The known case: a test split made of the session's own renders (8-bit PNGs) differs from
+    them by quantisation alone, so PSNR >= 20 log10(510) = 54.2 dB and SSIM > 0.99."""
+    run = tmp_path / "run"
+    train_new(dataset(tmp_path / "data"), run)
+    session = CaptureSession.open(run)
+    poses = sample_uniform_poses(3, torch.Generator().manual_seed(5))
+    renders = (session.render(poses) * 255).round() / 255
+    own = tmp_path / "own"
+    cameras = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, SIZE, SIZE)
+    write_blender_split(own, "test", Views(cameras, renders, [f"./x/own_{i}" for i in range(3)]))
+    write_blender_split(own, "noise", views(3, 9, poses))
+    out = tmp_path / "metrics.json"
+    capsys.readouterr()
+    main(["eval", str(run), "--data", str(own), "--out", str(out), "--device", "cpu"])
+    printed = capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert result["step"] == 2 and len(result["per_view"]) == 3
+    assert min(v["psnr"] for v in result["per_view"]) > 54.0
+    assert result["mean"]["ssim"] > 0.99
+    assert f"PSNR {result['mean']['psnr']:.2f} dB" in printed
+    # Random images at the same poses score far worse; eval's own JSON may be overwritten.
+    main(["eval", str(run), "--data", str(own), "--split", "noise", "--out", str(out), "--device", "cpu"])
+    assert json.loads(out.read_text())["mean"]["psnr"] < 20.0
