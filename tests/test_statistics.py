@@ -6,22 +6,19 @@ import pytest
 import torch
 from scipy import stats
 
+from nerfaug.coverage import mean_pairwise_angle, seen_half_start, unseen_half_share, view_coverage
 from nerfaug.hemisphere import half_hemisphere_poses, pose_from_angles
 from nerfaug.statistics import (
     bootstrap_median_difference,
     compare,
     markdown_table,
-    mean_pairwise_angle,
     min_attainable_p,
     min_attainable_paired_p,
     paired_comparison,
     seed_level_comparison,
-    seen_half_start,
     sign_flip_p,
     summarise,
     summary_table,
-    unseen_half_share,
-    view_coverage,
 )
 
 

@@ -83,6 +83,8 @@ def study_out(sphere, tmp_path_factory):
             "1",
             "--device",
             "cpu",
+            "--table",
+            str(docs.parent / "results" / "study-table.json"),
             "--results-doc",
             str(docs),
         ]
@@ -111,42 +113,63 @@ def unseen_share(folder: Path) -> float:
     return float((np.abs(offset) > math.pi / 2).mean())
 
 
-def test_study_writes_every_run_and_a_summary(study_out):
+def table_of(out: Path) -> dict:
+    from nerfaug.report.study_table import read_table
+
+    return read_table(out.parent / f"{out.name}_docs" / "results" / "study-table.json")
+
+
+def test_study_writes_every_run_a_table_and_a_summary(study_out):
     out, docs = study_out
     plan = json.loads((out / "study.json").read_text())
     assert plan["engines"] == ["test"] and plan["methods"] == ["ours", "uniform"] and plan["trials"] == 2
     assert plan["machine"]["cpu_count"] and plan["machine"]["torch"] == torch.__version__
+    assert plan["engine_settings"]["test"]["background_mode"] == "fixed"
     for method in ("ours", "uniform"):
         assert len(run_folders(out, method)) == 2
     assert (out / "study.md").is_file() and (out / "figures" / "coverage_test.png").is_file()
     assert (out / "figures" / "boxplots_test_sphere.png").is_file() and (out / "figures" / "paired_psnr.png").is_file()
     text = docs.read_text()
-    assert "nerfaug study --out" in text and "torch " + torch.__version__ in text
-    assert (docs.parent / "results" / "coverage_test.png").is_file()  # figures copied beside the page
+    assert "nerfaug study --summary-only --table" in text and "torch " + torch.__version__ in text
+    assert (docs.parent / "results" / "coverage_test.png").is_file()  # figures beside the page
     assert "](results/coverage_test.png)" in text
+    assert len(table_of(out)["runs"]) == 4
+
+
+def test_table_rows_are_the_run_folders(study_out):
+    from nerfaug.experiment.store import code_version
+
+    out, _ = study_out
+    runs = {(r["method"], r["trial"]): r for r in table_of(out)["runs"]}
+    for method in ("ours", "uniform"):
+        for folder in run_folders(out, method):
+            result = json.loads((folder / "result.json").read_text())
+            selection = json.loads((folder / "selection.json").read_text())
+            row = runs[(method, result["trial"])]
+            assert row["engine"] == "test" and row["scene"] == "sphere" and row["seed"] == result["seed"]
+            assert (row["psnr"], row["ssim"], row["lpips"]) == tuple(
+                result["metrics"][k] for k in ("psnr", "ssim", "lpips")
+            )
+            assert row["fingerprint"] == result["fingerprint"] and row["code_version"] == result["code_version"]
+            assert row["code_version"] == code_version() and row["chosen"] == selection["indices"]
+            np.testing.assert_allclose(row["chosen_poses"], np.asarray(selection["chosen_poses"])[:, :3], atol=1e-6)
 
 
 def test_summary_numbers_equal_a_recomputation(study_out):
     from nerfaug.report.study import BOOTSTRAP_SEED, collect_study
 
     out, _ = study_out
-    (cell,) = collect_study(out).cells
+    (cell,) = collect_study(table_of(out)).cells
     ours, uniform = psnrs(out, "ours"), psnrs(out, "uniform")
     assert cell.methods["ours"].values["psnr"] == ours and cell.methods["uniform"].values["psnr"] == uniform
     assert cell.winner == ("ours" if np.median(ours) > np.median(uniform) else "uniform")
     entry = cell.methods["ours"].vs_reference["psnr"]
-    assert entry["difference"] == pytest.approx(np.median(ours) - np.median(uniform), abs=1e-12)
-    ci = stats.bootstrap(
-        (np.array(ours), np.array(uniform)),
-        lambda x, y, axis: np.median(x, axis) - np.median(y, axis),
-        paired=False,
-        vectorized=True,
-        n_resamples=9999,
-        method="percentile",
-        rng=np.random.default_rng(BOOTSTRAP_SEED),
-    ).confidence_interval
-    assert (entry["low"], entry["high"]) == pytest.approx((ci.low, ci.high), abs=1e-12)
-    p = stats.mannwhitneyu(ours, uniform, alternative="two-sided", method="exact").pvalue
+    d = np.array(ours) - np.array(uniform)  # trial k pairs with trial k: the same seed
+    assert entry["difference"] == pytest.approx(np.median(d), abs=1e-12)
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    medians = np.median(d[rng.integers(0, d.size, (9999, d.size))], axis=1)
+    assert (entry["low"], entry["high"]) == pytest.approx(tuple(np.percentile(medians, [2.5, 97.5])), abs=1e-12)
+    p = stats.wilcoxon(d, alternative="two-sided", method="exact").pvalue
     assert entry["p_value"] == pytest.approx(p) and entry["p_bonferroni"] == pytest.approx(min(1.0, p * 1))
     for method in ("ours", "uniform"):
         found = sorted(c["unseen_share"] for c in cell.methods[method].coverage)
@@ -158,18 +181,72 @@ def test_summary_numbers_equal_a_recomputation(study_out):
     assert f"{cell.winner} ({np.median(ours if cell.winner == 'ours' else uniform):.2f} dB)" in text
 
 
-def test_summary_names_engines_not_run_and_lpips(study_out):
-    from nerfaug.report.study import write_study
+def without_provenance(text: str) -> str:
+    return "\n".join(line for line in text.splitlines() if not line.startswith("Generated on "))
+
+
+def test_the_page_is_rederived_from_the_table_alone(study_out, tmp_path):
+    """Without the run folders (a study folder that does not exist), --summary-only from the table
+    writes the same page, byte for byte but for its timestamp line."""
+    from nerfaug.cli import main
+
+    out, docs = study_out
+    before = docs.read_text()
+    table = docs.parent / "results" / "study-table.json"
+    table_bytes = table.read_bytes()
+    main(
+        ["study", "--out", str(tmp_path / "gone"), "--summary-only", "--table", str(table), "--results-doc", str(docs)]
+    )
+    assert without_provenance(docs.read_text()) == without_provenance(before)
+    assert table.read_bytes() == table_bytes  # read, not rewritten
+
+
+def test_a_study_resumes_from_its_table_without_run_folders(study_out, sphere, tmp_path, capsys):
+    from nerfaug.cli import main
+
+    out, docs = study_out
+    table = docs.parent / "results" / "study-table.json"
+    again = tmp_path / "again"
+    main(
+        [
+            "study",
+            "--out",
+            str(again),
+            "--table",
+            str(table),
+            "--preset",
+            "tiny",
+            "--engines",
+            "test",
+            "--scenes",
+            str(sphere),
+            "--methods",
+            "ours",
+            "uniform",
+            "--trials",
+            "2",
+            "--resolution",
+            str(SIZE),
+            "--steps",
+            "60",
+            "--workers",
+            "1",
+            "--device",
+            "cpu",
+        ]
+    )
+    assert "4 recorded in the table, 0 to run" in capsys.readouterr().err
+    assert not list((again / "test" / "runs").glob("*/*/*"))  # nothing was run again
+    assert len(table_of(out)["runs"]) == 4
+
+
+def test_summary_names_engines_not_run_and_lpips(study_out, tmp_path):
+    from nerfaug.report.study_page import write_study
 
     out, _ = study_out
-    plan = json.loads((out / "study.json").read_text())
-    plan["engines"].append("cpu")  # planned but never run: its cells are incomplete
-    (out / "study.json").write_text(json.dumps(plan))
-    try:
-        text = write_study(out)[0].read_text()
-    finally:
-        plan["engines"].remove("cpu")
-        (out / "study.json").write_text(json.dumps(plan))
+    table = table_of(out)
+    table["plan"]["engines"].append("cpu")  # planned but never run: its cells are incomplete
+    text = write_study(tmp_path, table)[0].read_text()
     incomplete = text.split("## Incomplete cells", 1)[1]
     assert "engine cpu: not run yet" in incomplete
     lpips = [json.loads((f / "result.json").read_text())["metrics"]["lpips"] for f in run_folders(out, "ours")]
@@ -227,36 +304,25 @@ def test_bad_study_options_are_refused_before_any_dataset_is_rendered(tmp_path):
 
 
 def test_the_hand_written_reading_is_kept_when_the_page_is_regenerated(study_out, tmp_path):
-    from nerfaug.report.study import READING_END, READING_START, write_results_doc
+    from nerfaug.report.study_page import READING_END, READING_START, write_results_doc
 
     out, _ = study_out
+    table, source = table_of(out), Path("study-table.json")
     page = tmp_path / "results.md"
-    write_results_doc(out, page)
+    write_results_doc(table, source, page)
     reading = f"{READING_START}\nOurs did not beat uniform here; see the coverage figure.\n{READING_END}"
     page.write_text(page.read_text() + "\n" + reading + "\n")
-    write_results_doc(out, page)
+    write_results_doc(table, source, page)
     text = page.read_text()
     assert text.count("Ours did not beat uniform here") == 1
-    assert text.index(READING_END) < text.index("## Where each method wins")
-    write_results_doc(out, page)  # and again: still once
+    assert text.index(READING_END) < text.index("## Which method to use")
+    write_results_doc(table, source, page)  # and again: still once
     assert page.read_text().count(READING_START) == 1
 
 
-def test_pooled_pairs_are_matched_by_trial_and_shown_as_computed(study_out):
+def test_paired_values_are_matched_by_trial():
     from nerfaug.report.collect import Results, Run
-    from nerfaug.report.pooled import paired_values, plot_paired_differences, pooled_comparisons
-    from nerfaug.report.study import BOOTSTRAP_SEED
-    from nerfaug.statistics import paired_comparison
-
-    out, _ = study_out
-    ours, uniform = psnrs(out, "ours"), psnrs(out, "uniform")
-    results = collect_results_of(out)
-    pooled = pooled_comparisons([(results, "sphere")], ["ours", "uniform"], "uniform", seed=BOOTSTRAP_SEED)
-    expected = paired_comparison(ours, uniform, 1, seed=BOOTSTRAP_SEED)
-    assert set(pooled) == {"ours"} and pooled["ours"]["psnr"] == {**expected, "cells": 1}
-    shown = round(expected["difference"], 2) + 0.0
-    assert "## Pooled over cells, paired by trial (secondary)" in (out / "study.md").read_text()
-    assert f"{shown:+.2f}" in (out / "study.md").read_text().split("## Pooled over cells", 1)[1]
+    from nerfaug.report.pooled import paired_values, plot_paired_differences
 
     # A trial one method lacks, or whose metric is missing, pairs with nothing.
     def run(method, trial, psnr):

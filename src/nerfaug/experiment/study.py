@@ -7,9 +7,12 @@ each as one resumable sweep per engine into `OUT/<engine>/`, then one combined s
                               methods, trials, the command, the machine
       datasets/<res>px/<scene>/  each built-in scene rendered once, shared by every engine
       <engine>/               a results folder as `nerfaug run` writes it (sweep.json, runs/, report)
-      study.md, figures/      the summary
+      study-table.json        the per-run table (`nerfaug.report.study_table`), or the --table file
+      study.md, figures/      the summary, generated from the table alone
 
-Re-running the same command skips completed runs (each engine's sweep resumes on its own).
+Re-running the same command skips completed runs (each engine's sweep resumes on its own), and
+runs recorded in the table with the fingerprint they would have now (a study committed beside
+its page resumes without its run folders).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from typing import Literal
 from nerfaug.experiment.config import ExperimentConfig, preset
 
 STUDY_FILE = "study.json"
+TABLE_FILE = "study-table.json"
 DEFAULT_TRIALS = 10
 """Trials per (scene, engine, method): with 10 seed-paired trials a two-sided Wilcoxon signed-rank
 test, Bonferroni over the 7 methods compared with uniform, reaches p < 0.05 when 9 of 10 pairs
@@ -121,8 +125,11 @@ class StudyPlan:
         return self.config.replace(engine=engine, scenes=tuple(self.datasets[s] for s in self.scenes))
 
     def record(self) -> dict:
+        from nerfaug.nerf.config import NerfConfig
+
         return {
             "engines": self.engines,
+            "engine_settings": {e: NerfConfig.preset(e).to_dict() for e in self.engines},
             "left_out": self.left_out,
             "scenes": self.scenes,
             "datasets": self.datasets,
@@ -157,17 +164,21 @@ def prepare_datasets(
 
 
 def merged_record(path: Path, record: dict) -> dict:
-    """`record` grown by the study.json at `path`, if any: a study may run in sittings, one engine
-    or scene at a time (`--engines nerfacto-cpu --scenes lego`), and its summary covers every
-    engine and scene run so far. The methods and trials are the latest command's; the commands
-    of every sitting are kept."""
+    """`record` grown by the study.json at `path`, if any (`merge_records`)."""
     try:
         previous = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return record
-    if not isinstance(previous, dict):
-        return record
+    return merge_records(previous, record) if isinstance(previous, dict) else record
+
+
+def merge_records(previous: dict, record: dict) -> dict:
+    """`record` grown by an earlier sitting's: a study may run in sittings, one engine or scene at
+    a time (`--engines nerfacto-cpu --scenes lego`), and its summary covers every engine and scene
+    run so far. The methods and trials are the latest command's; the commands of every sitting
+    are kept."""
     merged = dict(record)
+    merged["engine_settings"] = {**previous.get("engine_settings", {}), **record.get("engine_settings", {})}
     merged["engines"] = list(dict.fromkeys([*previous.get("engines", []), *record["engines"]]))
     merged["scenes"] = list(dict.fromkeys([*previous.get("scenes", []), *record["scenes"]]))
     merged["datasets"] = {**previous.get("datasets", {}), **record["datasets"]}
@@ -178,9 +189,13 @@ def merged_record(path: Path, record: dict) -> dict:
     return merged
 
 
-def run_study(plan: StudyPlan, workers: int = 1, force: bool = False, progress: bool = True) -> dict[str, dict]:
-    """Run every engine's sweep (resuming), writing OUT/study.json first. Returns engine ->
-    {"failed": {run: reason}, "results": n valid results}."""
+def run_study(
+    plan: StudyPlan, workers: int = 1, force: bool = False, progress: bool = True, table: dict | None = None
+) -> dict[str, dict]:
+    """Run every engine's sweep (resuming; runs recorded in `table` with their current fingerprint
+    are not run again), writing OUT/study.json first. Returns engine -> {"failed": {run: reason},
+    "results": n valid results}."""
+    from nerfaug.experiment.store import RunKey
     from nerfaug.experiment.sweep import run_sweep
     from nerfaug.jsonio import atomic_write_json
 
@@ -197,6 +212,11 @@ def run_study(plan: StudyPlan, workers: int = 1, force: bool = False, progress: 
             force=force,
             progress=progress,
             command=plan.command,
+            recorded={
+                RunKey(r["scene"], r["method"], r["trial"]): r["fingerprint"]
+                for r in (table or {}).get("runs", [])
+                if r["engine"] == engine
+            },
         )
         outcomes[engine] = {"failed": outcome.failed, "results": len(outcome.results)}
     return outcomes
@@ -215,20 +235,23 @@ def study(
     device: Literal["auto", "cpu", "cuda"] = "auto",
     preset: StudyPreset = "study",
     summary_only: bool = False,
+    table: Path | None = None,
     results_doc: Path | None = None,
 ) -> None:
     """The study: which selection method wins where. Runs the study family of methods x engine
-    presets x scenes as one resumable sweep per engine into OUT/<engine>/, then writes the summary
-    OUT/study.md (winner per scene and engine, every method's median difference to uniform with a
-    bootstrap 95% CI, Mann-Whitney p-values, PSNR/SSIM/LPIPS, coverage of the chosen views).
+    presets x scenes as one resumable sweep per engine into OUT/<engine>/, records every finished
+    run in a per-run table, and writes the summary OUT/study.md from that table alone: which method
+    to use per engine, per (scene, engine) every method's paired difference to uniform (same seed)
+    with a bootstrap 95% CI and a Wilcoxon signed-rank test, per engine a test with one value per
+    seed, PSNR/SSIM/LPIPS, and the coverage of the chosen views.
 
     Args:
         out: the study folder.
-        engines: engine presets (default: every preset but the test one, and the paper's only on
-            a GPU; the reason is printed).
+        engines: engine presets, or variants written BASE+FIELD=VALUE (default: every preset but
+            the test one, and the paper's only on a GPU; the reason is printed).
         scenes: built-in scene names or dataset folders (default: lego, chair, materials).
         methods: selection methods (default: the registry's "study" family).
-        trials: trials per (scene, method, engine) (default: 5, or more when Bonferroni over
+        trials: trials per (scene, method, engine) (default: 10, or more when Bonferroni over
             the comparisons with uniform needs more for p < 0.05 to be reachable).
         resolution: image size of the built-in scenes.
         steps: training steps per run (default: the preset's, 2000).
@@ -236,15 +259,21 @@ def study(
         force: discard existing runs and redo them.
         device: auto (cuda when there is a GPU), cpu or cuda.
         preset: study (the paper's protocol at 100x100) or tiny (seconds; tests).
-        summary_only: run nothing; rewrite the summary from what OUT holds.
-        results_doc: also write this Markdown summary (e.g. docs/results.md), figures beside it.
+        summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
+            folders where OUT holds a study).
+        table: the per-run table to record runs in and summarise (default OUT/study-table.json);
+            runs it records with their current fingerprint are not run again.
+        results_doc: also write this Markdown page (e.g. docs/results.md), figures beside it.
     """
-    from nerfaug.report.study import write_results_doc, write_study
+    from nerfaug.report.study_page import write_results_doc, write_study
+    from nerfaug.report.study_table import read_table
 
     out = Path(out)
+    table_path = Path(table) if table is not None else out / TABLE_FILE
+    previous = read_table(table_path) if table_path.exists() else None
     failed = {}
     if not summary_only:
-        command = study_command(out, engines, scenes, methods, trials, resolution, steps, device, preset)
+        command = study_command(out, engines, scenes, methods, trials, resolution, steps, device, preset, table)
         plan = make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command)
         for engine, why in plan.left_out.items():
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)
@@ -252,12 +281,14 @@ def study(
             workers = (
                 1 if plan.config.device == "cuda" else max(1, (os.cpu_count() or 1) // plan.config.threads_per_run)
             )
-        outcomes = run_study(plan, workers=workers, force=force)
+        outcomes = run_study(plan, workers=workers, force=force, table=previous)
         failed = {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
-    paths = write_study(out)
+    recorded = record_table(out, table_path, previous)
+    print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
+    paths = write_study(out, recorded)
     print("study summary: " + ", ".join(str(p) for p in paths))
     if results_doc is not None:
-        print(f"results: {write_results_doc(out, results_doc)}")
+        print(f"results: {write_results_doc(recorded, table_path, results_doc)}")
     if failed:
         print(f"{len(failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
         for key, why in failed.items():
@@ -265,11 +296,39 @@ def study(
         raise SystemExit(1)
 
 
+def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
+    """The study's table: `previous` (the table at `table_path`, if any) updated with every valid
+    run under OUT, written back; `previous` itself when OUT holds no study.
+
+    Raises:
+        SystemExit: neither OUT/study.json nor the table exists.
+    """
+    from nerfaug.report.study_table import make_table, rows_from_folders, write_table
+
+    path = Path(out) / STUDY_FILE
+    if not path.is_file():
+        if previous is None:
+            raise SystemExit(
+                f"nerfaug study: nothing to summarise: neither {path} nor the table {table_path} exists; run a "
+                "study first, or pass --table FILE"
+            )
+        return previous
+    record = json.loads(path.read_text())
+    if previous is not None:
+        record = merge_records(previous["plan"], record)
+    rows, initial = rows_from_folders(Path(out), record["engines"])
+    recorded = make_table(record, rows, initial, previous)
+    write_table(table_path, recorded)
+    return recorded
+
+
 def study_command(
-    out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str, preset_name: str
+    out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str, preset_name: str, table=None
 ) -> list[str]:
     """The command line that plans this study again (the options that decide what runs)."""
     command = ["nerfaug", "study", "--out", str(out)]
+    if table is not None:
+        command += ["--table", str(table)]
     for flag, values in (("--engines", engines), ("--scenes", scenes), ("--methods", methods)):
         if values:
             command += [flag, *map(str, values)]
@@ -343,10 +402,12 @@ def make_plan(
 __all__ = [
     "DEFAULT_TRIALS",
     "STUDY_FILE",
+    "TABLE_FILE",
     "StudyPlan",
     "default_engines",
     "engine_presets",
     "make_plan",
+    "merge_records",
     "min_trials",
     "prepare_datasets",
     "run_study",

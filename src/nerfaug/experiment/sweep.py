@@ -236,6 +236,7 @@ def run_sweep(
     force: bool = False,
     progress: bool = True,
     command: list[str] | None = None,
+    recorded: dict[RunKey, str] | None = None,
 ) -> SweepOutcome:
     """Run every missing run of the sweep and return all results.
 
@@ -245,6 +246,9 @@ def run_sweep(
         workers: concurrent runs for the local backend.
         address: a Ray cluster to join ("auto", "ray://host:10001"); None starts a local Ray.
         force: move existing runs aside (into root/superseded/) and redo everything.
+        recorded: runs finished elsewhere (a study's committed table), by key, with their run
+            fingerprint: a run whose recorded fingerprint is the one it would have now is not
+            run again (and is not among the results returned).
 
     Raises:
         ValueError, DatasetError: a setting or a dataset is wrong (checked before any work).
@@ -266,19 +270,24 @@ def run_sweep(
         console.print(f"--force: the earlier runs and sweep.json were moved to {moved}")
     datasets = {scene_name(s): prepare_scene(root, s, config, progress=progress) for s in config.scenes}
 
-    results, todo = [], []
+    results, todo, elsewhere = [], [], 0
     for key in keys:
         folder = key.folder(root)
-        result = read_result(folder, run_fingerprint(record["fingerprint"], record["methods"][key.method]))
+        expected = run_fingerprint(record["fingerprint"], record["methods"][key.method])
+        result = read_result(folder, expected)
         if result is not None:
             results.append(result)
+            continue
+        if not force and (recorded or {}).get(key) == expected and not folder.exists():
+            elsewhere += 1
             continue
         if clear_incomplete(folder):
             console.print(f"[yellow]redoing {key}: its folder had no valid result (interrupted or corrupted)")
         todo.append(key)
     skipped = len(results)
-    if skipped:
-        console.print(f"{skipped} completed run(s) kept, {len(todo)} to run")
+    if skipped or elsewhere:
+        kept = f"{skipped} completed run(s) kept" + (f", {elsewhere} recorded in the table" if elsewhere else "")
+        console.print(f"{kept}, {len(todo)} to run")
 
     execute = {"local": _execute_local, "ray": _execute_ray}[backend]
     new_results, failed = execute(todo, datasets, config, root, workers, address, progress)

@@ -1,0 +1,306 @@
+"""The study's per-run table: one row per finished run (engine, scene, method, trial, seed, PSNR,
+SSIM, LPIPS, the chosen views and their poses, the code version and the run's fingerprint), with
+the study's plan, the methods' definitions and each scene's initial views.
+
+It is the study's record: the results page and its figures are generated from this table alone
+(`nerfaug.report.study`), so a page committed beside its table can be re-derived without the run
+folders, and a study resumes from it (runs recorded with a matching fingerprint are not run
+again). Written as JSON, one run per line, rows sorted by (engine, scene, method, trial):
+
+    {"format": "nerfaug-study-table", "version": 1, "plan": {...study.json...},
+     "methods": {name: {"label", "description", "definition"}},
+     "scenes": {scene: {"initial_poses": [[3x4], ...]}},
+     "runs": [{"engine", "scene", "method", "trial", "seed", "psnr", "ssim", "lpips",
+               "lpips_status", "chosen", "chosen_poses", "code_version", "fingerprint"}, ...]}
+
+Poses are camera-to-world, the top 3x4 rows, rounded to `POSE_DECIMALS` (what the coverage numbers
+are computed from, so rounding never separates the table from its page).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nerfaug.experiment.runfolder import read_selection
+from nerfaug.jsonio import atomic_write_bytes
+from nerfaug.report.collect import ReportError, Results, Run, collect_results
+
+TABLE_FORMAT, TABLE_VERSION = "nerfaug-study-table", 1
+POSE_DECIMALS = 6
+ROW_FIELDS = (
+    "engine",
+    "scene",
+    "method",
+    "trial",
+    "seed",
+    "psnr",
+    "ssim",
+    "lpips",
+    "lpips_status",
+    "chosen",
+    "chosen_poses",
+    "code_version",
+    "fingerprint",
+)
+
+
+@dataclass(frozen=True)
+class RunRow:
+    """One finished run of the study.
+
+    Attributes:
+        chosen: pool indices of the views the method added, in the order chosen.
+        chosen_poses: their camera-to-world poses, top 3x4 rows, as nested lists (k, 3, 4).
+        lpips: None where LPIPS was not computed (`lpips_status` says why).
+    """
+
+    engine: str
+    scene: str
+    method: str
+    trial: int
+    seed: int
+    psnr: float
+    ssim: float | None
+    lpips: float | None
+    lpips_status: str
+    chosen: list[int]
+    chosen_poses: list
+    code_version: str
+    fingerprint: str
+
+    @property
+    def key(self) -> tuple[str, str, str, int]:
+        return (self.engine, self.scene, self.method, self.trial)
+
+    def metric(self, name: str) -> float | None:
+        return getattr(self, name)
+
+    def poses(self) -> np.ndarray:
+        """The chosen views' camera-to-world matrices, shape (k, 4, 4)."""
+        return homogeneous(self.chosen_poses)
+
+
+def homogeneous(poses_3x4) -> np.ndarray:
+    """(k, 3, 4) nested lists -> (k, 4, 4) float64 camera-to-world matrices."""
+    top = np.asarray(poses_3x4, dtype=np.float64).reshape(-1, 3, 4)
+    bottom = np.broadcast_to(np.array([0.0, 0.0, 0.0, 1.0]), (top.shape[0], 1, 4))
+    return np.concatenate([top, bottom], axis=1)
+
+
+def rounded_poses(poses) -> list:
+    """(k, 4, 4) camera-to-world -> their top 3x4 rows as nested lists, rounded (+ 0.0: no -0.0)."""
+    top = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)[:, :3, :]
+    return (np.round(top, POSE_DECIMALS) + 0.0).tolist()
+
+
+def _number(value) -> float | None:
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
+    """A run folder's row and its initial views' poses (3x4 lists); None without a selection
+    record (a run of an older nerfaug, or a damaged folder)."""
+    selection = read_selection(run.folder)
+    if selection is None or selection.chosen_poses is None:
+        return None
+    result, metrics = run.result, run.result["metrics"]
+    row = RunRow(
+        engine=engine,
+        scene=run.scene,
+        method=run.method,
+        trial=run.trial,
+        seed=int(result["seed"]),
+        psnr=float(metrics["psnr"]),
+        ssim=_number(metrics.get("ssim")),
+        lpips=_number(metrics.get("lpips")),
+        lpips_status=str(result.get("lpips_status", "")),
+        chosen=[int(i) for i in result.get("chosen", selection.indices)],
+        chosen_poses=rounded_poses(selection.chosen_poses),
+        code_version=str(result["code_version"]),
+        fingerprint=str(result["fingerprint"]),
+    )
+    return row, rounded_poses(selection.train_poses)
+
+
+def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dict[str, list]]:
+    """Every valid run under `root/<engine>/` as rows, and each scene's initial views.
+
+    Raises:
+        ReportError: two runs of a scene started from different initial views (the table holds
+            one set per scene).
+    """
+    rows, initial = [], {}
+    for engine in engines:
+        if not (Path(root) / engine / "sweep.json").is_file():
+            continue
+        for run in collect_results(Path(root) / engine).runs:
+            found = row_of(engine, run)
+            if found is None:
+                continue
+            row, poses = found
+            if initial.setdefault(row.scene, poses) != poses:
+                raise ReportError(f"{run.folder}: its initial views differ from other runs of scene {row.scene!r}")
+            rows.append(row)
+    return rows, initial
+
+
+def method_records(names) -> dict[str, dict]:
+    """name -> its label, description and definition, for every registered name in `names`."""
+    from nerfaug.selection import METHODS
+
+    return {
+        name: {"label": spec.label, "description": spec.description, "definition": spec.definition()}
+        for name in names
+        if (spec := METHODS.get(name)) is not None
+    }
+
+
+def make_table(plan: dict, rows: list[RunRow], initial: dict[str, list], previous: dict | None = None) -> dict:
+    """The table of `rows` over `previous`, with `plan`, the methods' records and the scenes'
+    initial views. A row replaces the previous row of its run; where `rows` hold an (engine,
+    method) with another fingerprint than the previous rows of it (its settings or its engine
+    changed), those previous rows are dropped: a cell never mixes runs of two configurations."""
+    current = {(row.engine, row.method): row.fingerprint for row in rows}
+    kept = [
+        row
+        for row in (previous_rows(previous) if previous else [])
+        if current.get((row.engine, row.method), row.fingerprint) == row.fingerprint
+    ]
+    by_key = {row.key: row for row in kept}
+    by_key.update({row.key: row for row in rows})
+    scenes = dict((previous or {}).get("scenes", {}))
+    scenes.update({scene: {"initial_poses": poses} for scene, poses in initial.items()})
+    ordered = sorted(by_key.values(), key=lambda r: r.key)
+    methods = list(dict.fromkeys([*plan.get("methods", []), *(r.method for r in ordered)]))
+    return {
+        "format": TABLE_FORMAT,
+        "version": TABLE_VERSION,
+        "plan": plan,
+        "methods": {**(previous or {}).get("methods", {}), **method_records(methods)},
+        "scenes": dict(sorted(scenes.items())),
+        "runs": [asdict(row) for row in ordered],
+    }
+
+
+def previous_rows(table: dict) -> list[RunRow]:
+    return [RunRow(**run) for run in table["runs"]]
+
+
+def table_bytes(table: dict) -> bytes:
+    """The table as JSON text: the header keys on their own lines, one run per line (diffs
+    between sittings stay readable)."""
+    head = {k: v for k, v in table.items() if k != "runs"}
+    lines = ["{"]
+    for key, value in head.items():
+        lines.append(f"{json.dumps(key)}: {json.dumps(value, sort_keys=True)},")
+    runs = [json.dumps(run, separators=(",", ":")) for run in table["runs"]]
+    lines.append('"runs": [')
+    lines += [f"{run}," for run in runs[:-1]] + runs[-1:]
+    lines += ["]", "}"]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def write_table(path: Path, table: dict) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, table_bytes(table))
+    return path
+
+
+def _refuse(path: Path, where: str, problem: str) -> ReportError:
+    return ReportError(f"{path}: {where}: {problem}")
+
+
+def _check_row(path: Path, index: int, run) -> RunRow:
+    where = f"runs[{index}]"
+    if not isinstance(run, dict):
+        raise _refuse(path, where, "not an object")
+    missing = [k for k in ROW_FIELDS if k not in run]
+    unknown = sorted(set(run) - set(ROW_FIELDS))
+    if missing or unknown:
+        raise _refuse(path, where, f"missing {missing}" if missing else f"unknown fields {unknown}")
+    for name, kinds in (("engine", str), ("scene", str), ("method", str), ("trial", int), ("seed", int)):
+        if not isinstance(run[name], kinds) or isinstance(run[name], bool):
+            raise _refuse(path, f"{where}.{name}", f"{run[name]!r} is not a {kinds.__name__}")
+    for name in ("psnr", "ssim", "lpips"):
+        value = run[name]
+        if value is None and name != "psnr":
+            continue
+        # PSNR may be inf (identical images); SSIM and LPIPS are finite or null.
+        if _number(value) is None or math.isnan(value) or (name != "psnr" and math.isinf(value)):
+            raise _refuse(path, f"{where}.{name}", f"{value!r} is not a number")
+    try:
+        poses = np.asarray(run["chosen_poses"], dtype=np.float64).reshape(-1, 3, 4)
+    except (TypeError, ValueError):
+        raise _refuse(path, f"{where}.chosen_poses", "not a list of 3x4 matrices") from None
+    if poses.shape[0] != len(run["chosen"]) or not np.isfinite(poses).all():
+        raise _refuse(path, f"{where}.chosen_poses", f"{poses.shape[0]} finite poses expected for {run['chosen']}")
+    return RunRow(**run)
+
+
+def read_table(path: Path) -> dict:
+    """A table written by `write_table`, checked: ReportError naming the file, the field and the
+    value otherwise."""
+    path = Path(path)
+    try:
+        table = json.loads(path.read_text())
+    except OSError as error:
+        raise ReportError(f"{path}: not readable ({error.strerror or error})") from None
+    except json.JSONDecodeError as error:
+        raise ReportError(f"{path}: invalid JSON ({error.msg} at line {error.lineno})") from None
+    if not isinstance(table, dict) or table.get("format") != TABLE_FORMAT:
+        raise _refuse(
+            path, "format", f"not a {TABLE_FORMAT} (got {table.get('format') if isinstance(table, dict) else table!r})"
+        )
+    if table.get("version") != TABLE_VERSION:
+        raise _refuse(path, "version", f"{table.get('version')!r}, this nerfaug reads version {TABLE_VERSION}")
+    for key, kind in (("plan", dict), ("methods", dict), ("scenes", dict), ("runs", list)):
+        if not isinstance(table.get(key), kind):
+            raise _refuse(path, key, f"missing or not a {kind.__name__}")
+    keys = set()
+    for index, run in enumerate(table["runs"]):
+        row = _check_row(path, index, run)
+        if row.key in keys:
+            raise _refuse(path, f"runs[{index}]", f"a second row for {'/'.join(map(str, row.key))}")
+        if row.scene not in table["scenes"]:
+            raise _refuse(path, f"runs[{index}].scene", f"{row.scene!r} has no initial views under 'scenes'")
+        keys.add(row.key)
+    return table
+
+
+def engine_results(table: dict, engine: str) -> Results:
+    """One engine's rows as the `Results` the report's figures and paired values read (runs
+    without folders: every number comes from the table)."""
+    rows = [r for r in previous_rows(table) if r.engine == engine]
+    runs = [
+        Run(
+            r.scene,
+            r.method,
+            r.trial,
+            Path("."),
+            {"metrics": {"psnr": r.psnr, "ssim": r.ssim, "lpips": r.lpips}, "lpips_status": r.lpips_status},
+        )
+        for r in rows
+    ]
+    plan = table["plan"]
+    scenes = [s for s in plan.get("scenes", []) if any(r.scene == s for r in rows)]
+    scenes += sorted({r.scene for r in rows} - set(scenes))
+    methods = [m for m in plan.get("methods", []) if any(r.method == m for r in rows)]
+    methods += sorted({r.method for r in rows} - set(methods))
+    return Results(Path("."), {"config": {"methods": methods}}, runs, [], [], scenes, methods)
+
+
+__all__ = [
+    "RunRow",
+    "engine_results",
+    "homogeneous",
+    "make_table",
+    "read_table",
+    "rows_from_folders",
+    "write_table",
+]

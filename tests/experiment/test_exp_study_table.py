@@ -1,0 +1,144 @@
+"""The study's per-run table: its checks, and the page's statistics and verdicts computed from a
+constructed table whose answers are known."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from nerfaug.hemisphere import half_hemisphere_poses, pose_from_angles
+from nerfaug.report.collect import ReportError
+from nerfaug.report.document import to_markdown
+from nerfaug.report.study import collect_study
+from nerfaug.report.study_hypotheses import h1, h2, h3
+from nerfaug.report.study_page import study_blocks
+from nerfaug.report.study_table import RunRow, make_table, read_table, rounded_poses, write_table
+from nerfaug.statistics import seed_level_comparison
+
+ENGINE = "nerfacto-cpu-last-sample"
+SCENES = ("lego", "chair", "materials")
+SEEDS = range(10)
+
+
+def poses_at(azimuths_deg):
+    azimuth = torch.tensor(azimuths_deg, dtype=torch.float64).deg2rad()
+    return rounded_poses(pose_from_angles(azimuth, torch.full_like(azimuth, 1.0)).numpy())
+
+
+def synthetic_table(offsets: dict[str, float]) -> dict:
+    """10 seeds x 3 scenes; uniform's PSNR varies by seed and scene, every other method is
+    uniform + its offset + a small seed-dependent term (of the offset's sign; alternating where
+    the offset is 0). ours-paper-sum picks views on the far side (azimuth 180), ours near the seen side."""
+    rng = np.random.default_rng(0)
+    rows = []
+    far, near = poses_at([170, 180, 190]), poses_at([10, 20, 30])
+    for scene in SCENES:
+        for seed in SEEDS:
+            base = 20.0 + rng.normal(0, 2)
+            for method, offset in {"uniform": 0.0, **offsets}.items():
+                sign = (-1) ** seed if offset == 0 else np.sign(offset)  # offset 0: no consistent sign
+                jitter = 0.0 if method == "uniform" else 0.01 * (seed + 1) * sign
+                poses = far if method == "ours-paper-sum" else near
+                rows.append(
+                    RunRow(
+                        ENGINE,
+                        scene,
+                        method,
+                        seed,
+                        seed,
+                        base + offset + jitter,
+                        0.8,
+                        0.2,
+                        "ok",
+                        [0, 1, 2],
+                        poses,
+                        "v1",
+                        "f",
+                    )
+                )
+    initial = rounded_poses(half_hemisphere_poses(6).numpy())
+    plan = {
+        "engines": [ENGINE],
+        "scenes": list(SCENES),
+        "methods": ["ours", "ours-paper-sum", "uniform", "fisherrf"],
+        "trials": 10,
+        "engine_settings": {ENGINE: {"background_mode": "last_sample"}},
+    }
+    return make_table(plan, rows, {scene: initial for scene in SCENES})
+
+
+def test_paired_tests_regimes_and_verdicts_on_a_constructed_study(tmp_path):
+    table = synthetic_table({"ours": 1.0, "ours-paper-sum": 0.0, "fisherrf": -2.0})
+    path = write_table(tmp_path / "table.json", table)
+    study = collect_study(read_table(path))
+    assert [c.scene for c in study.cells] == list(SCENES) and all(c.complete for c in study.cells)
+    for cell in study.cells:
+        entry = cell.methods["ours"].vs_reference["psnr"]
+        # 10 of 10 pairs favour ours: the exact signed-rank test's smallest p, x3 methods compared.
+        assert entry["wins"] == 10 and entry["p_value"] == pytest.approx(2 / 2**10)
+        assert entry["p_bonferroni"] == pytest.approx(3 * 2 / 2**10) and entry["significant"]
+        assert cell.significant(True) == ["ours"] and cell.significant(False) == ["fisherrf"]
+    # The regime test takes each seed's mean over the three scenes.
+    regime = study.regimes[ENGINE]["ours"]
+    by_seed = {
+        scene: {seed: 1.0 + 0.01 * (seed + 1) for seed in SEEDS} for scene in SCENES
+    }  # ours - uniform, by construction
+    expected = seed_level_comparison(by_seed, 3)
+    assert regime["seed_means"] == pytest.approx(expected["seed_means"]) and regime["p_value"] == expected["p_value"]
+    assert h1(study)[0] == "supported"
+    assert h2(study)[0] == "open"  # worse in the paper's regime, but cpu has not run
+    assert h3(study)[0] == "open"  # far side in 3 of 9 planned cells: not yet most
+    text = to_markdown(study_blocks(study, {}), tmp_path)
+    assert f"engine {ENGINE} (background last_sample): use **ours**" in text
+    assert "Worse than uniform: fisherrf (-2.06 dB)" in text
+
+
+def test_h1_is_not_supported_when_ours_loses(tmp_path):
+    study = collect_study(synthetic_table({"ours": -0.5, "ours-paper-sum": 0.2, "fisherrf": 0.0}))
+    verdict, evidence = h1(study)
+    assert verdict == "not supported" and "0 of 3 complete scene(s)" in evidence
+
+
+def test_rows_of_a_changed_configuration_replace_the_old_rows_of_that_method():
+    table = synthetic_table({"ours": 1.0})
+    new = RunRow(ENGINE, "lego", "ours", 0, 0, 30.0, 0.9, 0.1, "ok", [0], poses_at([0]), "v2", "g")
+    merged = make_table(table["plan"], [new], {}, table)
+    ours = [r for r in merged["runs"] if r["method"] == "ours"]
+    assert len(ours) == 1 and ours[0]["fingerprint"] == "g"  # no mix of fingerprints f and g
+    assert sum(r["method"] == "uniform" for r in merged["runs"]) == 30
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (lambda t: t.update(format="other"), "format: not a nerfaug-study-table"),
+        (lambda t: t.update(version=9), "version: 9, this nerfaug reads version 1"),
+        (lambda t: t["runs"][3].pop("psnr"), "runs[3]: missing ['psnr']"),
+        (lambda t: t["runs"][0].update(psnr="high"), "runs[0].psnr: 'high' is not a number"),
+        (lambda t: t["runs"][0].update(lpips=float("nan")), "runs[0].lpips: nan is not a number"),
+        (lambda t: t["runs"][1].update(trial="1"), "runs[1].trial: '1' is not a int"),
+        (lambda t: t["runs"][2].update(chosen_poses=[[1, 2]]), "runs[2].chosen_poses: not a list of 3x4 matrices"),
+        (lambda t: t["runs"].append(dict(t["runs"][0])), "a second row for nerfacto-cpu-last-sample/chair/ours/0"),
+        (lambda t: t["runs"][0].update(scene="kitchen"), "runs[0].scene: 'kitchen' has no initial views"),
+        (lambda t: t.update(runs={}), "runs: missing or not a list"),
+    ],
+)
+def test_a_damaged_table_is_refused_naming_the_field(tmp_path, change, message):
+    table = json.loads(write_table(tmp_path / "t.json", synthetic_table({"ours": 1.0})).read_text())
+    change(table)
+    path = tmp_path / "damaged.json"
+    path.write_text(json.dumps(table))
+    with pytest.raises(ReportError, match=r"damaged\.json: ") as refused:
+        read_table(path)
+    assert message in str(refused.value) and "\n" not in str(refused.value)
+
+
+def test_summary_only_without_a_study_or_a_table_says_so(tmp_path, capsys):
+    from nerfaug.cli import main
+
+    with pytest.raises(SystemExit) as stopped:
+        main(["study", "--out", str(tmp_path / "none"), "--summary-only"])
+    assert stopped.value.code != 0
+    assert "nothing to summarise" in capsys.readouterr().err
+    assert not (tmp_path / "none").exists()
