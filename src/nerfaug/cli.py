@@ -9,7 +9,7 @@ nerfaug train DATA --out RUN                    active capture: train on what yo
 nerfaug propose RUN --n 6 --out poses.json      ask where to look next,
 nerfaug add RUN --images DIR --poses poses.json add what you captured, and go on training
 nerfaug export RUN --format nerfstudio --out DIR
-nerfaug eval RUN --data DATA --split test      PSNR/SSIM/LPIPS of the session on held-out views
+nerfaug eval RUN --data DATA --split test       PSNR/SSIM/LPIPS of the session on held-out views
 """
 
 from __future__ import annotations
