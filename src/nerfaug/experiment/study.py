@@ -1,4 +1,4 @@
-"""The study (issue 9): the study family of selection methods x the engine presets x the scenes,
+"""The study: the study family of selection methods x the engine presets x the scenes,
 each as one resumable sweep per engine into `OUT/<engine>/`, then one combined summary
 (`nerfaug.report.study`).
 

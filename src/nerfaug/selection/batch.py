@@ -1,4 +1,4 @@
-"""Batch-aware sampling (beyond the paper; issue 9 part 5).
+"""Batch-aware sampling (beyond the paper).
 
 The paper scores the candidates once and draws all n views from that one posterior, so the
 coverage term D ignores the views accepted earlier in the same batch: two near-identical

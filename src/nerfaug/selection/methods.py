@@ -66,7 +66,7 @@ AUTHORS_NBV_SETTINGS = MappingProxyType(
 BATCH_ENTROPY_SIGMA = 0.35
 # The sharp variant's posterior: effective sample size at the geometric mean of uniform's (all
 # candidates) and next-best-view's (n), halfway between the two on a log scale; see
-# `selection.posterior`. Today's posterior is nearly flat (issue 9: max U / mean U = 1.7).
+# `selection.posterior`. The plain posterior is nearly flat (measured on lego: max U / mean U = 1.7).
 BATCH_SHARPNESS = 0.5
 
 

@@ -2,7 +2,7 @@
 
 The sampler draws views with probability proportional to the scores w. Under the default
 min-max normalisation U = H' + D' lies in [0, 2] and most candidates score a sizeable fraction of
-the best, so the posterior is close to uniform (issue 9 measured max U / mean U = 1.7 on lego:
+the best, so the posterior is close to uniform (max U / mean U = 1.7 was measured on lego:
 a mildly tilted uniform). A temperature T reshapes it to w^(1/T): T = 1 keeps it, T < 1
 sharpens it (T -> 0 is next-best-view), T > 1 flattens it (T -> inf is uniform). Ratios of
 scores are what the sampler uses, so this is the same as a softmax of log w / T.
