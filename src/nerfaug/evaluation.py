@@ -166,7 +166,7 @@ def evaluate_views(
         An `EvaluationResult`. The mean PSNR is the mean of the per-view PSNRs (as nerfstudio
         reports it), not the PSNR of the mean error.
     """
-    from rich.progress import track
+    from nerfaug.progress import track
 
     if isinstance(lpips, str):
         if lpips != "auto":
@@ -189,7 +189,7 @@ def evaluate_views(
     n_saved = len(views) if save_count is None else save_count
 
     per_view = []
-    indices = track(range(len(views)), "evaluating", disable=not progress, transient=True)
+    indices = track(range(len(views)), "evaluating", enabled=progress, transient=True)
     for index in indices:
         with torch.no_grad():
             render = render_fn(views.cameras, index)

@@ -101,15 +101,8 @@ def _train(session, steps: int, every_s: float = CHECKPOINT_EVERY_S) -> dict:
     """
     import signal
 
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeRemainingColumn,
-    )
-
     from nerfaug.errors import Interrupted
+    from nerfaug.progress import progress_bar
 
     asked = []
 
@@ -123,14 +116,7 @@ def _train(session, steps: int, every_s: float = CHECKPOINT_EVERY_S) -> dict:
     target, saved, last = session.step + steps, session.step, {"step": session.step}
     saved_at = monotonic()
     previous = signal.signal(signal.SIGINT, stop)
-    bar = Progress(
-        TextColumn("training"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("psnr {task.fields[psnr]:.2f} dB"),
-        TimeRemainingColumn(),
-        disable=not show,
-    )
+    bar = progress_bar(fields="psnr {psnr:.2f} dB", enabled=show)
     try:
         with bar:
             task = bar.add_task("training", total=steps, psnr=float("nan"))

@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Literal
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, scene_folder
@@ -36,13 +35,14 @@ from nerfaug.experiment.store import (
     read_result,
     run_fingerprint,
 )
+from nerfaug.progress import progress_bar
 
 Backend = Literal["local", "ray"]
 # Built-in scenes stand in for the NeRF-synthetic scenes, whose images are 800 px across: the most
 # `--resolution` renders them at (a larger one is a typo costing hours; `nerfaug scene render` takes any).
 BUILTIN_MAX_RESOLUTION = 800
 PROGRESS_FILE = FILES.progress
-console = Console(stderr=True)
+console = Console(stderr=True, soft_wrap=True)  # a pipe or a log gets whole lines, not 80 columns
 
 
 @dataclass
@@ -296,21 +296,13 @@ def run_sweep(
 
 class _Display:
     """Progress across runs (done / running / failed, ETA) and each running run's iterations,
-    read from the progress files the runs write."""
+    read from the progress files the runs write. Where stderr is not a terminal: a line per
+    finished run and one per quarter of a run's steps."""
 
     def __init__(self, total: int, root: Path, steps: int, enabled: bool):
         self.root, self.steps = root, steps
-        self.progress = Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            TimeRemainingColumn(),
-            console=console,
-            disable=not enabled,
-            transient=False,
-        )
-        self.overall = self.progress.add_task("runs", total=total)
+        self.progress = progress_bar(fields="{last}", console=console, enabled=enabled)
+        self.overall = self.progress.add_task("runs", total=total, every=1, last="")
         self.running: dict[RunKey, int] = {}
         self.queued: list[RunKey] = []
         self.done = self.failed = 0
@@ -323,7 +315,7 @@ class _Display:
         self.progress.__exit__(*exc)
 
     def started(self, key: RunKey) -> None:
-        self.running[key] = self.progress.add_task(f"  {key}", total=self.steps)
+        self.running[key] = self.progress.add_task(f"  {key}", total=self.steps, every=max(1, -(-self.steps // 4)))
         self._describe()
 
     def queue(self, key: RunKey) -> None:
@@ -338,8 +330,9 @@ class _Display:
             self.progress.remove_task(task)
         self.done += ok
         self.failed += not ok
-        self.progress.advance(self.overall)
-        self._describe()
+        self.progress.update(
+            self.overall, advance=1, description=self._description(), last=f"({key} {'done' if ok else 'failed'})"
+        )
 
     def poll(self) -> None:
         for key in [k for k in self.queued if (k.folder(self.root) / PROGRESS_FILE).exists()]:
@@ -351,10 +344,10 @@ class _Display:
                 self.progress.update(task, completed=step)
 
     def _describe(self) -> None:
-        self.progress.update(
-            self.overall,
-            description=f"runs: {self.done} done, {len(self.running)} running, {self.failed} failed",
-        )
+        self.progress.update(self.overall, description=self._description())
+
+    def _description(self) -> str:
+        return f"runs: {self.done} done, {len(self.running)} running, {self.failed} failed"
 
 
 def _execute_local(todo, datasets, config, root, workers, address, progress):

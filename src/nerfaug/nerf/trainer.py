@@ -325,15 +325,7 @@ class Trainer:
 
 
 def _progress_bar(enabled: bool):
-    """A rich progress bar showing loss and PSNR; disabled bars draw nothing."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    """Training progress showing loss and PSNR (a live bar, or lines where stderr is not a terminal)."""
+    from nerfaug.progress import progress_bar
 
-    return Progress(
-        TextColumn("[progress.description]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("loss {task.fields[loss]:.4f}  psnr {task.fields[psnr]:.2f} dB"),
-        TimeRemainingColumn(),
-        disable=not enabled,
-        transient=False,
-    )
+    return progress_bar(fields="loss {loss:.4f}  psnr {psnr:.2f} dB", enabled=enabled)

@@ -29,7 +29,6 @@ import imageio.v3 as iio
 import numpy as np
 import torch
 from rich.console import Console
-from rich.progress import Progress
 from torch import Tensor
 
 import nerfaug
@@ -45,6 +44,7 @@ from nerfaug.hemisphere import (
     sample_uniform_poses,
 )
 from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.progress import progress_bar
 from nerfaug.scenes import BUILTIN_SCENES, worker
 
 # Bump when the layout or meaning of a rendered dataset changes; older caches then re-render.
@@ -150,7 +150,7 @@ def _run_worker(job_path: Path, n_frames: int, progress: bool, description: str)
     log = collections.deque(maxlen=40)
     done = 0
     with (
-        Progress(disable=not progress, transient=False) as bar,
+        progress_bar(enabled=progress) as bar,
         subprocess.Popen(
             command,
             stdout=subprocess.PIPE,
