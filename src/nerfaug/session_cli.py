@@ -20,6 +20,7 @@ from typing import Annotated, Literal
 
 import tyro
 
+from nerfaug.capture.constraints import ViewConstraints
 from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset
@@ -29,6 +30,7 @@ RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
 Device = Literal["auto", "cpu", "cuda"]
 # The defaults `--selection.*` options start from (read-only use: never mutated).
 DEFAULT_SELECTION = SelectionConfig()
+DEFAULT_CONSTRAINTS = ViewConstraints()
 
 
 def _device(device: str) -> str:
@@ -279,6 +281,7 @@ def propose(
     seed: int | None = None,
     device: Device = "auto",
     selection: SelectionConfig = DEFAULT_SELECTION,
+    constraints: Annotated[ViewConstraints, tyro.conf.OmitArgPrefixes] = DEFAULT_CONSTRAINTS,
     force: bool = False,
 ) -> None:
     """Propose the next views to capture and write their poses as a Blender-style JSON.
@@ -301,6 +304,8 @@ def propose(
         device: where candidates are scored: auto (cuda when available, else cpu), cpu, cuda.
         selection: options of the selection method (recorded with the proposal in session.json);
             a method's own settings (e.g. ours-authors') apply over them.
+        constraints: where views may lie (--elevation, --azimuth, --radius, --keep-out), applied
+            to the hemisphere's candidates or to --candidates.
         force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
     """
     from nerfaug.capture.choose import check_method
@@ -313,7 +318,15 @@ def propose(
         raise ValueError(f"--seed {seed}: must be >= 0")
     _check_poses_out(out, force)
     session = _open(run, device)
-    proposal = session.propose(n, method, candidates=candidates, n_candidates=n_candidates, seed=seed, config=selection)
+    proposal = session.propose(
+        n,
+        method,
+        candidates=candidates,
+        n_candidates=n_candidates,
+        seed=seed,
+        config=selection,
+        constraints=constraints,
+    )
     path = proposal.write(out)
     session.save()
     print(

@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from nerfaug.cameras import Cameras
+from nerfaug.capture.constraints import ViewConstraints, constrained_indices
 from nerfaug.capture.frame import ENGINE_RADIUS
 from nerfaug.capture.images import as_array
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
@@ -81,6 +82,7 @@ def propose(
     seed: int | None = None,
     config=None,
     map: bool = True,
+    constraints: ViewConstraints | dict | None = None,
 ) -> Proposal:
     """`CaptureSession.propose`: choose, record and write `n` views to capture next."""
     session.require_model()
@@ -96,12 +98,17 @@ def propose(
         raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
     if seed is not None and int(seed) < 0:
         raise ValueError(f"seed must be >= 0, got {seed}")
+    if isinstance(constraints, dict):
+        constraints = ViewConstraints.from_dict(constraints)
+    elif constraints is not None:
+        constraints.check()
     number = len(session.state.proposals)
     used_seed = None
     if generator is None:
         used_seed = proposal_seed(session.seed, number) if seed is None else int(seed)
         generator = torch.Generator().manual_seed(used_seed)
     world = candidate_cameras(session, candidates, n_candidates, generator)
+    world = world[constrained_indices(world.camera_to_world, session.hemisphere, constraints, n).tolist()]
     if len(world) < n:
         raise ValueError(
             f"{describe_candidates(candidates)}: cannot propose {n} views from {len(world)} candidates "
@@ -169,7 +176,8 @@ def propose(
             polar=polar.tolist(),
             file=str(record_path.relative_to(session.run_dir)),
             created=now(),
-            extra={"selection": used_config.to_dict()},
+            extra={"selection": used_config.to_dict()}
+            | ({} if constraints is None or constraints.empty else {"constraints": constraints.to_dict()}),
         )
     )
     return proposal

@@ -402,6 +402,7 @@ class CaptureSession:
         seed: int | None = None,
         config=None,
         map: bool = True,
+        constraints=None,
     ) -> Proposal:
         """Choose `n` views to capture next.
 
@@ -421,13 +422,18 @@ class CaptureSession:
                 paper's defaults. The method's own settings apply over it; what was used is
                 recorded with the proposal (`extra["selection"]` of its history record).
             map: draw the hemisphere map to `run/proposals/proposal_NNN.png`.
+            constraints: a `ViewConstraints` (or its `to_dict()`): elevation, azimuth and radius
+                ranges and keep-out cones the candidates must satisfy (recorded with the proposal).
 
         Returns:
             Proposal (world-frame poses, names, angles, every candidate's score, map path). The
             proposal is recorded in the history (saved with `save()`) and written, with its
             candidates, to `run/proposals/proposal_NNN.json`.
+
+        Raises:
+            TooFewCandidates (a ValueError): the constraints leave fewer candidates than `n`.
         """
-        return choose.propose(self, n, method, candidates, n_candidates, generator, seed, config, map)
+        return choose.propose(self, n, method, candidates, n_candidates, generator, seed, config, map, constraints)
 
     def add_views(self, images, poses=None, names: Sequence[str] | None = None) -> list[str]:
         """Add captured images, taken at world-frame `poses`, to the dataset and to training.
