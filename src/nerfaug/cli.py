@@ -3,7 +3,7 @@
 nerfaug scene render lego --out data/lego      render a built-in scene as a Blender dataset
 nerfaug run --preset quick --out results/quick  the paper's experiment, then its report
 nerfaug report results/quick                    (re)write report.md and report.html
-nerfaug study --out results/study               which method wins where (issue 9's study)
+nerfaug study --out results/study               which method wins where, on which engine
 nerfaug methods                                 list the view-selection methods
 nerfaug train DATA --out RUN                    active capture: train on what you have,
 nerfaug propose RUN --n 6 --out poses.json      ask where to look next,
@@ -14,15 +14,18 @@ nerfaug eval RUN --data DATA --split test       PSNR/SSIM/LPIPS of the session o
 
 from __future__ import annotations
 
+import inspect
 import os
+import re
 import sys
 import warnings
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal, get_args
 
 import tyro
 
 from nerfaug.experiment.config import PresetName
+from nerfaug.experiment.config import preset as make_preset
 from nerfaug.nerf.config import EnginePreset
 from nerfaug.selection.methods import SelectionConfig
 
@@ -31,15 +34,64 @@ Positional = tyro.conf.Positional
 DEFAULT_SELECTION = SelectionConfig()
 
 
-def selection_changes(given: SelectionConfig) -> dict:
-    """The fields of `given` that differ from `SelectionConfig()`'s defaults: what a user set on
-    the command line, to apply over a preset's selection settings."""
-    default = SelectionConfig().to_dict()
-    return {k: getattr(given, k) for k, v in given.to_dict().items() if v != default[k]}
+def preset_default(name: str) -> str:
+    """The help's default for an option whose value `--preset` decides: each preset's, e.g.
+    "(default: the preset's: quick, ablation: 5; paper: 10; tiny: 2)"."""
+    presets: dict[str, list[str]] = {}
+    for preset_name in get_args(PresetName):
+        value = getattr(make_preset(preset_name), name)
+        presets.setdefault(" ".join(map(str, value)) if isinstance(value, tuple) else str(value), []).append(
+            preset_name
+        )
+    if len(presets) == 1:
+        return f"(default: {next(iter(presets))}, in every preset)"
+    return "(default: the preset's: " + "; ".join(f"{', '.join(p)}: {v}" for v, p in presets.items()) + ")"
+
+
+def _from_preset(kind, name: str, metavar: str):
+    return Annotated[kind | None, tyro.conf.arg(metavar=metavar, help_behavior_hint=preset_default(name))]
+
+
+ENGINES = "{" + ",".join(get_args(EnginePreset)) + "}"
+Scenes = _from_preset(tuple[str, ...], "scenes", "SCENE [SCENE ...]")
+Methods = _from_preset(tuple[str, ...], "methods", "METHOD [METHOD ...]")
+Trials = _from_preset(int, "trials", "INT")
+Steps = _from_preset(int, "steps", "INT")
+Engine = _from_preset(EnginePreset, "engine", ENGINES)
+Resolution = _from_preset(int, "resolution", "INT")
+Seed = _from_preset(int, "seed", "INT")
+Data = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: the preset's scenes)")]
+Workers = Annotated[
+    int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one at a time on a GPU)")
+]
+Address = Annotated[str | None, tyro.conf.arg(metavar="ADDRESS", help_behavior_hint="(default: a local Ray instance)")]
+
+
+def reflow(docstring: str | None) -> str | None:
+    """`docstring` with each paragraph, and each argument's description under "Args:", on one
+    line: the help wraps text to the terminal's width, and keeps the line breaks it is given."""
+    if not docstring:
+        return docstring
+    lines: list[str] = []
+    for line in inspect.cleandoc(docstring).splitlines():
+        indent, text = len(line) - len(line.lstrip()), line.strip()
+        previous = lines[-1] if lines else ""
+        joins = (
+            text
+            and previous.strip()
+            and not re.fullmatch(r"[A-Z][A-Za-z ]*:", previous.strip())  # a section's heading
+            and not text.startswith(("- ", "* "))
+            and (indent == 0 or indent > len(previous) - len(previous.lstrip()))
+        )
+        if joins:
+            lines[-1] = f"{previous} {text}"
+        else:
+            lines.append(line.rstrip())
+    return "\n".join(lines)
 
 
 def scene_render(
-    scene: Positional[str],
+    scene: Annotated[str, Positional, tyro.conf.arg(metavar="SCENE")],
     out: Path,
     res: int = 200,
     pool: int = 300,
@@ -75,17 +127,17 @@ def scene_render(
 def run(
     out: Path = Path("results/quick"),
     preset: PresetName = "quick",
-    scenes: tuple[str, ...] | None = None,
-    data: Path | None = None,
-    methods: tuple[str, ...] | None = None,
-    trials: int | None = None,
-    steps: int | None = None,
-    engine: EnginePreset | None = None,
-    resolution: int | None = None,
-    seed: int | None = None,
+    scenes: Scenes = None,
+    data: Data = None,
+    methods: Methods = None,
+    trials: Trials = None,
+    steps: Steps = None,
+    engine: Engine = None,
+    resolution: Resolution = None,
+    seed: Seed = None,
     backend: Literal["local", "ray"] = "local",
-    workers: int | None = None,
-    address: str | None = None,
+    workers: Workers = None,
+    address: Address = None,
     force: bool = False,
     report: bool = True,
     device: Literal["auto", "cpu", "cuda"] = "auto",
@@ -97,9 +149,10 @@ def run(
 
     Args:
         out: results folder.
-        preset: quick (default; lego at 100x100 on the CPU, minutes), paper (Sec. IV: three scenes,
-            10 trials, 10k steps), ablation (Tables I and II), tiny (seconds; smoke test).
-        scenes: built-in scene names or dataset folders (overrides the preset's).
+        preset: the protocol the other options change: quick (lego at 100x100 on the CPU, minutes),
+            paper (Sec. IV: three scenes, 10 trials, 10k steps), ablation (Tables I and II), tiny
+            (seconds; a smoke test).
+        scenes: built-in scene names or dataset folders.
         data: a Blender-format dataset folder to run on (its train split is the candidate pool,
             its test split the evaluation); shorthand for --scenes DATA.
         methods: selection methods (see `nerfaug methods`); the first is compared with the others.
@@ -109,9 +162,8 @@ def run(
         resolution: image size of built-in scenes (or the width user data is downscaled to).
         seed: base seed.
         backend: local (this machine) or ray (one task per run; --address joins a cluster).
-        workers: concurrent runs (local backend) or Ray CPUs to start (local Ray); default: one
-            run per core.
-        address: Ray cluster address; omitted starts a local Ray instance.
+        workers: concurrent runs (local backend) or Ray CPUs to start (local Ray).
+        address: the Ray cluster to join.
         force: move the runs already in --out aside (into OUT/superseded/, nothing is deleted) and
             redo every run; needed when OUT's sweep.json is missing or its settings differ.
         report: write report.md / report.html at the end.
@@ -144,7 +196,7 @@ def run(
         changes["device"] = resolve_device(device).type
     except ValueError as error:
         raise SystemExit(f"--device: {error}") from None
-    changes["selection"] = replace(config.selection, **selection_changes(selection))
+    changes["selection"] = replace(config.selection, **selection.changes())
     config = config.replace(**changes)
     if workers is None:
         # One run per core on a CPU; on a GPU one run at a time (each holds its own CUDA context).
@@ -257,30 +309,28 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(exit_code(error)) from None
 
 
+def scene() -> None:
+    """Built-in scenes: `nerfaug scene render SCENE --out DIR` renders lego, chair, materials or a
+    .blend file as a Blender-format dataset (`nerfaug scene render --help`)."""
+    _dispatch(["scene", "--help"])
+
+
 def _dispatch(argv: list[str]) -> None:
+    from nerfaug import session_cli
     from nerfaug.experiment.study import study
 
-    commands = {
-        "run": run,
-        "report": report,
-        "methods": methods,
-        "study": study,
-    }
-    from nerfaug import session_cli
-
+    commands = {"scene": scene, "run": run, "report": report, "methods": methods, "study": study}
     commands.update(session_cli.COMMANDS)
+    for command in [*commands.values(), scene_render]:
+        command.__doc__ = reflow(command.__doc__)
     if argv[:1] == ["scene"]:
         tyro.extras.subcommand_cli_from_dict({"render": scene_render}, args=argv[1:], prog="nerfaug scene")
         return
-    descriptions = {"scene": "Built-in scenes: `nerfaug scene render --help`."}
     if not argv or argv[0] in ("-h", "--help"):
         print(__doc__.strip())
         print()
     tyro.extras.subcommand_cli_from_dict(
-        commands,
-        args=argv,
-        prog="nerfaug",
-        description="Choose which views to add when a NeRF has too little data. " + descriptions["scene"],
+        commands, args=argv, prog="nerfaug", description="Choose which views to add when a NeRF has too little data."
     )
 
 

@@ -206,8 +206,8 @@ def train(
 ) -> None:
     """Start an active-capture session on a dataset and train it, or train an existing session further.
 
-    `nerfaug train DATA --out RUN` copies the dataset's views into RUN/dataset, builds the NeRF and
-    trains it; `nerfaug train RUN` (a folder holding session.json) trains `--steps` more.
+    Given a dataset, `nerfaug train DATA --out RUN` copies its views into RUN/dataset, builds the NeRF
+    and trains it; given a run folder (one holding session.json), `nerfaug train RUN` trains `--steps` more.
 
     Args:
         path: a Blender (transforms_{split}.json) or nerfstudio (transforms.json) dataset folder,

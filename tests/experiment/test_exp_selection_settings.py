@@ -104,10 +104,9 @@ def test_run_and_propose_help_show_the_selection_options(capsys):
 
 
 def test_command_line_selection_applies_over_the_preset():
-    from nerfaug.cli import selection_changes
-
     given = SelectionConfig(entropy_resolution=20, sharpness=0.3)
-    assert selection_changes(given) == {"entropy_resolution": 20, "sharpness": 0.3}
+    assert given.changes() == {"entropy_resolution": 20, "sharpness": 0.3}
+    assert given.flags() == ["--selection.entropy-resolution", "20", "--selection.sharpness", "0.3"]
     preset_selection = SelectionConfig(temperature=0.5, entropy_resolution=50)
-    merged = dataclasses.replace(preset_selection, **selection_changes(given))
+    merged = dataclasses.replace(preset_selection, **given.changes())
     assert (merged.entropy_resolution, merged.sharpness, merged.temperature) == (20, 0.3, 0.5)

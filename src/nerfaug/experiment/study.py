@@ -22,11 +22,13 @@ import json
 import os
 import platform
 import sys
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
-from nerfaug.experiment.config import ExperimentConfig, preset
+import tyro
+
+from nerfaug.experiment.config import ExperimentConfig, SelectionConfig, preset
 
 STUDY_FILE = "study.json"
 TABLE_FILE = "study-table.json"
@@ -222,21 +224,52 @@ def run_study(
     return outcomes
 
 
+# The defaults `--selection.*` options start from (read-only use: never mutated).
+DEFAULT_SELECTION = SelectionConfig()
+
+
 def study(
     out: Path = Path("results/study"),
-    engines: tuple[str, ...] | None = None,
-    scenes: tuple[str, ...] | None = None,
-    methods: tuple[str, ...] | None = None,
-    trials: int | None = None,
+    engines: Annotated[
+        tuple[str, ...] | None,
+        tyro.conf.arg(
+            metavar="ENGINE [ENGINE ...]",
+            help_behavior_hint="(default: every preset but the test one, and the paper's only on a GPU; the reason "
+            "is printed)",
+        ),
+    ] = None,
+    scenes: Annotated[
+        tuple[str, ...] | None,
+        tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint="(default: lego chair materials)"),
+    ] = None,
+    methods: Annotated[
+        tuple[str, ...] | None,
+        tyro.conf.arg(metavar="METHOD [METHOD ...]", help_behavior_hint='(default: the registry\'s "study" family)'),
+    ] = None,
+    trials: Annotated[
+        int | None,
+        tyro.conf.arg(
+            metavar="INT",
+            help_behavior_hint="(default: 10, or more when Bonferroni over the comparisons with uniform needs more "
+            "for p < 0.05 to be reachable)",
+        ),
+    ] = None,
     resolution: int = 100,
-    steps: int | None = None,
-    workers: int | None = None,
+    steps: Annotated[
+        int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's: study: 2000; tiny: 60)")
+    ] = None,
+    workers: Annotated[
+        int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one on a GPU)")
+    ] = None,
     force: bool = False,
     device: Literal["auto", "cpu", "cuda"] = "auto",
     preset: StudyPreset = "study",
     summary_only: bool = False,
-    table: Path | None = None,
-    results_doc: Path | None = None,
+    table: Annotated[
+        Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: OUT/study-table.json)")
+    ] = None,
+    results_doc: Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")] = None,
+    selection: SelectionConfig = DEFAULT_SELECTION,
 ) -> None:
     """The study: which selection method wins where. Runs the study family of methods x engine
     presets x scenes as one resumable sweep per engine into OUT/<engine>/, records every finished
@@ -247,23 +280,24 @@ def study(
 
     Args:
         out: the study folder.
-        engines: engine presets, or variants written BASE+FIELD=VALUE (default: every preset but
-            the test one, and the paper's only on a GPU; the reason is printed).
-        scenes: built-in scene names or dataset folders (default: lego, chair, materials).
-        methods: selection methods (default: the registry's "study" family).
-        trials: trials per (scene, method, engine) (default: 10, or more when Bonferroni over
-            the comparisons with uniform needs more for p < 0.05 to be reachable).
+        engines: engine presets, or variants written BASE+FIELD=VALUE.
+        scenes: built-in scene names or dataset folders.
+        methods: selection methods (`nerfaug methods`).
+        trials: trials per (scene, method, engine).
         resolution: image size of the built-in scenes.
-        steps: training steps per run (default: the preset's, 2000).
-        workers: concurrent runs (default: one per core; one on a GPU).
+        steps: training steps per run.
+        workers: concurrent runs.
         force: discard existing runs and redo them.
         device: auto (cuda when there is a GPU), cpu or cuda.
         preset: study (the paper's protocol at 100x100) or tiny (seconds; tests).
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
-        table: the per-run table to record runs in and summarise (default OUT/study-table.json);
-            runs it records with their current fingerprint are not run again.
+        table: the per-run table to record runs in and summarise; runs it records with their
+            current fingerprint are not run again.
         results_doc: also write this Markdown page (e.g. docs/results.md), figures beside it.
+        selection: options of the selection methods (every one is part of the runs' fingerprint;
+            left at their defaults, they change nothing); a method's own settings (e.g.
+            ours-authors') apply over them.
     """
     from nerfaug.report.study_page import write_results_doc, write_study
     from nerfaug.report.study_table import read_table
@@ -274,7 +308,9 @@ def study(
     failed = {}
     if not summary_only:
         command = study_command(out, engines, scenes, methods, trials, resolution, steps, device, preset, table)
+        command += selection.flags()
         plan = make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command)
+        plan.config = plan.config.replace(selection=replace(plan.config.selection, **selection.changes()))
         for engine, why in plan.left_out.items():
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)
         if workers is None:

@@ -148,10 +148,10 @@ class SelectionConfig:
         authors_threshold: the 15 of the authors' sampler.
         max_draws: proposals before the rejection sampler gives up.
         fisher_method: "random-sign" (default) or "exact"; see `nerfaug.uncertainty.fisher`.
-        fisher_train_pixels: training pixels H_train is taken over (uniform subsample). 4096 and
-            `fisher_resolution` 45: the cheapest setting whose candidate ranking, at step 200 on
-            lego 100x100, stays put when either side's pixels double (mean Spearman >= 0.9 and
-            top-6 overlap >= 4/6 for each of 4 seeds; `benchmarks/bench_fisher.py`, BENCHMARKS.md).
+        fisher_train_pixels: training pixels H_train is taken over (uniform subsample). With
+            fisher_resolution 45, 4096 is the cheapest setting whose candidate ranking, at step 200
+            on lego 100x100, stays put when either side's pixels double (mean Spearman >= 0.9 and
+            top-6 overlap >= 4/6 for each of 4 seeds; see benchmarks/bench_fisher.py and BENCHMARKS.md).
         fisher_train_chunk: rays per squared probe for H_train ("random-sign").
         fisher_train_probes: Rademacher probes per chunk for H_train ("random-sign"; each is
             three backward passes, one per colour channel).
@@ -173,13 +173,13 @@ class SelectionConfig:
             never chosen, by any selector; None for no limit (the authors' sampler: 0.4).
         entropy_max_polar: candidates farther than this from the pole (radians) get entropy 0
             before normalisation; None for no limit (the authors' entropy NBV: 0.75).
-        distance_rotations: the rotations the coverage term compares: "pose" (the cameras') or
-            "azimuth" (polar angle set to 0, as the authors' NBV code does: D from azimuth alone).
+        distance_rotations: the rotations the coverage term compares: "pose" (the cameras') or the
+            azimuth's alone, "azimuth" (polar angle set to 0, as the authors' NBV code does).
         temperature: T of the sampling posterior, scores ** (1/T): 1 keeps the scores, < 1
             sharpens towards next-best-view, > 1 flattens towards uniform. Samplers only.
         sharpness: if set, in [0, 1]: T is solved per selection so the posterior's effective
             sample size is C^(1 - s) n^s (C candidates, n views): 0 keeps it, 1 is next-best-view,
-            0.5 the geometric mean (see `nerfaug.selection.posterior`). Overrides `temperature`.
+            and 0.5 the geometric mean (see `nerfaug.selection.posterior`). Overrides `temperature`.
         batch_entropy_sigma: for batch-aware sampling: the entropy of a candidate theta radians
             from an accepted view is multiplied by 1 - exp(-theta^2 / (2 sigma^2)); None for no
             entropy discount (see `nerfaug.selection.batch`).
@@ -261,6 +261,21 @@ class SelectionConfig:
     def to_dict(self) -> dict:
         """Plain data (JSON-serialisable), for saving next to a selection."""
         return asdict(self)
+
+    def changes(self) -> dict:
+        """The fields that differ from `SelectionConfig()`'s defaults: what a user set with
+        `--selection.*` options, to apply over a preset's selection settings."""
+        default = SelectionConfig().to_dict()
+        return {k: getattr(self, k) for k, v in self.to_dict().items() if v != default[k]}
+
+    def flags(self) -> list[str]:
+        """The `--selection.*` options that give this config (its changes from the defaults)."""
+        words = []
+        for name, value in self.changes().items():
+            values = value if isinstance(value, (list, tuple)) else [value]
+            flat = [v for item in values for v in (item if isinstance(item, (list, tuple)) else [item])]
+            words += [f"--selection.{name.replace('_', '-')}", *map(str, flat)]
+        return words
 
     @classmethod
     def from_dict(cls, data: dict) -> SelectionConfig:

@@ -1,0 +1,109 @@
+"""`nerfaug --help` and each command's: the values that will be used (a preset's, not "None"),
+readable metavars, every command listed, text wrapped by the help rather than broken mid-sentence;
+and `study`'s `--selection.*` options, which leave the study's fingerprint alone at their defaults."""
+
+import re
+
+import pytest
+
+from nerfaug.cli import main, preset_default, reflow
+from nerfaug.experiment.store import fingerprint
+
+
+def help_text(argv: list[str], capsys, monkeypatch) -> str:
+    monkeypatch.setenv("COLUMNS", "400")  # one line per option's help: a hard break shows as a second line
+    with pytest.raises(SystemExit) as done:
+        main([*argv, "--help"])
+    assert done.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_run_help_shows_the_presets_values_not_none(capsys, monkeypatch):
+    text = help_text(["run"], capsys, monkeypatch)
+    options = text.split("selection options")[0]  # a selection option's None is its real default
+    assert "(default: None)" not in options and "{None}" not in options
+    assert "(default: the preset's: quick: 800; paper: 10000; ablation: 2000; tiny: 60)" in text
+    assert "--scenes SCENE [SCENE ...]" in text and "--trials INT" in text
+    assert "(default: 0, in every preset)" in text  # --seed
+
+
+def test_a_presets_default_groups_the_presets_that_agree():
+    assert preset_default("trials") == "(default: the preset's: quick, ablation: 5; paper: 10; tiny: 2)"
+
+
+def test_top_level_usage_lists_every_command(capsys, monkeypatch):
+    from nerfaug import session_cli
+
+    text = help_text([], capsys, monkeypatch)
+    usage = re.search(r"usage: nerfaug \[-h\] \{([^}]*)\}", text)
+    assert usage is not None, text
+    listed = set(usage.group(1).split(","))
+    assert {"scene", "run", "report", "methods", "study", *session_cli.COMMANDS} <= listed
+
+
+def test_study_help_lists_selection_options_and_no_none_defaults(capsys, monkeypatch):
+    text = help_text(["study"], capsys, monkeypatch)
+    assert "--selection.sharpness" in text
+    options = text.split("selection options")[0]
+    assert "(default: None)" not in options and "{None}" not in options
+
+
+def test_option_help_is_one_line_in_a_wide_terminal(capsys, monkeypatch):
+    text = help_text(["run"], capsys, monkeypatch)
+    body = [line.strip("│ ").rstrip() for line in text.splitlines() if line.startswith("│")]
+    # Each option is its flag line followed by exactly one help line (none broken by the docstring).
+    flags = [i for i, line in enumerate(body) if line.startswith("--") or line.startswith("-h")]
+    for here, after in zip(flags, flags[1:]):
+        if "selection options" in "".join(body[here:after]) or "──" in "".join(body[here:after]):
+            continue  # the panel's end and the next panel's heading
+        assert after - here == 2, body[here:after]
+
+
+def test_reflow_joins_paragraphs_and_argument_descriptions_but_keeps_headings():
+    doc = """Summary line.
+
+    A paragraph over
+    two lines.
+
+    Args:
+        first: a description over
+            two lines.
+        second: one line.
+    """
+    assert reflow(doc).splitlines() == [
+        "Summary line.",
+        "",
+        "A paragraph over two lines.",
+        "",
+        "Args:",
+        "    first: a description over two lines.",
+        "    second: one line.",
+    ]
+
+
+def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_defaults(monkeypatch, tmp_path):
+    import nerfaug.experiment.study as study_module
+    import nerfaug.report.study_page as study_page
+
+    planned = []
+
+    def make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command):
+        config = study_module.base_config(preset).replace(resolution=resolution, device="cpu")
+        plan = study_module.StudyPlan(out, config, ["test"], command=command)
+        planned.append(plan)
+        return plan
+
+    monkeypatch.setattr(study_module, "make_plan", make_plan)
+    monkeypatch.setattr(study_module, "run_study", lambda plan, **kw: {})
+    monkeypatch.setattr(study_module, "record_table", lambda out, path, previous: {"runs": []})
+    monkeypatch.setattr(study_page, "write_study", lambda out, recorded: [])
+    base = ["study", "--out", str(tmp_path / "s"), "--preset", "tiny", "--workers", "1"]
+    main(base)
+    main([*base, "--selection.temperature", "1.0", "--selection.entropy-resolution", "40"])
+    main([*base, "--selection.sharpness", "0.5"])
+    default, same, sharper = (fingerprint(p.config.fingerprinted()) for p in planned)
+    untouched = study_module.base_config("tiny").replace(resolution=100, device="cpu")
+    assert default == same == fingerprint(untouched.fingerprinted())
+    assert sharper != default and planned[2].config.selection.sharpness == 0.5
+    assert planned[2].command[-2:] == ["--selection.sharpness", "0.5"]
+    assert not any(word.startswith("--selection") for word in planned[1].command)
