@@ -1,0 +1,31 @@
+"""The repository after the README's commands: what they write into its root is ignored by git,
+and the package metadata uses the current form of its fields."""
+
+import shutil
+import subprocess
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+# Written into the root by the README's commands (`nerfaug train/propose/render-proposals/export`).
+WRITTEN = ["runs/lego/session.json", "poses.json", "poses.png", "poses2.json", "captures/capture_000_00.png"]
+
+
+@pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(), reason="needs git and a checkout")
+@pytest.mark.parametrize("path", [*WRITTEN, "lego-grown/transforms.json"])
+def test_what_the_readme_writes_is_ignored(path):
+    done = subprocess.run(["git", "check-ignore", "--no-index", "-q", path], cwd=ROOT)
+    assert done.returncode == 0, f"{path} is not ignored"
+
+
+def test_the_readme_still_writes_those_paths():
+    readme = (ROOT / "README.md").read_text()
+    for word in ("--out runs/lego", "--out poses.json", "--out captures/", "--out lego-grown"):
+        assert word in readme
+
+
+def test_license_is_an_spdx_string():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["license"] == "MIT"
