@@ -162,8 +162,12 @@ def test_medians_and_iqrs_match_hand_computed_values(report):
     assert strip_bold(lego["ours"][6]) == "0.1300"  # LPIPS median of [0.13, 0.14, 0.12]
     chair = table_rows(markdown, "## Scene: chair")
     assert [strip_bold(c) for c in chair["ours"][1:4]] == ["3", "25.50", "1.00"]
-    # the paper's phrasing: (21 - 14) / 14 = +50.0 % median PSNR
-    assert "+50.0% median PSNR" in markdown
+    # differences in dB with their CI (not a percent of a dB value): 21 - 14 = +7 dB
+    assert re.search(r"\+7\.00 dB \(95% CI [+-]\d+\.\d\d to [+-]\d+\.\d\d\) median PSNR vs uniform", markdown)
+    assert "% median PSNR" not in markdown
+    # spreads as both IQRs with their n: equal ranges read as equal, never "x% smaller"
+    assert "1.50 (n=3) vs 1.50 (n=3)" in markdown and "smaller" not in markdown
+    assert "under the machine's load" in markdown  # timings say what they measured
 
 
 def test_invalid_runs_are_listed_and_left_out(report):
@@ -218,7 +222,7 @@ def test_table_ii_appears_only_with_its_methods(tmp_path):
     write_report(tmp_path)
     markdown = (tmp_path / "report.md").read_text()
     assert "NBV vs sampling (Table II)" in markdown and "Table I)" not in markdown
-    assert "ours vs ours-nbv" in markdown and "+50.0% median PSNR" in markdown  # 21 vs 14
+    assert "ours vs ours-nbv" in markdown and "+7.00 dB (95% CI" in markdown  # 21 vs 14
 
 
 def test_missing_planned_runs_and_no_valid_runs(tmp_path):

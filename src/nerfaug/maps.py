@@ -81,7 +81,9 @@ def _interpolate(xy: np.ndarray, values: np.ndarray, gx: np.ndarray, gy: np.ndar
     return np.where(np.ma.getmaskarray(linear), grid, linear.filled(0.0))
 
 
-def _draw(ax: Axes, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre, vmin=None, vmax=None):
+def _draw(
+    ax: Axes, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre, vmin=None, vmax=None, train_label=""
+):
     xy = hemisphere_xy(candidate_c2w, projection, centre)
     values = np.asarray(torch.as_tensor(scores).detach().cpu().double().reshape(-1))
     if values.shape[0] != xy.shape[0]:
@@ -129,7 +131,7 @@ def _draw(ax: Axes, candidate_c2w, scores, train_c2w, chosen_c2w, projection, ce
         c="#29b6f6",
         edgecolors="black",
         linewidths=0.8,
-        label="training views",
+        label=train_label,
         zorder=3,
     )
     if chosen_c2w is not None:
@@ -162,6 +164,7 @@ def plot_hemisphere_map(
     label: str = "uncertainty",
     projection: str = "equal-area",
     centre=(0.0, 0.0, 0.0),
+    train_label: str = "training views",
 ) -> Path:
     """Draw the scores over the hemisphere seen from above and save it as a PNG.
 
@@ -175,6 +178,7 @@ def plot_hemisphere_map(
         label: the colourbar's label.
         projection: "equal-area" (default) or "equidistant".
         centre: the hemisphere's centre, world space.
+        train_label: the legend's name for the triangles (an experiment's "initial views").
 
     Returns:
         The path written.
@@ -184,7 +188,7 @@ def plot_hemisphere_map(
     # A bare Figure renders with Agg and touches no pyplot state (no global backend, no leaks).
     fig = Figure(figsize=(5.2, 4.6))
     ax = fig.subplots()
-    image = _draw(ax, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre)
+    image = _draw(ax, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre, train_label=train_label)
     fig.colorbar(image, ax=ax, fraction=0.046, pad=0.02, label=label)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.05, -0.08), fontsize=7, frameon=False)
     if title:
@@ -200,6 +204,7 @@ def plot_method_maps(
     title: str | None = None,
     projection: str = "equal-area",
     centre=(0.0, 0.0, 0.0),
+    train_label: str = "training views",
 ) -> Path:
     """One hemisphere map per method, side by side, and save them as a PNG.
 
@@ -212,7 +217,7 @@ def plot_method_maps(
         train_c2w: Tensor or array with shape (n_training, 4, 4).
         path: PNG file to write.
         title: a title over all panels.
-        projection, centre: as in `plot_hemisphere_map`.
+        projection, centre, train_label: as in `plot_hemisphere_map`.
 
     Returns:
         The path written.
@@ -227,7 +232,9 @@ def plot_method_maps(
         values = torch.as_tensor(np.asarray(scores) if not torch.is_tensor(scores) else scores).double()
         span = values.max() - values.min()
         shown = (values - values.min()) / span if span > 0 else torch.full_like(values, 0.5)
-        image = _draw(ax, candidate_c2w, shown, train_c2w, chosen, projection, centre, vmin=0.0, vmax=1.0)
+        image = _draw(
+            ax, candidate_c2w, shown, train_c2w, chosen, projection, centre, vmin=0.0, vmax=1.0, train_label=train_label
+        )
         ax.set_title(name, fontsize=10)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)

@@ -288,8 +288,9 @@ def propose(
 
     The JSON ({camera_angle_x, w, h, fl_x, fl_y, cx, cy, frames: [{file_path, transform_matrix,
     azimuth, polar, score}]}) holds world-frame OpenGL camera-to-world poses, ready for a robot or
-    Blender; the hemisphere map of every candidate's score is written beside it (same name, .png).
-    Name each captured image after its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`.
+    Blender, with azimuth and polar in radians (printed here in degrees); the hemisphere map of
+    every candidate's score is written beside it (same name, .png). Name each captured image after
+    its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`.
 
     Args:
         run: the session's run folder.
@@ -330,8 +331,8 @@ def propose(
     path = proposal.write(out)
     session.save()
     print(
-        f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path}, map "
-        f"{path.with_suffix('.png')}"
+        f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path} (angles in "
+        f"radians), map {path.with_suffix('.png')}"
     )
     for name, a, p in zip(proposal.names, proposal.azimuth.tolist(), proposal.polar.tolist()):
         print(f"  {name}: azimuth {a * 57.29578:6.1f} deg, polar {p * 57.29578:5.1f} deg")

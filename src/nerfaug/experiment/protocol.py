@@ -286,6 +286,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
         data.pool.cameras.camera_to_world[chosen],
         path=folder / FILES.uncertainty,
         title=f"{key.scene}: {key.method}",
+        train_label="initial views",
     )
     write_metrics(folder, evaluation.to_dict())
     write_history(folder, trainer.history)

@@ -127,6 +127,7 @@ def plot_uncertainty_maps(results: Results, scene: str, folder: Path) -> tuple[l
             chunk[0][2].train_poses,
             path,
             title=f"{scene}: uncertainty over the hemisphere, seen from above (bright = uncertain)",
+            train_label="initial views",
         )
         paths.append(path)
     return paths, notes

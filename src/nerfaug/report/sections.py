@@ -25,12 +25,11 @@ from nerfaug.report.document import (
     bold_best,
     number,
     p_value,
-    percent,
     seconds,
 )
 from nerfaug.report.figures import Figures
 from nerfaug.selection.methods import TABLE_I, TABLE_I_ROWS, TABLE_II, TABLE_II_ROWS
-from nerfaug.statistics import compare, summarise, summary_table
+from nerfaug.statistics import bootstrap_median_difference, compare, summarise, summary_table
 
 TIMING_FIELDS = ("setup", "train_before", "selection", "oracle", "train_after", "evaluation", "total")
 # The tables' rows come from the method registry's families (the one source of method families).
@@ -132,13 +131,25 @@ def _median_table(results: Results, scene: str, rows: dict[str, dict[str, dict]]
     return Table(headers, [list(row) for row in zip(*columns)], notes)
 
 
-def _iqr_change(reduction: float | None) -> str:
-    """`compare`'s iqr_reduction (positive: ours is tighter) in words."""
-    if reduction is None or math.isnan(reduction):
-        return "n/a (baseline IQR 0)"
-    if abs(reduction) < 5e-4:
-        return "equal"
-    return f"{abs(reduction) * 100:.1f}% {'smaller' if reduction > 0 else 'larger'}"
+# A metric's unit where it has one: differences of PSNR are in dB (never a percent of a dB value).
+UNITS = {"psnr": " dB"}
+
+
+def median_difference(x, y, metric: str) -> str:
+    """median(x) - median(y) in the metric's unit, with its bootstrap 95% CI, e.g.
+    "+1.23 dB (95% CI +0.40 to +2.10)"; the CI is "n/a" when a side has fewer than 2 values."""
+    d = bootstrap_median_difference(x, y)
+    decimals, unit = METRIC_DECIMALS[metric], UNITS.get(metric, "")
+    text = f"{d['difference']:+.{decimals}f}{unit}"
+    if math.isnan(d["low"]):
+        return f"{text} (95% CI n/a: fewer than 2 trials)"
+    return f"{text} (95% CI {d['low']:+.{decimals}f} to {d['high']:+.{decimals}f})"
+
+
+def spreads(x, y, metric: str) -> str:
+    """Both sides' interquartile ranges with their n, e.g. "0.41 (n=5) vs 0.38 (n=5)"."""
+    decimals = METRIC_DECIMALS[metric]
+    return " vs ".join(f"{summarise(v)['iqr']:.{decimals}f} (n={len(v)})" for v in (x, y))
 
 
 def _label(results: Results, method: str) -> str:
@@ -158,7 +169,7 @@ def _significance(row: dict) -> str:
     return "no (n too small)" if row["too_small"] else "no"
 
 
-def _comparison_table(results: Results, rows: dict[str, dict[str, dict]]) -> Table | None:
+def _comparison_table(results: Results, scene: str, rows: dict[str, dict[str, dict]]) -> Table | None:
     k = max(1, len(results.baselines))
     body, notes = [], []
     for baseline in results.baselines:
@@ -168,13 +179,14 @@ def _comparison_table(results: Results, rows: dict[str, dict[str, dict]]) -> Tab
             if row is None or row["p_value"] is None:
                 continue
             label, decimals = METRIC_LABELS[metric], METRIC_DECIMALS[metric]
+            x, y = results.values(scene, results.ours, metric), results.values(scene, baseline, metric)
             body.append(
                 [
                     baseline,
                     label,
                     f"{number(ours_row['median'], decimals)} vs {number(row['median'], decimals)}",
-                    f"{percent(row['median_change'])} median {label} ({_direction(row, ours_row)})",
-                    _iqr_change(row["iqr_reduction"]),
+                    f"{median_difference(x, y, metric)} ({_direction(row, ours_row)})",
+                    spreads(x, y, metric),
                     p_value(row["p_value"]),
                     p_value(row["p_bonferroni"]),
                     _significance(row),
@@ -194,7 +206,7 @@ def _comparison_table(results: Results, rows: dict[str, dict[str, dict]]) -> Tab
         "baseline",
         "metric",
         "median (ours vs baseline)",
-        "change of the median",
+        "difference of the medians (ours - baseline)",
         "IQR of ours vs baseline's",
         "p",
         f"p x {k} (Bonferroni)",
@@ -209,7 +221,7 @@ def scene_section(results: Results, scene: str, boxplots: Path | None) -> list[B
     if not rows:
         return blocks + [Paragraph("No aggregated runs for this scene.")]
     blocks.append(_median_table(results, scene, rows))
-    comparison = _comparison_table(results, rows) if results.ours in rows else None
+    comparison = _comparison_table(results, scene, rows) if results.ours in rows else None
     if comparison is not None:
         blocks += [Paragraph(f"**{_label(results, results.ours)}** against each baseline on {scene}:"), comparison]
     elif results.ours not in rows:
@@ -221,7 +233,7 @@ def scene_section(results: Results, scene: str, boxplots: Path | None) -> list[B
 
 
 def summary_section(results: Results) -> list[Block]:
-    """One line per scene with the paper's headline phrasing ("+66.7% median PSNR")."""
+    """One line per scene: the difference of median PSNR to each baseline in dB, with its CI."""
     ours, items = results.ours, []
     for scene in results.scenes:
         x = results.values(scene, ours, "psnr") if ours else []
@@ -233,7 +245,7 @@ def summary_section(results: Results) -> list[Block]:
             c = compare(x, y, max(1, len(results.baselines)), higher_is_better=True)
             verdict = "significant" if c["significant"] else "n too small" if c["too_small"] else "not significant"
             parts.append(
-                f"{percent(c['median_change'])} median PSNR vs {baseline} (p x {c['n_comparisons']} = "
+                f"{median_difference(x, y, 'psnr')} median PSNR vs {baseline} (p x {c['n_comparisons']} = "
                 f"{p_value(c['p_bonferroni'])}, {verdict})"
             )
         if x:
@@ -312,7 +324,7 @@ def _pair_comparisons(results: Results, scene: str) -> Table | None:
             [
                 family,
                 f"{sampling} vs {nbv}",
-                f"{percent(c['median_change'])} median PSNR",
+                f"{median_difference(x, y, 'psnr')} median PSNR",
                 p_value(c["p_value"]),
                 p_value(c["p_bonferroni"]),
                 _significance(c),
@@ -374,7 +386,12 @@ def timing_section(results: Results) -> list[Block]:
         Table(
             ["method", "runs"] + list(TIMING_FIELDS),
             rows,
-            ["Median over all aggregated runs of the method (all scenes), per phase."],
+            [
+                "Median over all aggregated runs of the method (all scenes), per phase: wall-clock times measured "
+                "under the machine's load while the sweep ran (runs side by side share its cores), so methods doing "
+                "the same work can differ by the load alone; compare phases that differ in work, not these "
+                "seconds, across methods."
+            ],
         ),
         Paragraph(
             f"Sweep total: {seconds(total)} of run time summed over {len(results.runs)} aggregated runs "
