@@ -150,7 +150,7 @@ def test_presets_and_config_round_trip():
     assert (paper.hash_levels, paper.hash_features_per_level, paper.hash_log2_table_size) == (16, 2, 19)
     assert (paper.batch_size, paper.adam_eps, paper.average_init_density) == (4096, 1e-15, 0.01)
     assert NerfConfig.preset("paper", field_lr=0.002).field_lr == 0.002
-    with pytest.raises(ValueError, match="unknown preset"):
+    with pytest.raises(ValueError, match="unknown engine preset .fast."):
         NerfConfig.preset("fast")
     with pytest.raises(ValueError, match="near"):
         NerfConfig(near=3.0, far=2.0)

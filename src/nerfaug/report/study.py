@@ -154,7 +154,9 @@ def make_cell(rows: list[RunRow], scene: str, engine: str, methods: list[str], t
             rows=mine,
         )
     compared = [m for m in by_method if m != REFERENCE]
-    k = max(1, len(compared))
+    # Bonferroni over every method the plan compares with uniform, run yet or not: the correction
+    # does not shrink while a cell is incomplete.
+    k = max(1, len([m for m in dict.fromkeys([*methods, *compared]) if m != REFERENCE]))
     reference = by_method.get(REFERENCE)
     for method in compared if reference is not None else []:
         for metric in METRICS:
@@ -174,8 +176,9 @@ def make_cell(rows: list[RunRow], scene: str, engine: str, methods: list[str], t
 
 def regime_comparisons(cells: list[Cell], metric: str = "psnr") -> dict[str, dict]:
     """method -> `seed_level_comparison` of its differences to uniform over `cells` (one
-    engine's), Bonferroni over the methods compared."""
+    engine's), Bonferroni over the methods the cells compare (as each cell's test)."""
     methods = list(dict.fromkeys(m for c in cells for m in c.methods if m != REFERENCE))
+    k = max([c.n_comparisons for c in cells], default=1)
     found = {}
     for method in methods:
         differences = {
@@ -184,9 +187,7 @@ def regime_comparisons(cells: list[Cell], metric: str = "psnr") -> dict[str, dic
             if method in c.methods and REFERENCE in c.methods
         }
         if any(differences.values()):
-            found[method] = seed_level_comparison(
-                differences, max(1, len(methods)), HIGHER_IS_BETTER[metric], alpha=ALPHA
-            )
+            found[method] = seed_level_comparison(differences, k, HIGHER_IS_BETTER[metric], alpha=ALPHA)
     return found
 
 
