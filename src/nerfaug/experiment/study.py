@@ -90,7 +90,8 @@ def min_trials(n_comparisons: int, alpha: float = 0.05, start: int = DEFAULT_TRI
 def base_config(name: StudyPreset) -> ExperimentConfig:
     """The protocol every engine runs: "study" is `ExperimentConfig`'s defaults (the paper's
     protocol at 100x100: 6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50 test
-    views); "tiny" is the seconds-long preset of the tests."""
+    views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are rendered
+    first, which takes minutes)."""
     if name == "study":
         return ExperimentConfig()
     if name == "tiny":
@@ -289,7 +290,8 @@ def study(
         workers: concurrent runs.
         force: discard existing runs and redo them.
         device: auto (cuda when there is a GPU), cpu or cuda.
-        preset: study (the paper's protocol at 100x100) or tiny (seconds; tests).
+        preset: study (the paper's protocol at 100x100) or tiny (a smoke test: seconds per run, after
+            the built-in scenes are rendered).
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
         table: the per-run table to record runs in and summarise; runs it records with their
