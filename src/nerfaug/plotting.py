@@ -24,14 +24,19 @@ def new_figure(width: float, height: float):
     return Figure(figsize=(width, height))
 
 
+def figure_png(figure, dpi: int = FIGURE_DPI) -> bytes:
+    """`figure` rendered as PNG bytes (tight bounding box), e.g. to answer an HTTP request."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    return buffer.getvalue()
+
+
 def save_figure(figure, path: str | Path, dpi: int = FIGURE_DPI) -> Path:
     """Render `figure` as a PNG (tight bounding box) and write it atomically to `path`, creating
     its folder: a reader never sees a half-written image. Returns the path."""
     path = Path(path)
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
-    atomic_write_bytes(path, buffer.getvalue())
+    atomic_write_bytes(path, figure_png(figure, dpi))
     return path
 
 
-__all__ = ["FIGURE_DPI", "new_figure", "save_figure"]
+__all__ = ["FIGURE_DPI", "figure_png", "new_figure", "save_figure"]

@@ -20,6 +20,7 @@ from typing import Annotated, Literal
 
 import tyro
 
+from nerfaug import serve_cli
 from nerfaug.capture.constraints import ViewConstraints
 from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
 from nerfaug.experiment.config import ExperimentConfig
@@ -519,4 +520,5 @@ COMMANDS: dict = {
     "export": export,
     "eval": evaluate,
     "render-proposals": render_proposals,
+    **serve_cli.COMMANDS,
 }

@@ -1,0 +1,139 @@
+"""CLI commands for capturing with a robot: the HTTP service over capture sessions, and
+uncertainty images of any view of a session.
+
+    nerfaug serve --root SESSIONS                   the HTTP JSON service (API docs at /docs)
+    nerfaug uncertainty RUN --poses POSES.json --out DIR
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
+
+TOKEN_ENV = "NERFAUG_TOKEN"
+UNCERTAINTY_KIND = "uncertainty-images"  # the marker of a folder `nerfaug uncertainty` wrote
+
+
+def is_loopback(host: str) -> bool:
+    """Whether `host` binds only this machine (127.0.0.0/8, ::1, localhost)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def serve(
+    root: Path = Path("sessions"),
+    host: str = "127.0.0.1",
+    port: int = 8000,
+    token: str | None = None,
+    device: Literal["auto", "cpu", "cuda"] = "auto",
+    checkpoint_every: float = 60.0,
+    threads: int = 1,
+    max_upload_mb: float = 25.0,
+) -> None:
+    """Serve capture sessions over HTTP (JSON): create sessions, add captures, train in the
+    background, propose reachable views, and uncertainty images of any pose. The API and its
+    models are documented at http://HOST:PORT/docs.
+
+    Each session is a folder under --root that `nerfaug train/propose/add ROOT/ID` also open.
+    Stopped or killed, the service resumes every session, and its training, from its last save.
+
+    Args:
+        root: the folder holding the sessions (and datasets sessions may start from).
+        host: the address to listen on; only this machine (127.0.0.1) unless a token is set.
+        port: the port to listen on.
+        token: a secret every request must send as `Authorization: Bearer TOKEN` (default: the
+            NERFAUG_TOKEN environment variable); needed to listen beyond this machine.
+        device: where the NeRFs train: auto (cuda when available, else cpu), cpu, cuda.
+        checkpoint_every: save a training session after this many seconds (and when a job ends).
+        threads: torch threads for training.
+        max_upload_mb: the largest image file accepted, in MB.
+    """
+    token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
+    if not is_loopback(host) and not token:
+        raise SystemExit(
+            f"--host {host}: listening beyond this machine needs a token (--token or the {TOKEN_ENV} "
+            "environment variable), checked on every request"
+        )
+    if not 0 <= port <= 65535:
+        raise ValueError(f"--port {port}: must be in 0-65535")
+    if not checkpoint_every > 0:
+        raise ValueError(f"--checkpoint-every {checkpoint_every}: must be > 0 (seconds between saves)")
+    if not max_upload_mb > 0:
+        raise ValueError(f"--max-upload-mb {max_upload_mb}: must be > 0")
+    if threads < 1:
+        raise ValueError(f"--threads {threads}: must be >= 1")
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"--root {root}: not a folder")
+    try:
+        import uvicorn
+
+        from nerfaug.service.app import create_app
+    except ImportError as error:
+        raise SystemExit(
+            f"nerfaug serve needs the service's packages ({error.name} is missing): pip install 'nerfaug[serve]'"
+        ) from None
+    from nerfaug.device import configure_process, resolve_device
+    from nerfaug.service.hub import SessionHub
+
+    configure_process(threads=threads)
+    hub = SessionHub(root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every)
+    app = create_app(hub, token=token, max_upload_mb=max_upload_mb)
+    print(f"serving the sessions in {root} on http://{host}:{port} (API docs: /docs)", flush=True)
+    uvicorn.run(app, host=host, port=port, log_level="warning")
+
+
+def uncertainty(
+    run: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")],
+    poses: Path,
+    out: Path,
+    width: int | None = None,
+    fisher: bool = True,
+    fisher_width: int = 16,
+    device: Literal["auto", "cpu", "cuda"] = "auto",
+) -> None:
+    """Uncertainty images of any views of a session: for each pose of a poses JSON, what the NeRF
+    renders, its depth, the ray entropy and FisherRF's per-pixel score, as NAME.png (panels with
+    colour bars) and NAME_rgb.npy, NAME_depth.npy, NAME_entropy.npy, NAME_fisher.npy, NAME_pose.npy.
+
+    Args:
+        run: the session's run folder.
+        poses: a transforms JSON of world-frame poses (e.g. what `nerfaug propose` wrote); files are
+            named after its frames' file_path.
+        out: the folder to write (new, empty, or one this command wrote before).
+        width: pixels across of the render, depth and entropy; default: the training resolution.
+        fisher: also compute FisherRF's per-pixel score (three backward passes per pixel).
+        fisher_width: pixels across of the FisherRF image.
+        device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
+    """
+    from nerfaug import owned
+    from nerfaug.capture import CaptureSession, read_poses
+    from nerfaug.capture.uncertainty_images import view_maps, write_maps
+    from nerfaug.device import resolve_device
+    from nerfaug.errors import FolderRefused
+
+    if width is not None and width < 1:
+        raise ValueError(f"--width {width}: must be >= 1")
+    if fisher_width < 1:
+        raise ValueError(f"--fisher-width {fisher_width}: must be >= 1")
+    if not owned.is_empty(out) and not owned.marked(out, UNCERTAINTY_KIND):
+        raise FolderRefused(f"{out}: not empty and not written by `nerfaug uncertainty`; choose a new folder for --out")
+    if owned.overlaps(out, run):
+        raise FolderRefused(f"{out}: lies inside or holds the session {run}; choose a folder outside it")
+    matrices, names = read_poses(poses)
+    session = CaptureSession.open(run, device=str(resolve_device(device)))
+    maps = view_maps(session, matrices, width, fisher, fisher_width)
+    owned.mark(out, UNCERTAINTY_KIND)
+    for name, view in zip(names, maps):
+        write_maps(view, out, name)
+        print(f"{name}: mean entropy {view.entropy.mean():.3f} bits -> {out / (name + '.png')}")
+
+
+COMMANDS: dict = {"serve": serve, "uncertainty": uncertainty}

@@ -1,0 +1,42 @@
+"""The one place library errors become HTTP status codes: every error is answered as
+`{"detail": "one line"}` naming the field and the value."""
+
+from __future__ import annotations
+
+from nerfaug.capture.state import SessionError
+from nerfaug.data import DatasetError
+from nerfaug.errors import FolderRefused
+
+
+class ServiceError(Exception):
+    """An answer other than success: an HTTP status and one line saying why."""
+
+    def __init__(self, status: int, message: str):
+        super().__init__(message)
+        self.status = status
+        self.message = " ".join(message.split())
+
+
+def bad_input(message: str) -> ServiceError:
+    """422: a value the client sent is wrong (the message names the field)."""
+    return ServiceError(422, message)
+
+
+def status_of(error: BaseException) -> tuple[int, str]:
+    """The HTTP status and one-line message for an error raised inside a request.
+
+    422: bad input (`DatasetError`, `ValueError`: a value, pose or image the client sent);
+    409: the session's folder refuses the operation or is inconsistent (`FolderRefused`,
+    `SessionError`); 404: a file the request names does not exist; 500: anything else, named as
+    an internal error.
+    """
+    if isinstance(error, ServiceError):
+        return error.status, error.message
+    text = " ".join(str(error).split()) or type(error).__name__
+    if isinstance(error, (FolderRefused, SessionError)):
+        return 409, text
+    if isinstance(error, (DatasetError, ValueError)):
+        return 422, text
+    if isinstance(error, FileNotFoundError):
+        return 404, text
+    return 500, f"internal error ({type(error).__name__}: {text})"

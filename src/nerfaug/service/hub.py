@@ -1,0 +1,274 @@
+"""The sessions a service holds: one `CaptureSession` per folder under the service root, one lock
+per session (requests to a session run one at a time), training in a worker thread per session,
+and a record of each training job so that a restarted service resumes it.
+
+    ROOT/
+      <id>/                 a capture session (`nerfaug train/propose/add ROOT/<id>` open it too)
+      .service/jobs/<id>.json   the session's training job: target step, state
+
+Training holds the session's lock for a chunk of steps at a time, so other requests to the
+session wait at most one chunk; the state a client polls is a snapshot taken after each chunk,
+read without the lock, so it is answered while training runs.
+"""
+
+from __future__ import annotations
+
+import re
+import tempfile
+import threading
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from time import monotonic, time
+
+from nerfaug.capture.state import SESSION_FILE
+from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.service.errors import ServiceError, bad_input, status_of
+
+SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
+JOBS_DIR = Path(".service") / "jobs"
+CHUNK_STEPS = 10  # training steps per hold of the session's lock
+
+
+def check_session_id(session_id: str) -> str:
+    """`session_id` if it matches `SESSION_ID` (so it names a folder directly under the root)."""
+    if not isinstance(session_id, str) or not SESSION_ID.fullmatch(session_id):
+        raise bad_input(
+            f"session id {str(session_id)[:80]!r}: must be 1-64 letters, digits, '_' or '-', starting "
+            "with a letter or digit"
+        )
+    return session_id
+
+
+@dataclass
+class Job:
+    """A training job: from `start` to `target` steps; `state` is running, done or failed."""
+
+    target: int
+    start: int
+    step: int
+    state: str = "running"
+    error: str | None = None
+    started: float = field(default_factory=time)
+    finished: float | None = None
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        done = self.step - self.start
+        data["progress"] = 1.0 if self.target <= self.start else round(done / (self.target - self.start), 4)
+        return data
+
+
+class Slot:
+    """One session's place in the hub: its lock, the open session, its job and its snapshot."""
+
+    def __init__(self, session_id: str):
+        self.id = session_id
+        self.lock = threading.RLock()
+        self.session = None
+        self.job: Job | None = None
+        self.thread: threading.Thread | None = None
+        self.snapshot: dict = {}
+
+
+class SessionHub:
+    """The sessions under `root`; see the module docstring.
+
+    Args:
+        root: the service root folder (created if missing).
+        device: torch device sessions train and render on.
+        checkpoint_every: seconds of training between saves (and a save at each job's end).
+        chunk_steps: training steps per hold of a session's lock.
+    """
+
+    def __init__(self, root: Path, device: str = "cpu", checkpoint_every: float = 60.0, chunk_steps: int = CHUNK_STEPS):
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.device = device
+        self.checkpoint_every = float(checkpoint_every)
+        self.chunk_steps = int(chunk_steps)
+        self._slots: dict[str, Slot] = {}
+        self._slots_lock = threading.Lock()
+        self._stopping = threading.Event()
+
+    # -- sessions --
+
+    def folder(self, session_id: str) -> Path:
+        return self.root / check_session_id(session_id)
+
+    def ids(self) -> list[str]:
+        """Ids of the sessions under the root (folders holding a session.json)."""
+        return sorted(
+            p.name for p in self.root.iterdir() if SESSION_ID.fullmatch(p.name) and (p / SESSION_FILE).is_file()
+        )
+
+    def slot(self, session_id: str, must_exist: bool = True) -> Slot:
+        folder = self.folder(session_id)
+        with self._slots_lock:
+            slot = self._slots.get(session_id)
+            if slot is None:
+                if must_exist and not (folder / SESSION_FILE).is_file():
+                    raise ServiceError(404, f"session {session_id!r}: no such session under the service root")
+                slot = self._slots[session_id] = Slot(session_id)
+            return slot
+
+    def opened(self, slot: Slot):
+        """The slot's session, opened on first use (hold `slot.lock`)."""
+        if slot.session is None:
+            from nerfaug.capture import CaptureSession
+
+            slot.session = CaptureSession.open(self.root / slot.id, device=self.device)
+            self._snapshot(slot)
+        return slot.session
+
+    def created(self, session_id: str, create) -> dict:
+        """Create a session with `create(folder)` (a function returning the `CaptureSession`)."""
+        folder = self.folder(session_id)
+        if folder.exists():
+            raise ServiceError(409, f"session {session_id!r}: {folder.name} already exists under the service root")
+        slot = self.slot(session_id, must_exist=False)
+        with slot.lock:
+            if slot.session is not None or (folder / SESSION_FILE).exists():
+                raise ServiceError(409, f"session {session_id!r}: already exists")
+            try:
+                slot.session = create(folder)
+            except BaseException:
+                with self._slots_lock:
+                    self._slots.pop(session_id, None)
+                raise
+            slot.session.save()
+            self._snapshot(slot)
+        return self.state(session_id)
+
+    def dataset_path(self, relative: str) -> Path:
+        """A dataset folder named relative to the root, refused when it leaves the root."""
+        if not relative or Path(relative).is_absolute():
+            raise bad_input(f"dataset {relative!r}: give a folder relative to the service root")
+        path = (self.root / relative).resolve()
+        if not path.is_relative_to(self.root.resolve()):
+            raise bad_input(f"dataset {relative!r}: lies outside the service root")
+        if not path.is_dir():
+            raise ServiceError(404, f"dataset {relative!r}: no such folder under the service root")
+        return path
+
+    def run(self, session_id: str, action):
+        """`action(session)` under the session's lock; the snapshot is refreshed after it."""
+        slot = self.slot(session_id)
+        with slot.lock:
+            session = self.opened(slot)
+            try:
+                return action(session)
+            finally:
+                self._snapshot(slot)
+
+    def staging(self) -> tempfile.TemporaryDirectory:
+        """A private temporary folder for one request's uploads (removed when it ends)."""
+        return tempfile.TemporaryDirectory(prefix="nerfaug-upload-")
+
+    # -- state --
+
+    def _snapshot(self, slot: Slot) -> None:
+        session = slot.session
+        if session is None:
+            return
+        history = session.trainer.history
+        slot.snapshot = {
+            "id": slot.id,
+            "step": session.step,
+            "views": len(session.trainer.train_views),
+            "names": [str(n) for n in session.trainer.train_views.names],
+            "last_losses": [dict(h) for h in history[-5:]],
+            "proposals": len(session.state.proposals),
+            "additions": len(session.state.additions),
+            "hemisphere": session.hemisphere.to_dict(),
+            "intrinsics": asdict(session.state.intrinsics),
+        }
+
+    def state(self, session_id: str) -> dict:
+        """The session's state (never waits for its training): the last snapshot and the job."""
+        slot = self.slot(session_id)
+        if not slot.snapshot:
+            with slot.lock:
+                self.opened(slot)
+        job = slot.job
+        return {**slot.snapshot, "running": job is not None and job.state == "running", "job": job and job.to_dict()}
+
+    # -- training --
+
+    def _job_file(self, session_id: str) -> Path:
+        return self.root / JOBS_DIR / f"{session_id}.json"
+
+    def _record(self, slot: Slot) -> None:
+        atomic_write_json(self._job_file(slot.id), {"kind": "train", **slot.job.to_dict()})
+
+    def train(self, session_id: str, steps: int) -> dict:
+        """Start training `steps` more steps in a worker thread; 409 when a job is running."""
+        slot = self.slot(session_id)
+        with slot.lock:
+            if slot.job is not None and slot.job.state == "running":
+                raise ServiceError(
+                    409, f"session {session_id!r}: training is already running (until step {slot.job.target})"
+                )
+            session = self.opened(slot)
+            slot.job = Job(target=session.step + int(steps), start=session.step, step=session.step)
+            self._record(slot)
+            self._start(slot)
+            return slot.job.to_dict()
+
+    def _start(self, slot: Slot) -> None:
+        slot.thread = threading.Thread(target=self._train_worker, args=(slot,), name=f"train-{slot.id}", daemon=True)
+        slot.thread.start()
+
+    def _train_worker(self, slot: Slot) -> None:
+        job = slot.job
+        saved_at = monotonic()
+        try:
+            while not self._stopping.is_set():
+                with slot.lock:
+                    session = self.opened(slot)
+                    if session.step >= job.target:
+                        break
+                    session.train(min(self.chunk_steps, job.target - session.step))
+                    job.step = session.step
+                    if monotonic() - saved_at >= self.checkpoint_every:
+                        session.save()
+                        saved_at = monotonic()
+                    self._snapshot(slot)
+            with slot.lock:
+                slot.session.save()
+                self._snapshot(slot)
+                if not self._stopping.is_set():  # stopped by a shutdown: left running, resumed on restart
+                    job.state, job.finished = "done", time()
+                    self._record(slot)
+        except Exception as error:  # noqa: BLE001 -- any failure is reported to the client polling the job
+            job.state, job.finished, job.error = "failed", time(), status_of(error)[1]
+            self._record(slot)
+
+    def resume(self) -> list[str]:
+        """Restart the training jobs a stopped or killed service left running; returns their ids."""
+        resumed = []
+        folder = self.root / JOBS_DIR
+        for path in sorted(folder.glob("*.json")) if folder.is_dir() else []:
+            session_id = path.stem
+            try:
+                record = read_json(path)
+                if record.get("state") != "running" or not (self.root / session_id / SESSION_FILE).is_file():
+                    continue
+                slot = self.slot(session_id)
+                with slot.lock:
+                    session = self.opened(slot)
+                    target = int(record["target"])
+                    slot.job = Job(target=target, start=int(record.get("start", session.step)), step=session.step)
+                    self._record(slot)
+                    self._start(slot)
+                resumed.append(session_id)
+            except Exception as error:  # noqa: BLE001 -- one bad session must not stop the others
+                slot = self.slot(session_id, must_exist=False)
+                slot.job = Job(target=0, start=0, step=0, state="failed", error=status_of(error)[1], finished=time())
+        return resumed
+
+    def shutdown(self, timeout: float = 30.0) -> None:
+        """Stop the training workers at their next chunk; each saves its session first."""
+        self._stopping.set()
+        for slot in list(self._slots.values()):
+            if slot.thread is not None:
+                slot.thread.join(timeout)
