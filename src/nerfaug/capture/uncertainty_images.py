@@ -126,6 +126,7 @@ def view_maps(session, poses, width: int | None = None, fisher: bool = True, fis
 def figure(maps: ViewMaps, title: str = ""):
     """The render, depth, entropy and (when computed) FisherRF panels of one view, side by side,
     each measured panel with its colour bar."""
+    from matplotlib import colormaps
     from matplotlib.colors import LogNorm
 
     from nerfaug.plotting import new_figure
@@ -147,7 +148,9 @@ def figure(maps: ViewMaps, title: str = ""):
         if positive.size and positive.max() > positive.min():
             norm = LogNorm(vmin=float(positive.min()), vmax=float(positive.max()))
         shown = np.where(maps.fisher > 0, maps.fisher, np.nan) if norm is not None else maps.fisher
-        image = axes[3].imshow(shown, cmap="inferno", norm=norm, interpolation="nearest")
+        # Pixels with no gain (rays that touch no parameter) are drawn in the scale's lowest colour.
+        colours = colormaps["inferno"].with_extremes(bad=colormaps["inferno"](0.0))
+        image = axes[3].imshow(shown, cmap=colours, norm=norm, interpolation="nearest")
         axes[3].set_title("FisherRF score per pixel" + (" (log)" if norm is not None else ""))
         fig.colorbar(image, ax=axes[3], fraction=0.046, pad=0.04)
     for ax in axes:
