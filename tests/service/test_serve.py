@@ -142,6 +142,8 @@ def server(root):
 
 def test_the_whole_capture_loop(server, root):
     assert server.client.get("/health").json()["status"] == "ok"
+    assert server.client.get("/docs").status_code == 200
+    assert "/sessions/{session_id}/proposals" in server.client.get("/openapi.json").json()["paths"]
     created = create(server, "loop")
     assert created.status_code == 201, created.text
     assert created.json()["views"] == 4 and created.json()["step"] == 0
