@@ -114,3 +114,33 @@ def test_the_example_with_pool_capture_runs(tmp_path):
     done = run([sys.executable, str(ROOT / "examples" / "active_capture.py"), *argv, *small], tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     assert (tmp_path / "results" / "active-capture-export" / "transforms.json").is_file()
+
+
+# Options appended to each line of the README's Usage block (the last of a repeated option wins):
+# the test engine, a few steps past the step where views are added (200), one trial, 24 px.
+USAGE_SMALL = {
+    "scene": SMALL["scene"],
+    "run": ["--engine", "test", "--steps", "210", "--trials", "1", "--resolution", "24", "--device", "cpu"],
+    "study": ["--preset", "tiny", "--engines", "test", "--scenes", "data/lego", "--trials", "2", "--device", "cpu"],
+    "report": [],
+    "methods": [],
+    "--help": [],
+}
+# The README's stand-in for a user's dataset, and the one the block's own `scene render` line writes.
+USAGE_DATA = ("path/to/nerf_synthetic/lego", "data/lego")
+
+
+def test_the_usage_block_runs_as_written(tmp_path):
+    """Every line of the Usage block but those ending in `...` (option examples to combine with
+    the lines above) and the venv's activation; the paper preset at one scene."""
+    block = block_with("bash", "nerfaug run --preset quick")
+    commands = [argv for argv in shell_lines(block) if argv[0] == "nerfaug" and "..." not in argv]
+    assert len(commands) >= 8, commands
+    for argv in commands:
+        argv = [USAGE_DATA[1] if a == USAGE_DATA[0] else a for a in argv]
+        small = USAGE_SMALL[argv[1]] + (["--scenes", "lego"] if "paper" in argv else [])
+        done = nerfaug([*argv[1:], *small], tmp_path)
+        assert done.returncode == 0, f"{shlex.join(argv)}: exit {done.returncode}\n{done.stderr[-3000:]}"
+    assert (tmp_path / "results" / "quick" / "report.md").is_file()
+    assert (tmp_path / "results" / "mylego" / "report.md").is_file()
+    assert (tmp_path / "results" / "study" / "study.md").is_file()

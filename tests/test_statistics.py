@@ -351,3 +351,12 @@ def test_seed_level_test_holds_its_false_positive_rate_where_pooling_pairs_does_
     assert 0.035 <= seed_level / simulations <= 0.065
     # ... while treating the 30 pairs as independent rejects a true null far too often.
     assert pooled / simulations > 0.15
+
+
+def test_compare_with_one_trial_each_and_a_tie_answers():
+    """A one-trial run (a smoke test) whose values tie: scipy's permutation test refuses samples of
+    one, so the tie-corrected asymptotic test answers, as scipy computes it."""
+    found = compare([1.0], [1.0], 3)
+    assert found["p_value"] == pytest.approx(stats.mannwhitneyu([1.0], [1.0], method="asymptotic").pvalue)
+    assert found["too_small"] and not found["significant"]
+    assert compare([1.0], [1.0, 2.0])["test_method"].startswith("asymptotic")
