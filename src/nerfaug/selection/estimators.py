@@ -154,6 +154,46 @@ def fisher_background(config: SelectionConfig) -> Tensor | None:
     return None if config.background is None else torch.tensor(config.background, dtype=torch.float32)
 
 
+def fisher_train_rays(
+    train_cameras: Cameras, config: SelectionConfig, generator: torch.Generator | None = None
+) -> tuple[Tensor, Tensor, Tensor]:
+    """The training rays H_train is taken over: about `config.fisher_train_pixels` pixels spread
+    evenly over the training views (`stratified_pixel_rays`), with the weights that make their
+    weighted sum estimate the sum over every pixel. Draws from `generator` once.
+
+    Returns:
+        origins, directions: Tensors with shape (n_rays, 3).
+        weights: Tensor with shape (n_rays,).
+    """
+    return stratified_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
+
+
+def fisher_train_diagonal(
+    model: nn.Module, train_cameras: Cameras, config: SelectionConfig, generator: torch.Generator | None = None
+) -> Tensor:
+    """H_train as `fisherrf_candidates` computes it: the Fisher diagonal over `fisher_train_rays`
+    with the config's fisher_* settings. Draws from `generator` once for the pixels and once
+    for the probes ("random-sign").
+
+    Returns:
+        Tensor with shape (P,).
+    """
+    # Stratified pixels with weights: H_train estimates the sum over every pixel of the training
+    # images, the scale of each candidate's whole-image H_cand that the greedy batch adds to it.
+    origins, directions, weights = fisher_train_rays(train_cameras, config, generator)
+    return fisher_diagonal(
+        model,
+        origins,
+        directions,
+        config.fisher_method,
+        config.fisher_train_probes,
+        generator,
+        config.fisher_train_chunk,
+        fisher_background(config),
+        weights=weights,
+    )
+
+
 def fisherrf_candidates(
     model: nn.Module,
     train_cameras: Cameras,
@@ -171,21 +211,8 @@ def fisherrf_candidates(
         scores: Tensor with shape (n_candidates,).
         h_of: candidate index -> H_cand, Tensor with shape (P,).
     """
-    # Stratified pixels with weights: H_train estimates the sum over every pixel of the training
-    # images, the scale of each candidate's whole-image H_cand that the greedy batch adds to it.
-    origins, directions, weights = stratified_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
+    h_train = fisher_train_diagonal(model, train_cameras, config, generator)
     background = fisher_background(config)
-    h_train = fisher_diagonal(
-        model,
-        origins,
-        directions,
-        config.fisher_method,
-        config.fisher_train_probes,
-        generator,
-        config.fisher_train_chunk,
-        background,
-        weights=weights,
-    )
     scores, h_of = fisherrf_view_scores(
         model,
         candidates,

@@ -148,10 +148,13 @@ class SelectionConfig:
         authors_threshold: the 15 of the authors' sampler.
         max_draws: proposals before the rejection sampler gives up.
         fisher_method: "random-sign" (default) or "exact"; see `nerfaug.uncertainty.fisher`.
-        fisher_train_pixels: training pixels H_train is taken over (uniform subsample). With
-            fisher_resolution 45, 4096 is the cheapest setting whose candidate ranking, at step 200
-            on lego 100x100, stays put when either side's pixels double (mean Spearman >= 0.9 and
-            top-6 overlap >= 4/6 for each of 4 seeds; see benchmarks/bench_fisher.py and BENCHMARKS.md).
+        fisher_train_pixels: training pixels H_train is taken over (a stratified, weighted
+            subsample of the training views, `fisher_train_rays`). With fisher_resolution 45, 4096
+            was chosen as the cheapest setting whose candidate ranking, at step 200 on lego
+            100x100, stays put when either side's pixels double (mean Spearman >= 0.9 and top-6
+            overlap >= 4/6 for each of 4 seeds), measured with unweighted uniform training pixels;
+            with this estimator the means hold but one seed of 4 keeps 2/6 when the training
+            pixels double (benchmarks/bench_fisher.py; BENCHMARKS.md, "FisherRF stability").
         fisher_train_chunk: rays per squared probe for H_train ("random-sign").
         fisher_train_probes: Rademacher probes per chunk for H_train ("random-sign"; each is
             three backward passes, one per colour channel).
