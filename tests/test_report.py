@@ -18,12 +18,14 @@ from nerfaug.experiment.runfolder import (
     write_metrics,
     write_progress,
     write_selection,
+    write_view_uncertainty,
 )
 from nerfaug.experiment.store import RunKey, run_fingerprint, write_result
 from nerfaug.experiment.sweep import sweep_record
 from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses, sample_uniform_poses
 from nerfaug.jsonio import atomic_write_json
 from nerfaug.report import ReportError, collect_results, history_series, write_report
+from nerfaug.uncertainty.sparsification import ause, mean_pool
 
 METHODS = ("ours", "uniform", "entropy")
 # PSNR per (scene, method): three trials each. Hand-computed (numpy linear quartiles):
@@ -47,10 +49,28 @@ def config():
     return preset("tiny").replace(scenes=("lego", "chair"), methods=METHODS, trials=3)
 
 
-def write_run(root, record, scene, method, trial, psnr, lpips_available=True, generator=None):
+# A test view's squared error (8x8, rising to the right and down), and each method's uncertainty
+# images of it: ours ranks the error exactly (AUSE 0); uniform is constant (a random ranking) with
+# FisherRF reversed; entropy saved no FisherRF image.
+VIEW_ERROR = np.add.outer(np.arange(8.0), np.arange(8.0)) / 100
+
+
+def view_arrays(method: str) -> dict:
+    arrays = {"render": np.full((8, 8, 3), 0.5), "error": VIEW_ERROR}
+    if method == "ours":
+        return {**arrays, "entropy": 3 * VIEW_ERROR, "fisher": mean_pool(VIEW_ERROR, 4, 4) + 1e-6}
+    if method == "uniform":
+        return {**arrays, "entropy": np.ones((8, 8)), "fisher": -mean_pool(VIEW_ERROR, 4, 4) + 1}
+    return {**arrays, "entropy": VIEW_ERROR[::-1, ::-1]}
+
+
+def write_run(root, record, scene, method, trial, psnr, lpips_available=True, generator=None, view=False):
     """One run folder as `protocol.run_trial` writes it, through the same run-folder contract;
-    result.json last."""
+    result.json last. With `view`, the first test view's arrays (`view_arrays`), which runs made
+    before they were saved lack."""
     folder = RunKey(scene, method, trial).folder(root)
+    if view:
+        write_view_uncertainty(folder, view_arrays(method))
     candidates = sample_uniform_poses(12, torch.Generator().manual_seed(len(scene)))  # the scene's pool
     initial = half_hemisphere_poses(3)
     chosen = [int(i) for i in torch.randperm(12, generator=generator)[:2]]
@@ -104,14 +124,16 @@ def write_run(root, record, scene, method, trial, psnr, lpips_available=True, ge
 
 
 def make_results(root, corrupt=True):
-    """2 scenes x 3 methods x 3 trials with the known numbers (no LPIPS on chair); with `corrupt`,
+    """2 scenes x 3 methods x 3 trials with the known numbers (no LPIPS on chair; the test view's
+    uncertainty arrays on lego only, chair's runs are as older runs wrote them); with `corrupt`,
     also a truncated result.json (PSNR 99.99) and a result of another configuration (PSNR 77.77)."""
     record = sweep_record(config(), ["nerfaug", "run", "--preset", "tiny"])
     atomic_write_json(root / "sweep.json", record)
     generator = torch.Generator().manual_seed(0)
     for (scene, method), values in PSNR.items():
         for trial, psnr in enumerate(values):
-            write_run(root, record, scene, method, trial, psnr, lpips_available=scene == "lego", generator=generator)
+            lego = scene == "lego"
+            write_run(root, record, scene, method, trial, psnr, lpips_available=lego, generator=generator, view=lego)
     if corrupt:
         truncated = write_run(root, record, "lego", "ours", 3, 99.99, generator=generator) / "result.json"
         truncated.write_text(truncated.read_text()[:60])
@@ -125,6 +147,15 @@ def table_rows(markdown: str, heading: str) -> dict[str, list[str]]:
     section = markdown.split(heading, 1)[1]
     lines = [line for line in section.split("\n\n", 2)[1].splitlines() if line.startswith("|")]
     return {cells[0]: cells for cells in ([c.strip() for c in line.strip("|").split("|")] for line in lines[2:])}
+
+
+def first_table_after(markdown: str, heading: str) -> dict[str, list[str]]:
+    """The first table after `heading` (past figures and text), as first cell -> cells."""
+    lines = markdown.split(heading, 1)[1].splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("|"))
+    end = next((i for i in range(start, len(lines)) if not lines[i].startswith("|")), len(lines))
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in lines[start + 2 : end]]
+    return {cells[0]: cells for cells in rows}
 
 
 @pytest.fixture(scope="module")
@@ -145,6 +176,40 @@ def test_files_are_written(report):
         assert path.is_file() and path.stat().st_size > 0
     for path in paths[2:]:
         assert iio.imread(path).ndim == 3  # a real PNG
+
+
+def test_the_uncertainty_of_a_test_view_with_each_methods_ause(report):
+    root, paths, markdown, _ = report
+    assert root / "figures" / "view_uncertainty_lego.png" in paths
+    assert not (root / "figures" / "view_uncertainty_chair.png").exists()  # its runs saved no arrays
+    section = markdown.split("## Uncertainty of a test view", 1)[1]
+    assert "view_uncertainty_lego.png" in section and "### chair" not in section.split("## ", 1)[0]
+    rows = first_table_after(section, "### lego")
+    # method, runs, AUSE entropy median (IQR), AUSE FisherRF median (IQR); every trial alike: IQR 0.
+    assert rows["ours"] == ["ours", "3 of 3", "0.000 (0.000)", "0.000 (0.000)"]
+    constant = ause(np.ones((8, 8)), VIEW_ERROR)
+    reversed_fisher = ause(-mean_pool(VIEW_ERROR, 4, 4), mean_pool(VIEW_ERROR, 4, 4))
+    assert constant > 0.05 and reversed_fisher > 0.05
+    assert rows["uniform"][2:] == [f"{constant:.3f} (0.000)", f"{reversed_fisher:.3f} (0.000)"]
+    assert rows["entropy"][3] == "n/a"  # no FisherRF image saved
+    # A figure of the same view, one row per method, with its AUSE in the panel titles.
+    image = iio.imread(root / "figures" / "view_uncertainty_lego.png")
+    assert image.shape[0] > 500 and image.shape[1] > 1000
+
+
+def test_a_report_of_runs_without_view_arrays_has_no_such_section(tmp_path):
+    record = sweep_record(config().replace(scenes=("lego",), methods=("ours", "uniform"), trials=1), ["nerfaug"])
+    atomic_write_json(tmp_path / "sweep.json", record)
+    for method in ("ours", "uniform"):
+        write_run(tmp_path, record, "lego", method, 0, 20.0, generator=torch.Generator().manual_seed(2))
+    paths = write_report(tmp_path)
+    assert "Uncertainty of a test view" not in (tmp_path / "report.md").read_text()
+    assert not any("view_uncertainty" in p.name for p in paths)
+    # One run of two with the arrays: the other is counted as left out.
+    write_view_uncertainty(RunKey("lego", "ours", 0).folder(tmp_path), view_arrays("ours"))
+    write_report(tmp_path)
+    section = (tmp_path / "report.md").read_text().split("## Uncertainty of a test view", 1)[1]
+    assert "1 run(s) without the arrays" in section and first_table_after(section, "### lego")["ours"][1] == "1 of 1"
 
 
 def strip_bold(cell: str) -> str:

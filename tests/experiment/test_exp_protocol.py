@@ -1,5 +1,7 @@
+import dataclasses
 import math
 
+import pytest
 import torch
 
 from nerfaug.cameras import Cameras
@@ -48,3 +50,69 @@ def test_quick_preset_compares_the_main_methods_with_enough_trials_for_significa
     assert config.resolution >= Lpips.min_size  # LPIPS is reported
     assert config.add_at_step == 200 and config.n_initial == config.n_new == 6  # the paper's protocol
     assert config.engine == "cpu" and config.n_test >= 20
+
+
+def test_a_run_saves_its_first_test_view_uncertainty_without_changing_its_results(tmp_path, monkeypatch):
+    """The view's arrays are written after the evaluation: the same run without them has the
+    same metrics, selection and history, bit for bit."""
+    import json
+
+    import numpy as np
+
+    from nerfaug.data import write_blender_split
+    from nerfaug.experiment import protocol
+    from nerfaug.experiment.runfolder import FILES, read_view_uncertainty
+    from nerfaug.experiment.store import RunKey
+    from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X
+
+    size, generator = 24, torch.Generator().manual_seed(0)
+    data = tmp_path / "data"
+    for split, n in (("train", 12), ("test", 2), ("initial", 3)):
+        poses = sample_uniform_poses(n, generator)
+        images = torch.rand(n, size, size, 3, generator=generator)
+        cameras = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, size, size)
+        write_blender_split(data, split, Views(cameras, images, [f"./{split}/r_{i}" for i in range(n)]))
+    config = preset("tiny").replace(steps=30, add_at_step=10, n_test=2, threads_per_run=1)
+    config = config.replace(
+        selection=dataclasses.replace(config.selection, fisher_resolution=4, fisher_train_pixels=64)
+    )
+    key = RunKey("scene", "fisherrf", 0)
+
+    with_maps = protocol.run_trial(key, data, config, tmp_path / "with")
+    arrays = read_view_uncertainty(key.folder(tmp_path / "with"))
+    assert arrays is not None and set(arrays) == {"render", "error", "entropy", "fisher"}
+    assert arrays["render"].shape == (size, size, 3) and arrays["error"].shape == arrays["entropy"].shape == (
+        size,
+        size,
+    )
+    assert arrays["fisher"].shape == (size, size)  # VIEW_FISHER_WIDTH (24) is not above the view's width
+    assert (arrays["error"] >= 0).all() and (arrays["entropy"] >= 0).all() and (arrays["fisher"] >= 0).all()
+    assert arrays["fisher"].sum() > 0 and "view_uncertainty" in with_maps["timing"]
+
+    monkeypatch.setattr(protocol, "save_view_uncertainty", lambda *args: None)
+    without = protocol.run_trial(key, data, config, tmp_path / "without")
+    assert not (key.folder(tmp_path / "without") / FILES.view_uncertainty).exists()
+    assert with_maps["metrics"] == without["metrics"] and with_maps["chosen"] == without["chosen"]
+    for name in (FILES.selection, FILES.metrics, FILES.history):
+        first, second = (json.loads((key.folder(tmp_path / r) / name).read_text()) for r in ("with", "without"))
+        assert first == second, name
+    # The error image is the render's against the test image the metrics were computed on.
+    per_view = json.loads((key.folder(tmp_path / "with") / FILES.metrics).read_text())["per_view"][0]
+    assert -10 * np.log10(arrays["error"].mean()) == pytest.approx(per_view["psnr"], abs=0.05)
+
+
+def test_view_uncertainty_of_older_runs_reads_as_absent(tmp_path):
+    import numpy as np
+
+    from nerfaug.experiment.runfolder import FILES, read_view_uncertainty, write_view_uncertainty
+
+    assert read_view_uncertainty(tmp_path) is None
+    write_view_uncertainty(tmp_path, {"render": np.zeros((4, 4, 3)), "error": np.zeros((4, 4))})
+    assert read_view_uncertainty(tmp_path) is None  # no entropy
+    write_view_uncertainty(tmp_path, {"entropy": np.zeros((4, 4)), "fisher": np.zeros((8, 8))})
+    found = read_view_uncertainty(tmp_path)
+    assert set(found) == {"render", "error", "entropy"}  # a FisherRF image larger than the view is left out
+    (tmp_path / FILES.view_uncertainty / "error.npy").write_bytes(b"not an array")
+    assert read_view_uncertainty(tmp_path) is None
+    with pytest.raises(ValueError, match="unknown view arrays"):
+        write_view_uncertainty(tmp_path, {"depth": np.zeros((4, 4))})

@@ -23,6 +23,7 @@ from nerfaug.experiment.runfolder import (
     write_metrics,
     write_progress,
     write_selection,
+    write_view_uncertainty,
 )
 from nerfaug.experiment.store import (
     RunKey,
@@ -35,6 +36,8 @@ from nerfaug.experiment.store import (
 from nerfaug.hemisphere import half_hemisphere_poses
 
 PROGRESS_EVERY = 50
+# Pixels across of the saved FisherRF image of a test view: three backward passes per pixel.
+VIEW_FISHER_WIDTH = 24
 # Set by a driver that shows progress in this process; called after each progress write.
 on_progress = None
 
@@ -209,6 +212,39 @@ def train_with_progress(trainer, until_step: int, folder: Path) -> None:
             on_progress()
 
 
+def save_view_uncertainty(folder: Path, trainer, test: Views, selection_config, seed: int) -> Path:
+    """The first test view's render, squared error, ray entropy and FisherRF images
+    (`FILES.view_uncertainty`), for the report's figure and AUSE.
+
+    H_train is taken as the method's FisherRF would take it (`fisher_train_diagonal`), on the
+    views trained on at the end, with a generator of its own; called after the evaluation, so no
+    metric and no selection depends on it.
+    """
+    from nerfaug.selection.estimators import fisher_train_diagonal
+    from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
+
+    model, device = trainer.model, trainer.device
+    cameras = test.cameras[[0]].to(device)
+    images = view_images(model, cameras, 0)
+    render = images["rgb"].clamp(0, 1).double()
+    target = test.image(0).double().cpu()
+    h_train = fisher_train_diagonal(
+        model, trainer.train_views.cameras.to(device), selection_config, torch.Generator().manual_seed(seed)
+    )
+    width = min(VIEW_FISHER_WIDTH, cameras.width)
+    small = cameras.resized(width, max(1, round(width * cameras.height / cameras.width)))
+    fisher = fisher_pixel_scores(model, small, h_train, 0)
+    return write_view_uncertainty(
+        folder,
+        {
+            "render": render.numpy().astype("float16"),
+            "error": (render - target).square().mean(-1).numpy().astype("float32"),
+            "entropy": images["entropy"].numpy().astype("float32"),
+            "fisher": fisher.numpy().astype("float32"),
+        },
+    )
+
+
 def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Path, progress: bool = False) -> dict:
     """Run one (scene, method, trial) and write its folder; result.json is written last.
 
@@ -270,6 +306,10 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
         progress=progress,
     )
     timing["evaluation"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    save_view_uncertainty(folder, trainer, data.test, config.selection, seed)
+    timing["view_uncertainty"] = time.perf_counter() - start
     timing["total"] = sum(timing.values())
 
     write_selection(

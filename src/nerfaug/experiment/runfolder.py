@@ -13,6 +13,10 @@ fake writer all go through this module, so a file's name or layout changes in on
       error.json       {"error": one line, "traceback": ...} when the run failed
       renders/         <i>_render.png and <i>_render_vs_gt.png of the first test views
       uncertainty.png  the selection's scores over the hemisphere
+      view_uncertainty/  the first test view after training, as .npy arrays: render.npy (H, W, 3)
+                       float16, error.npy (H, W) squared error per pixel (mean over colours),
+                       entropy.npy (H, W) ray entropy in bits, fisher.npy (h, w) FisherRF score per
+                       pixel at a lower resolution; absent in runs made before it was written
 
 Readers return None for a file that is absent or unreadable: a run folder is read from disk that
 another process may be writing, and the report lists such runs rather than failing.
@@ -20,6 +24,7 @@ another process may be writing, and the report lists such runs rather than faili
 
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from nerfaug.experiment.store import RESULT_FILE, read_result, write_result
-from nerfaug.jsonio import atomic_write_json
+from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
 
 
 @dataclass(frozen=True)
@@ -43,6 +48,7 @@ class RunFiles:
     error: str = "error.json"
     renders: str = "renders"
     uncertainty: str = "uncertainty.png"
+    view_uncertainty: str = "view_uncertainty"
 
 
 FILES = RunFiles()
@@ -198,6 +204,48 @@ def read_error(folder: Path) -> str | None:
     return str(error) if error is not None else None
 
 
+VIEW_ARRAYS = ("render", "error", "entropy", "fisher")
+"""The arrays of `FILES.view_uncertainty`, each `<name>.npy`."""
+
+
+def write_view_uncertainty(folder: Path, arrays: dict[str, np.ndarray]) -> Path:
+    """Write `FILES.view_uncertainty/<name>.npy` for each of `arrays` (names from VIEW_ARRAYS:
+    render (H, W, 3), error (H, W), entropy (H, W), fisher (h, w)). Returns the folder."""
+    unknown = sorted(set(arrays) - set(VIEW_ARRAYS))
+    if unknown:
+        raise ValueError(f"unknown view arrays {unknown}; valid: {', '.join(VIEW_ARRAYS)}")
+    target = Path(folder) / FILES.view_uncertainty
+    for name, values in arrays.items():
+        buffer = io.BytesIO()
+        np.save(buffer, np.asarray(values), allow_pickle=False)
+        atomic_write_bytes(target / f"{name}.npy", buffer.getvalue())
+    return target
+
+
+def read_view_uncertainty(folder: Path) -> dict[str, np.ndarray] | None:
+    """The arrays of `FILES.view_uncertainty` by name, as float64; None when the folder is absent
+    (runs made before it was written) or render, error or entropy is missing, unreadable or of
+    another size. fisher, when absent or unreadable, is left out."""
+    source = Path(folder) / FILES.view_uncertainty
+    if not source.is_dir():
+        return None
+    found = {}
+    for name in VIEW_ARRAYS:
+        try:
+            found[name] = np.load(source / f"{name}.npy", allow_pickle=False).astype(np.float64)
+        except (OSError, ValueError):
+            continue
+    if not {"render", "error", "entropy"} <= found.keys():
+        return None
+    size = found["render"].shape[:2]
+    if found["error"].shape != size or found["entropy"].shape != size or found["render"].shape[2:] != (3,):
+        return None
+    fisher = found.get("fisher")
+    if fisher is not None and (fisher.ndim != 2 or not all(0 < a <= b for a, b in zip(fisher.shape, size))):
+        del found["fisher"]
+    return found
+
+
 def render_paths(folder: Path, kind: str = "render") -> list[Path]:
     """The saved test renders, sorted by view: kind "render" (the model's image) or "render_vs_gt"
     (render left, ground truth right)."""
@@ -209,6 +257,7 @@ def render_paths(folder: Path, kind: str = "render") -> list[Path]:
 __all__ = [
     "FILES",
     "SELECTION_KEYS",
+    "VIEW_ARRAYS",
     "RunFiles",
     "SelectionRecord",
     "read_config",
@@ -218,6 +267,7 @@ __all__ = [
     "read_progress",
     "read_result",
     "read_selection",
+    "read_view_uncertainty",
     "render_paths",
     "write_config",
     "write_error",
@@ -226,4 +276,5 @@ __all__ = [
     "write_progress",
     "write_result",
     "write_selection",
+    "write_view_uncertainty",
 ]

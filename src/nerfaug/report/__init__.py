@@ -3,8 +3,8 @@ ablation tables and figures, run times and the runs left out, as `report.md` and
 `report.html` (figures embedded as data URIs), with the figures as PNGs under `figures/`.
 
 Rooms: `collect` (reading the results folder), `document` (blocks, Markdown, HTML, number
-formats), `figures` (the PNGs), `sections` (what the report says), `study` (the multi-engine
-study's summary).
+formats), `figures` (the PNGs), `sections` (what the report says), `view_uncertainty` (a test
+view's error and uncertainty images, AUSE), `study` (the multi-engine study's summary).
 
 Only runs whose result.json is valid for the sweep's fingerprint (`store.read_result`) are
 aggregated; every other run folder is listed with the reason, never silently counted.
@@ -35,6 +35,7 @@ from nerfaug.report.sections import (
     table_ii_section,
     timing_section,
 )
+from nerfaug.report.view_uncertainty import view_uncertainty_section
 
 
 def build_report(results: Results, figures: Figures) -> list[Block]:
@@ -42,7 +43,8 @@ def build_report(results: Results, figures: Figures) -> list[Block]:
     for scene in results.scenes:
         blocks += scene_section(results, scene, figures.boxplots.get(scene))
     blocks += table_i_section(results) + table_ii_section(results)
-    blocks += figure_sections(results, figures) + timing_section(results) + problems_section(results)
+    blocks += figure_sections(results, figures) + view_uncertainty_section(results, figures.view_uncertainty)
+    blocks += timing_section(results) + problems_section(results)
     return blocks
 
 

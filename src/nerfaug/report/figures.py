@@ -1,6 +1,7 @@
 """The report's figures, as PNGs under the results folder's `figures/`: box plots per scene
 (the paper's Fig. 4), the methods' uncertainty over the hemisphere (Fig. 1, drawn by
-`nerfaug.maps`), the test renders (Fig. 3) and the training curves. Every figure is written by
+`nerfaug.maps`), the test renders (Fig. 3), the training curves, and a test view's error and uncertainty images
+(`view_uncertainty`). Every figure is written by
 `nerfaug.plotting.save_figure` (atomic, one dpi)."""
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_LABELS, METRICS
 from nerfaug.plotting import new_figure, save_figure
 from nerfaug.report.collect import Results, Run
 from nerfaug.report.document import slug
+from nerfaug.report.view_uncertainty import plot_view_uncertainty
 
 
 def method_colours(methods: list[str]) -> dict[str, tuple]:
@@ -303,10 +305,11 @@ class Figures:
     map_notes: dict[str, list[str]] = field(default_factory=dict)
     renders: dict[str, Path] = field(default_factory=dict)
     curves: Path | None = None
+    view_uncertainty: dict[str, Path] = field(default_factory=dict)
 
     def paths(self) -> list[Path]:
         found = [*self.boxplots.values(), *(p for ps in self.maps.values() for p in ps), *self.renders.values()]
-        return found + ([self.curves] if self.curves else [])
+        return found + ([self.curves] if self.curves else []) + list(self.view_uncertainty.values())
 
 
 def make_figures(results: Results) -> Figures:
@@ -321,6 +324,8 @@ def make_figures(results: Results) -> Figures:
             figures.maps[scene], figures.map_notes[scene] = maps, notes
         if (path := plot_render_grid(results, scene, folder / f"fig3_renders_{name}.png")) is not None:
             figures.renders[scene] = path
+        if (path := plot_view_uncertainty(results, scene, folder / f"view_uncertainty_{name}.png")) is not None:
+            figures.view_uncertainty[scene] = path
     figures.curves = plot_training_curves(results, folder / "training_curves.png")
     return figures
 

@@ -5,14 +5,17 @@ Remove the pixels in order of decreasing uncertainty and track the mean error of
 the same in order of decreasing true error (the oracle, the best any ranking can do); the
 sparsification error is the first curve minus the second, and AUSE is its area over the fraction
 removed. 0 is a perfect ranking; a ranking unrelated to the error gives the area between the
-overall mean error and the oracle curve; a reversed ranking gives more.
+overall mean error and the oracle curve; a reversed ranking gives more (before normalising).
 
 Conventions (as Bayes' Rays' evaluation): `steps` fractions 0, 1/steps, ..., (steps-1)/steps
-removed, `floor(fraction * n)` pixels each; the area by the trapezoidal rule over those fractions;
-with `normalise`, both curves are divided by their largest value first, so AUSE does not depend on
-the error's scale. Pixels of equal uncertainty are taken in random order, and the curve is its
-expected value (each tied pixel counts with its group's mean error), so a constant uncertainty
-image scores as a random ranking, never by pixel order. Numpy only.
+removed; the area by the trapezoidal rule over those fractions; with `normalise`, both curves are
+divided by the largest value of either first, so AUSE does not depend on the error's scale (the
+divisor depends on the ranking too: a reversed ranking's curve peaks higher, which damps its
+AUSE). `floor(fraction * n)` pixels are removed, so one is always left (their code keeps
+`floor((1 - fraction) n)`, one pixel fewer at most, none when n < steps). Pixels of equal
+uncertainty are taken in random order, and the curve is its expected value (each tied pixel
+counts with its group's mean error), so a constant uncertainty image scores as a random ranking,
+never by pixel order. Numpy only.
 """
 
 from __future__ import annotations
