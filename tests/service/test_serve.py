@@ -44,12 +44,12 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def tiny_dataset(root: Path, n: int = 4) -> Path:
-    generator = torch.Generator().manual_seed(0)
+def tiny_dataset(root: Path, n: int = 4, split: str = "train", seed: int = 0) -> Path:
+    generator = torch.Generator().manual_seed(seed)
     poses = sample_uniform_poses(n, generator)
     images = (torch.rand(n, SIZE, SIZE, 3, generator=generator) * 255).round() / 255
     cameras = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, SIZE, SIZE)
-    write_blender_split(root, "train", Views(cameras, images, [f"./train/r_{i}" for i in range(n)]))
+    write_blender_split(root, split, Views(cameras, images, [f"./{split}/r_{i}" for i in range(n)]))
     return root
 
 
@@ -196,6 +196,29 @@ def test_uncertainty_images_of_a_pose(server):
     assert data["rgb"].shape == (6, 6, 3) and data["entropy"].shape == (6, 6) and data["depth"].shape == (6, 6)
     assert data["fisher"].shape == (4, 4) and (data["fisher"] >= 0).all() and data["fisher"].sum() > 0
     assert np.allclose(data["pose"], pose, atol=1e-5)
+
+
+def test_held_out_views_are_scored_as_the_library_scores_them(server, root):
+    from nerfaug.capture.evaluate import evaluate_session, load_held_out
+
+    tiny_dataset(root / "held-out", n=3, split="test", seed=5)
+    assert create(server, "scored").status_code == 201
+    assert server.client.post("/sessions/scored/train", json={"steps": 10}).status_code == 202
+    server.poll("scored")
+    answer = server.client.post("/sessions/scored/evaluate", json={"dataset": "held-out", "max_views": 2})
+    assert answer.status_code == 200, answer.text
+    scored = answer.json()
+    assert scored["step"] == 10 and scored["views"] == 2 and len(scored["per_view"]) == 2
+    assert scored["split"] == "test" and scored["dataset"] == "held-out"
+    assert 0 < scored["psnr"] < 60 and 0 <= scored["ssim"] <= 1
+    assert scored["lpips"] is None and "smaller than" in scored["lpips_status"]  # 8x8 pixels: below AlexNet's size
+    # The same numbers as `nerfaug eval` computes in process.
+    session = CaptureSession.open(root / "scored")
+    local = evaluate_session(session, load_held_out(session, root / "held-out", "test", max_views=2), lpips=None)
+    assert scored["psnr"] == pytest.approx(local.mean["psnr"], abs=1e-6)
+    assert [v["name"] for v in scored["per_view"]] == [v["name"] for v in local.per_view]
+    every = server.client.post("/sessions/scored/evaluate", json={"dataset": "held-out", "lpips": False}).json()
+    assert every["views"] == 3 and every["lpips_status"].startswith("not computed")
 
 
 def test_a_session_from_uploaded_images(server):
@@ -376,6 +399,21 @@ BAD_REQUESTS = {
         ),
         422,
         "settings: not valid JSON",
+    ),
+    "evaluate outside the root": (
+        _json("POST", "/sessions/bad/evaluate", {"dataset": "../.."}),
+        422,
+        "lies outside the service root",
+    ),
+    "evaluate a missing split": (
+        _json("POST", "/sessions/bad/evaluate", {"dataset": "data", "split": "val"}),
+        422,
+        "transforms_val.json",
+    ),
+    "evaluate zero views": (
+        _json("POST", "/sessions/bad/evaluate", {"dataset": "data", "max_views": 0}),
+        422,
+        "max_views:",
     ),
     "uploads with a bad intrinsic": (
         lambda c: c.post(

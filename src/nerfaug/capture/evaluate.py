@@ -12,12 +12,17 @@ from nerfaug.data import Views, load_dataset
 from nerfaug.evaluation import EvaluationResult, evaluate_views
 
 
-def load_held_out(session, data: str | Path, split: str = "test") -> Views:
+def load_held_out(session, data: str | Path, split: str = "test", max_views: int | None = None) -> Views:
     """`split` of the dataset folder `data`, world frame, at the session's training resolution
-    (its `downscale`) and composited over its background (images loaded on access)."""
-    return load_dataset(
+    (its `downscale`) and composited over its background (images loaded on access); its first
+    `max_views` views when given."""
+    views = load_dataset(
         Path(data), split, lazy=True, downscale=session.state.downscale, background=tuple(session.state.background)
     )
+    if max_views is None or max_views >= len(views):
+        return views
+    # The first views keep their indices, so the lazy loader serves them unchanged.
+    return Views(views.cameras[list(range(max_views))], None, views.names[:max_views], loader=views.loader)
 
 
 def engine_cameras(session, cameras: Cameras) -> Cameras:

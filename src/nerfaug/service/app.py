@@ -11,6 +11,7 @@
     POST /sessions/{id}/train                    train N steps in the background (poll the state)
     POST /sessions/{id}/proposals                propose N views (method, settings, constraints)
     POST /sessions/{id}/uncertainty              render, depth, entropy and FisherRF images of a pose
+    POST /sessions/{id}/evaluate                 PSNR, SSIM, LPIPS on held-out views of a dataset inside the root
 """
 
 from __future__ import annotations
@@ -238,6 +239,30 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         if request.format == "npz":
             return Response(npz_bytes(maps), media_type="application/octet-stream")
         return Response(figure_bytes(maps), media_type="image/png")
+
+    @app.post("/sessions/{session_id}/evaluate", response_model=models.Evaluation)
+    @answers
+    def evaluate(session_id: str, request: models.EvaluateRequest):
+        """The session's NeRF scored on a held-out split at its training resolution (`nerfaug eval`)."""
+        from nerfaug.capture.evaluate import evaluate_session, load_held_out
+
+        data = hub.dataset_path(request.dataset)
+
+        def score(session):
+            views = load_held_out(session, data, request.split, request.max_views)
+            result = evaluate_session(session, views, lpips="auto" if request.lpips else None)
+            return {
+                "step": session.step,
+                "dataset": request.dataset,
+                "split": request.split,
+                "views": len(views),
+                **result.mean,
+                "lpips_status": result.lpips_status,
+                "per_view": result.per_view,
+            }
+
+        check_session_id(session_id)
+        return hub.run(session_id, score)
 
     return app
 

@@ -93,6 +93,27 @@ class UncertaintyRequest(Strict):
     format: Literal["png", "npz"] = Field("png", description="png: the figure; npz: the arrays")
 
 
+class EvaluateRequest(Strict):
+    """Held-out views to score the session's NeRF on (as `nerfaug eval RUN --data DATA`)."""
+
+    dataset: str = Field(description="a dataset folder of the same scene and world frame, relative to the service root")
+    split: str = Field("test", description="the split to score")
+    max_views: int | None = Field(None, ge=1, description="score only the split's first views (default: all)")
+    lpips: bool = Field(True, description="also LPIPS (when its weights are installed and images are large enough)")
+
+
+class Evaluation(BaseModel):
+    step: int
+    dataset: str
+    split: str
+    views: int
+    psnr: float | None
+    ssim: float | None
+    lpips: float | None
+    lpips_status: str
+    per_view: list[dict]
+
+
 class Job(BaseModel):
     target: int
     start: int
