@@ -10,6 +10,7 @@ They run at a small size. How each is made small, so that what runs is still wha
 The dataset every block starts from is rendered first with the README's own command, shrunk.
 """
 
+import json
 import os
 import re
 import shlex
@@ -97,6 +98,10 @@ def test_the_example_then_the_python_snippet_run_in_one_folder(tmp_path):
         done = run([sys.executable, str(example), *small], tmp_path)
         assert done.returncode == 0, f"{example.name}: exit {done.returncode}\n{done.stderr[-3000:]}"
     assert (tmp_path / "results" / "active-capture-export" / "transforms.json").is_file()
+    # The robot's loop over HTTP: the first captures, then two rounds of two views, each scored.
+    rounds = json.loads((tmp_path / "results" / "robot-capture-loop.json").read_text())["rounds"]
+    assert [(r["round"], r["views"], r["step"]) for r in rounds] == [(0, 6, 10), (1, 8, 20), (2, 10, 30)]
+    assert all(0 < r["psnr"] < 60 and r["test_views"] == 4 for r in rounds)
 
     snippet = block_with("python", "CaptureSession.create")
     for literal, small_literal in PYTHON_SMALL:
@@ -117,11 +122,13 @@ def test_the_example_with_pool_capture_runs(tmp_path):
 
 
 # Options appended to each line of the README's Usage block (the last of a repeated option wins):
-# the test engine, a few steps past the step where views are added (200), one trial, 24 px.
+# the test engine, a few steps past the step where views are added (200), one trial, 32 px (the
+# size the block's `scene render` line renders at here).
 USAGE_SMALL = {
     "scene": SMALL["scene"],
-    "run": ["--engine", "test", "--steps", "210", "--trials", "1", "--resolution", "24", "--device", "cpu"],
-    "study": ["--preset", "tiny", "--engines", "test", "--scenes", "data/lego", "--trials", "2", "--device", "cpu"],
+    "run": ["--engine", "test", "--steps", "210", "--trials", "1", "--resolution", "32", "--device", "cpu"],
+    "study": ["--preset", "tiny", "--engines", "test", "--scenes", "data/lego", "--trials", "2", "--device", "cpu"]
+    + ["--resolution", "32"],
     "report": [],
     "methods": [],
     "--help": [],
