@@ -9,8 +9,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-# Written into the root by the README's commands (`nerfaug train/propose/render-proposals/export`).
-WRITTEN = ["runs/lego/session.json", "poses.json", "poses.png", "poses2.json", "captures/capture_000_00.png"]
+# Written into the root by the README's commands (`nerfaug train/propose/render-proposals/export/serve`).
+WRITTEN = [
+    "runs/lego/session.json",
+    "poses.json",
+    "poses.png",
+    "poses2.json",
+    "captures/capture_000_00.png",
+    "sessions/lego/session.json",  # `nerfaug serve --root sessions`
+]
 
 
 @pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(), reason="needs git and a checkout")
