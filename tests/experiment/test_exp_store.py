@@ -87,6 +87,13 @@ def test_plan_covers_every_cell():
     keys = plan_runs(config)
     assert len(keys) == 2 * 2 * 3 and len(set(keys)) == len(keys)
     assert RunKey("chair", "uniform", 2) in keys
+    # Trial by trial: every method's trial 0 before any method's trial 1.
+    assert keys[:4] == [
+        RunKey("lego", "ours", 0),
+        RunKey("lego", "uniform", 0),
+        RunKey("lego", "ours", 1),
+        RunKey("lego", "uniform", 1),
+    ]
 
 
 def test_dataset_content_digest_covers_the_images_runs_read_and_nothing_else(tmp_path):

@@ -55,11 +55,14 @@ class SweepOutcome:
 
 
 def plan_runs(config: ExperimentConfig) -> list[RunKey]:
+    """Every run, trial by trial: all methods of trial 0 of a scene, then of trial 1, ... so that a
+    sweep stopped part-way (a study run in sittings) leaves every method with the same seeds,
+    paired with each other."""
     return [
         RunKey(scene_name(scene), method, trial)
         for scene in config.scenes
-        for method in config.methods
         for trial in range(config.trials)
+        for method in config.methods
     ]
 
 
