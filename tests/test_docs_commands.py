@@ -125,10 +125,9 @@ def test_the_example_with_pool_capture_runs(tmp_path):
 # the test engine, a few steps past the step where views are added (200), one trial, 32 px (the
 # size the block's `scene render` line renders at here).
 USAGE_SMALL = {
-    "scene": SMALL["scene"],
+    "scene": ["--res", "32", "--pool", "12", "--test", "20", "--samples", "4"],  # 20: the quick preset's test views
     "run": ["--engine", "test", "--steps", "210", "--trials", "1", "--resolution", "32", "--device", "cpu"],
-    "study": ["--preset", "tiny", "--engines", "test", "--scenes", "data/lego", "--trials", "2", "--device", "cpu"]
-    + ["--resolution", "32"],
+    "study": ["--preset", "tiny", "--engines", "test", "--scenes", "lego", "--trials", "2", "--device", "cpu"],
     "report": [],
     "methods": [],
     "--help": [],
