@@ -9,7 +9,10 @@
    same method, seed and settings, one torch thread each. The two are interleaved (ABBA) `--repeat`
    times after one untimed call each; the medians and their ratio (HTTP / in process) are reported,
    and whether both chose the same poses.
-2. `examples/robot_capture_loop.py` at a small size: the held-out PSNR after each round.
+2. The session's state and the health check while that service trains: a training job of
+   `--status-steps` steps is started and `GET /sessions/{id}` and `GET /health` are each timed
+   `--status-polls` times while it runs (target: every answer within 200 ms).
+3. `examples/robot_capture_loop.py` at a small size: the held-out PSNR after each round.
 
 Prints a summary and writes `<out>/bench_service.json`.
 """
@@ -102,6 +105,7 @@ def bench_propose(args, work: Path, data: Path) -> dict:
                     start = time.perf_counter()
                     over_http() if kind == "http" else in_process()
                     times[kind].append(time.perf_counter() - start)
+            status = bench_status(client, args)
     finally:
         stop_service(process)
     medians = {kind: statistics.median(values) for kind, values in times.items()}
@@ -111,7 +115,28 @@ def bench_propose(args, work: Path, data: Path) -> dict:
         "ratio": medians["http"] / medians["in_process"],
         "same_poses": same,
         "step": state["step"],
+        "status_while_training": status,
     }
+
+
+def bench_status(client: httpx.Client, args) -> dict:
+    """Part 2: seconds per state and health request while a training job runs (bounded polls)."""
+    answer(client.post(f"/sessions/{SESSION}/train", json={"steps": args.status_steps}))
+    found = {"state": [], "health": [], "running": []}
+    for _ in range(args.status_polls):
+        for kind, path in (("state", f"/sessions/{SESSION}"), ("health", "/health")):
+            start = time.perf_counter()
+            reply = answer(client.get(path))
+            found[kind].append(time.perf_counter() - start)
+            if kind == "state":
+                found["running"].append(bool(reply["running"]))
+        time.sleep(0.05)
+    summary = {
+        kind: {"median_s": statistics.median(values), "max_s": max(values)}
+        for kind, values in found.items()
+        if kind != "running"
+    }
+    return {**summary, "polls": args.status_polls, "polls_while_running": sum(found["running"])}
 
 
 def bench_loop(args, work: Path, data: Path) -> dict:
@@ -159,6 +184,8 @@ def main() -> None:
     parser.add_argument("--entropy-resolution", type=int, default=24)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--repeat", type=int, default=6, help="timed proposals of each kind, interleaved")
+    parser.add_argument("--status-steps", type=int, default=2000, help="steps of the job the status polls run beside")
+    parser.add_argument("--status-polls", type=int, default=20, help="timed state and health requests each")
     parser.add_argument("--rounds", type=int, default=2, help="rounds of the example loop")
     parser.add_argument("--views-per-round", type=int, default=4)
     parser.add_argument("--steps-per-round", type=int, default=300)
@@ -197,6 +224,12 @@ def main() -> None:
         f"propose ({args.n} of {args.candidates} candidates, {args.method}, step {propose['step']}): "
         f"HTTP median {m['http']:.3f} s, in process {m['in_process']:.3f} s, ratio {propose['ratio']:.3f} "
         f"over {args.repeat} interleaved repetitions; same poses: {propose['same_poses']}"
+    )
+    status = propose["status_while_training"]
+    print(
+        f"while training ({status['polls_while_running']} of {status['polls']} polls during the job): state "
+        f"median {status['state']['median_s'] * 1000:.0f} ms, max {status['state']['max_s'] * 1000:.0f} ms; "
+        f"health median {status['health']['median_s'] * 1000:.0f} ms, max {status['health']['max_s'] * 1000:.0f} ms"
     )
     for r in loop["rounds"]:
         print(f"loop round {r['round']}: {r['views']} views, step {r['step']}: test PSNR {r['psnr']:.2f} dB")

@@ -14,7 +14,7 @@ pytestmark = [pytest.mark.slow]
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_service.py"
 TOY = ["--resolution", "24", "--samples", "2", "--preset", "test", "--steps", "10", "--candidates", "20"]
 TOY += ["--entropy-resolution", "4", "--repeat", "2", "--rounds", "1", "--views-per-round", "2"]
-TOY += ["--steps-per-round", "10", "--eval-views", "2"]
+TOY += ["--steps-per-round", "10", "--eval-views", "2", "--status-steps", "300", "--status-polls", "3"]
 
 
 def test_the_service_benchmark_runs_at_toy_size(tmp_path):
@@ -35,5 +35,8 @@ def test_the_service_benchmark_runs_at_toy_size(tmp_path):
     assert propose["same_poses"] and propose["step"] == 10
     assert len(propose["times_s"]["http"]) == len(propose["times_s"]["in_process"]) == 2
     assert propose["ratio"] == pytest.approx(propose["median_s"]["http"] / propose["median_s"]["in_process"])
+    status = propose["status_while_training"]
+    assert status["polls"] == 3 and 0 < status["state"]["median_s"] <= status["state"]["max_s"]
+    assert status["health"]["max_s"] > 0 and "while training" in done.stdout
     assert [(r["round"], r["views"]) for r in record["loop"]["rounds"]] == [(0, 6), (1, 8)]
     assert "ratio" in done.stdout and "loop round 1" in done.stdout
