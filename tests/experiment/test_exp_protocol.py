@@ -52,7 +52,7 @@ def test_quick_preset_compares_the_main_methods_with_enough_trials_for_significa
     assert config.engine == "cpu" and config.n_test >= 20
 
 
-def test_a_run_saves_its_first_test_view_uncertainty_without_changing_its_results(tmp_path, monkeypatch):
+def test_a_run_saves_its_first_test_view_uncertainty_without_changing_its_results(tmp_path):
     """The view's arrays are written after the evaluation: the same run without them has the
     same metrics, selection and history, bit for bit."""
     import json
@@ -89,9 +89,9 @@ def test_a_run_saves_its_first_test_view_uncertainty_without_changing_its_result
     assert (arrays["error"] >= 0).all() and (arrays["entropy"] >= 0).all() and (arrays["fisher"] >= 0).all()
     assert arrays["fisher"].sum() > 0 and "view_uncertainty" in with_maps["timing"]
 
-    monkeypatch.setattr(protocol, "save_view_uncertainty", lambda *args: None)
-    without = protocol.run_trial(key, data, config, tmp_path / "without")
+    without = protocol.run_trial(key, data, config.replace(view_uncertainty=False), tmp_path / "without")
     assert not (key.folder(tmp_path / "without") / FILES.view_uncertainty).exists()
+    assert "view_uncertainty" not in without["timing"]
     assert with_maps["metrics"] == without["metrics"] and with_maps["chosen"] == without["chosen"]
     for name in (FILES.selection, FILES.metrics, FILES.history):
         first, second = (json.loads((key.folder(tmp_path / r) / name).read_text()) for r in ("with", "without"))

@@ -64,6 +64,10 @@ class ExperimentConfig:
     2-core machine: torch's second thread stalls whenever anything else wants a core."""
     save_renders: int = 3
     """Test renders saved per run (for the report's figures)."""
+    view_uncertainty: bool = True
+    """Save the first test view's uncertainty images after the evaluation (for the report's figure
+    and AUSE; no metric depends on them). Off in the study, whose page does not show them: they
+    cost several seconds of a run (FisherRF per pixel)."""
     device: str = "auto"
     """Where runs compute: auto (cuda when a GPU is visible, else cpu), cpu or cuda. Its kind
     (cpu / cuda) is fingerprinted: the two give different numbers (other kernels and reduction

@@ -307,9 +307,10 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     )
     timing["evaluation"] = time.perf_counter() - start
 
-    start = time.perf_counter()
-    save_view_uncertainty(folder, trainer, data.test, config.selection, seed)
-    timing["view_uncertainty"] = time.perf_counter() - start
+    if config.view_uncertainty:
+        start = time.perf_counter()
+        save_view_uncertainty(folder, trainer, data.test, config.selection, seed)
+        timing["view_uncertainty"] = time.perf_counter() - start
     timing["total"] = sum(timing.values())
 
     write_selection(

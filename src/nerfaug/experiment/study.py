@@ -93,9 +93,9 @@ def base_config(name: StudyPreset) -> ExperimentConfig:
     views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are rendered
     first, which takes minutes)."""
     if name == "study":
-        return ExperimentConfig()
+        return ExperimentConfig(view_uncertainty=False)
     if name == "tiny":
-        return preset("tiny")
+        return preset("tiny").replace(view_uncertainty=False)
     raise ValueError(f"unknown study preset {name!r}; choose study or tiny")
 
 
