@@ -143,8 +143,8 @@ def generate_rays(cameras: Cameras, camera_indices: Tensor, pixel_x: Tensor, pix
     Example:
         >>> cams = Cameras.from_fov(torch.eye(4), 0.6911, 100, 100)
         >>> o, d = generate_rays(cams, torch.tensor([0]), torch.tensor([50]), torch.tensor([50]))
-        >>> d  # doctest: +SKIP
-        tensor([[ 0.0053, -0.0053, -1.0000]])
+        >>> o, d  # pixel (50, 50) is half a pixel right of and below the centre, focal 138.9 px
+        (tensor([[0., 0., 0.]]), tensor([[ 0.0036, -0.0036, -1.0000]]))
     """
     device = cameras.camera_to_world.device
     camera_indices = torch.as_tensor(camera_indices, device=device).long()

@@ -43,8 +43,8 @@ def estimate_centre(camera_to_world: Tensor) -> Tensor:
             is looked at.
 
     Example:
-        >>> from nerfaug.hemisphere import sample_uniform_poses
-        >>> estimate_centre(sample_uniform_poses(8, centre=(1.0, 2.0, 0.5)))  # doctest: +SKIP
+        >>> from nerfaug.hemisphere import half_hemisphere_poses
+        >>> estimate_centre(half_hemisphere_poses(8, centre=(1.0, 2.0, 0.5)))
         tensor([1.0000, 2.0000, 0.5000], dtype=torch.float64)
     """
     poses = torch.as_tensor(camera_to_world).double().reshape(-1, 4, 4)

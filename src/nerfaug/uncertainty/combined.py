@@ -47,8 +47,11 @@ def combined_uncertainty(
         Tensor with shape (n_candidates,), >= 0 when the terms are.
 
     Example:
+        >>> import torch
         >>> combined_uncertainty(torch.tensor([1.0, 2.0, 3.0]), torch.tensor([0.0, 10.0, 5.0]))
         tensor([0.0000, 1.5000, 1.5000])
+
+        (minmax: H' = [0, 0.5, 1] and D' = [0, 1, 0.5], so U = H' + D'.)
     """
     if normalisation not in NORMALISATIONS:
         raise ValueError(f"unknown normalisation {normalisation!r}; valid: {', '.join(NORMALISATIONS)}")
