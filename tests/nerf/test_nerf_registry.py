@@ -52,8 +52,9 @@ BEFORE = {
         "0x1.d2850c0000000p+1",
     ),
 }
-# Other CPUs may take other vectorised kernels (different rounding): there, equal to 1e-5.
-SAME_MACHINE = torch.backends.cpu.get_cpu_capability() == "AVX512" and torch.__version__.startswith("2.13.0")
+# Recorded on one machine; CPUs with other vectorised kernels round differently (seen: two AVX512
+# Xeons differed in the 8th digit), so the numbers are compared to 1e-5: a change of behaviour moves
+# them by far more.
 
 
 @pytest.mark.parametrize("case", list(BEFORE))
@@ -76,10 +77,7 @@ def test_same_seed_gives_the_numbers_recorded_before_the_sampler_interface(case,
     expected = [float.fromhex(x) for x in losses + [weights_sum, rgb_sum]]
     if case.endswith("step 2"):  # the grid has culled cells: the occupancy path ran
         assert not trainer.model.sampler.grid.occupied.all()
-    if SAME_MACHINE:
-        assert got == expected
-    else:
-        assert got == pytest.approx(expected, rel=1e-5)
+    assert got == pytest.approx(expected, rel=1e-5)
 
 
 @pytest.mark.parametrize("field, value", [("encoding", "nope"), ("sampler", "grid")])

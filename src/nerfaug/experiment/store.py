@@ -52,7 +52,10 @@ _RUN_CONTRACT = (
     "error.json",
     "uncertainty.png",
     "renders",
+    "view_uncertainty",
 )
+# The run folder's subfolders (`runfolder.FILES`) and the one kind of file each holds.
+_RUN_SUBFOLDERS = {"renders": ".png", "view_uncertainty": ".npy"}
 
 
 @dataclass(frozen=True)
@@ -140,8 +143,9 @@ def read_result(folder: Path, expected_fingerprint: str | None = None) -> dict |
 
 def is_run_folder(folder: Path) -> bool:
     """Whether `folder` holds only what nerfaug writes into a run folder: the files of the
-    run-folder contract (renders holding only PNGs) and its marker. A marked folder into which a
-    user put a file of their own is not a run folder any more: removing it would lose that file."""
+    run-folder contract (renders holding only PNGs, view_uncertainty only .npy arrays) and its
+    marker. A marked folder into which a user put a file of their own is not a run folder any
+    more: removing it would lose that file."""
     folder = Path(folder)
     if not folder.is_dir():
         return False
@@ -150,8 +154,10 @@ def is_run_folder(folder: Path) -> bool:
             continue
         if entry.name not in _RUN_CONTRACT:
             return False
-        if entry.is_dir() and (entry.name != "renders" or any(not p.name.endswith(".png") for p in entry.iterdir())):
-            return False
+        if entry.is_dir():
+            suffix = _RUN_SUBFOLDERS.get(entry.name)
+            if suffix is None or any(not p.name.endswith(suffix) for p in entry.iterdir()):
+                return False
     return True
 
 
