@@ -117,9 +117,7 @@ def propose(
         )
     hemisphere = session.hemisphere
     engine_train = session.trainer.train_views.cameras
-    engine = Cameras(
-        hemisphere.to_engine(world.camera_to_world), world.fx, world.fy, world.cx, world.cy, world.width, world.height
-    )
+    engine = hemisphere.cameras_to_engine(world)
     if (engine.width, engine.height) != (engine_train.width, engine_train.height):
         engine = engine.resized(engine_train.width, engine_train.height)
     selection = select_views(

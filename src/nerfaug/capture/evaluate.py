@@ -27,15 +27,7 @@ def load_held_out(session, data: str | Path, split: str = "test", max_views: int
 
 def engine_cameras(session, cameras: Cameras) -> Cameras:
     """World-frame `cameras` moved into the engine frame the session's NeRF is trained in."""
-    return Cameras(
-        session.hemisphere.to_engine(cameras.camera_to_world),
-        cameras.fx,
-        cameras.fy,
-        cameras.cx,
-        cameras.cy,
-        cameras.width,
-        cameras.height,
-    )
+    return session.hemisphere.cameras_to_engine(cameras)
 
 
 def evaluate_session(session, views: Views, lpips="auto", progress: bool = False) -> EvaluationResult:

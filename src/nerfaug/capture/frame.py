@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import BLENDER_RADIUS, angles_from_pose
 
 ENGINE_RADIUS = BLENDER_RADIUS
@@ -138,6 +139,12 @@ class Hemisphere:
         offset = poses[:, :3, 3] - torch.tensor(self.centre, dtype=torch.float64)
         out[:, :3, 3] = offset @ rotation / self.scale
         return out.float()
+
+    def cameras_to_engine(self, cameras: Cameras) -> Cameras:
+        """World-frame `cameras` in the engine frame: their poses moved (`to_engine`), their
+        intrinsics and image size kept."""
+        engine = self.to_engine(cameras.camera_to_world)
+        return Cameras(engine, cameras.fx, cameras.fy, cameras.cx, cameras.cy, cameras.width, cameras.height)
 
     def to_world(self, camera_to_world: Tensor) -> Tensor:
         """Engine-frame poses (n, 4, 4) in the world frame, float32 (n, 4, 4)."""

@@ -361,15 +361,7 @@ class CaptureSession:
                 )
         if (width, height) != (cameras.width, cameras.height):
             cameras = cameras.resized(width, height)
-        cameras = Cameras(
-            self.hemisphere.to_engine(cameras.camera_to_world),
-            cameras.fx,
-            cameras.fy,
-            cameras.cx,
-            cameras.cy,
-            cameras.width,
-            cameras.height,
-        )
+        cameras = self.hemisphere.cameras_to_engine(cameras)
         alphas = None
         if all(a is not None for _, a in loaded):
             alphas = torch.stack([a for _, a in loaded])

@@ -14,7 +14,6 @@ import torch
 from torch import Tensor
 
 from nerfaug.selection.candidates import with_poses
-from nerfaug.uncertainty.fisher import fisher_diagonal, stratified_pixel_rays
 from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
 
 ARRAYS = ("rgb", "depth", "entropy", "fisher")
@@ -45,28 +44,18 @@ class ViewMaps:
 
 
 def training_fisher(session, generator: torch.Generator | None = None) -> Tensor:
-    """H_train of the session's model as its FisherRF proposals take it (`SelectionConfig` defaults).
+    """H_train of the session's model as its FisherRF proposals take it (`fisher_train_diagonal`
+    with the `SelectionConfig` defaults).
 
     Returns:
         Tensor with shape (P,).
     """
     from nerfaug.selection import SelectionConfig
+    from nerfaug.selection.estimators import fisher_train_diagonal
 
-    config = SelectionConfig()
     generator = generator if generator is not None else torch.Generator().manual_seed(session.seed)
     train = session.trainer.train_views.cameras.to(session.trainer.device)
-    origins, directions, weights = stratified_pixel_rays(train, config.fisher_train_pixels, generator)
-    return fisher_diagonal(
-        session.trainer.model,
-        origins,
-        directions,
-        config.fisher_method,
-        config.fisher_train_probes,
-        generator,
-        config.fisher_train_chunk,
-        None,
-        weights=weights,
-    )
+    return fisher_train_diagonal(session.trainer.model, train, SelectionConfig(), generator)
 
 
 def view_maps(session, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16) -> list[ViewMaps]:
