@@ -296,7 +296,10 @@ def propose(
     Args:
         run: the session's run folder.
         n: views to propose.
-        method: the selection method (`nerfaug methods`); "ours" is the paper's.
+        method: the selection method (`nerfaug methods`); "ours" is the paper's (min-max normalised
+            entropy + coverage, rejection sampling). Which method to use: the study's results page
+            (docs/results.md, "Which method to use") says, per engine, which methods beat uniform
+            selection and by how much; where none does, uniform is as good a choice.
         out: the poses JSON to write.
         candidates: a transforms JSON of reachable poses (e.g. a robot's workspace) to choose
             from instead of the hemisphere.
