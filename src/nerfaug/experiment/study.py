@@ -182,6 +182,7 @@ def merge_records(previous: dict, record: dict) -> dict:
     are kept."""
     merged = dict(record)
     merged["engine_settings"] = {**previous.get("engine_settings", {}), **record.get("engine_settings", {})}
+    merged["design"] = record.get("design") or previous.get("design")
     merged["engines"] = list(dict.fromkeys([*previous.get("engines", []), *record["engines"]]))
     merged["scenes"] = list(dict.fromkeys([*previous.get("scenes", []), *record["scenes"]]))
     merged["datasets"] = {**previous.get("datasets", {}), **record["datasets"]}
@@ -351,13 +352,34 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
                 "study first, or pass --table FILE"
             )
         return previous
-    record = json.loads(path.read_text())
+    record = with_design(json.loads(path.read_text()), Path(out))
     if previous is not None:
         record = merge_records(previous["plan"], record)
     rows, initial = rows_from_folders(Path(out), record["engines"])
     recorded = make_table(record, rows, initial, previous)
     write_table(table_path, recorded)
     return recorded
+
+
+def with_design(record: dict, out: Path) -> dict:
+    """`record` (a study.json) with what its summary needs beyond the sittings run: "design", the
+    cells a full study runs on its device (the default engines x the built-in scenes), so cells not
+    run yet are named; and "engine_settings" of each engine run, from its sweep.json's fingerprint
+    (the settings its runs were made with)."""
+    from nerfaug.scenes import BUILTIN_SCENES
+
+    device = record.get("config", {}).get("device", "cpu")
+    engines, _ = default_engines("cuda" if device == "cuda" else "cpu")
+    record = {**record, "design": record.get("design") or {"engines": engines, "scenes": list(BUILTIN_SCENES)}}
+    settings = dict(record.get("engine_settings", {}))
+    for engine in record.get("engines", []):
+        try:
+            fingerprinted = json.loads((out / engine / "sweep.json").read_text())["fingerprinted"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        found = {k.removeprefix("engine."): v for k, v in fingerprinted.items() if k.startswith("engine.")}
+        settings[engine] = found or settings.get(engine, {})
+    return {**record, "engine_settings": settings}
 
 
 def study_command(

@@ -106,6 +106,8 @@ class Study:
     results: dict[str, Results]
     regimes: dict[str, dict[str, dict]] = field(default_factory=dict)
     """engine -> method -> `seed_level_comparison` of its PSNR differences to uniform."""
+    missing_cells: list[str] = field(default_factory=list)
+    """"scene, engine" of the study's design (the plan's "design") an engine run has no runs of."""
 
     @property
     def plan(self) -> dict:
@@ -198,7 +200,9 @@ def collect_study(table: dict) -> Study:
     ran = list(dict.fromkeys(r.engine for r in rows))
     engines = [e for e in plan.get("engines", []) if e in ran] + [e for e in ran if e not in plan.get("engines", [])]
     not_run = dict(plan.get("left_out", {}))
-    not_run.update({e: "not run yet (no runs in the table)" for e in plan.get("engines", []) if e not in ran})
+    design = plan.get("design") or {}
+    planned = list(dict.fromkeys([*design.get("engines", []), *plan.get("engines", [])]))
+    not_run.update({e: "not run yet (no runs in the table)" for e in planned if e not in ran})
     scenes = list(dict.fromkeys([*plan.get("scenes", []), *(r.scene for r in rows)]))
     methods, trials = list(plan.get("methods", [])), int(plan.get("trials", 0))
     cells, regimes = [], {}
@@ -218,7 +222,14 @@ def collect_study(table: dict) -> Study:
         cells += mine
         regimes[engine] = regime_comparisons(mine)
     results = {engine: engine_results(table, engine) for engine in engines}
-    return Study(table, cells, not_run, results, regimes)
+    design_scenes = list(dict.fromkeys([*design.get("scenes", []), *scenes]))
+    missing_cells = [
+        f"{scene}, {engine}"
+        for engine in engines
+        for scene in design_scenes
+        if not any(c.engine == engine and c.scene == scene for c in cells)
+    ]
+    return Study(table, cells, not_run, results, regimes, missing_cells)
 
 
 __all__ = ["Cell", "MethodResult", "Study", "collect_study", "make_cell", "regime_comparisons"]

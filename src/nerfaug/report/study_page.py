@@ -101,7 +101,8 @@ def _which_method(study: Study) -> list[Block]:
         best, entry = max(regime.items(), key=lambda kv: kv[1]["difference"])
         better = [m for m, e in regime.items() if e["significant"] and e["better"]]
         worse = [m for m, e in regime.items() if e["significant"] and not e["better"]]
-        complete = all(c.complete for c in cells)
+        not_yet = [m.split(",")[0] for m in study.missing_cells if m.endswith(f", {engine}")]
+        complete = all(c.complete for c in cells) and not not_yet
         rows.append(
             [
                 engine,
@@ -132,6 +133,12 @@ def _which_method(study: Study) -> list[Block]:
         if worse:
             lines[-1] += (
                 " Worse than uniform: " + ", ".join(f"{m} ({regime[m]['difference']:+.2f} dB)" for m in worse) + "."
+            )
+        if not complete:
+            lines[-1] += (
+                f" A provisional answer: from {', '.join(c.scene for c in cells)} only"
+                + (f" ({', '.join(not_yet)} not run yet)" if not_yet else ", with incomplete cells")
+                + "."
             )
     if not rows:
         return [Heading("Which method to use"), Paragraph("No regime has paired results yet.")]
@@ -255,6 +262,7 @@ def _regime_section(study: Study, figures: dict) -> list[Block]:
 
 def _incomplete_section(study: Study) -> list[Block]:
     items = [f"engine {engine}: {why}" for engine, why in study.not_run.items()]
+    items += [f"{cell}: not run yet" for cell in study.missing_cells]
     items += [f"{c.scene}, {c.engine}: " + "; ".join(c.missing) for c in study.cells if c.missing]
     return [
         Heading("Incomplete cells"),

@@ -1,0 +1,48 @@
+"""docs/results.md is what its committed per-run table gives, and every number in its hand-written
+reading is one the generated page (or the committed FisherRF measurement) shows."""
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = ROOT / "docs" / "results.md"
+TABLE = ROOT / "docs" / "results" / "study-table.json"
+FISHER = ROOT / "docs" / "results" / "fisher-stability.json"
+NUMBER = re.compile(r"[-+]?\d+\.\d+")
+
+pytestmark = pytest.mark.skipif(not TABLE.is_file(), reason="no committed study table yet")
+
+
+def split_page(text: str) -> tuple[str, str]:
+    """(the generated part, the hand-written reading) of a results page."""
+    from nerfaug.report.study_page import READING_END, READING_START
+
+    start, end = text.find(READING_START), text.find(READING_END)
+    if start < 0:
+        return text, ""
+    return text[:start] + text[end + len(READING_END) :], text[start:end]
+
+
+def without_provenance(text: str) -> str:
+    return "\n".join(line for line in text.splitlines() if not line.startswith("Generated on "))
+
+
+@pytest.mark.slow
+def test_the_committed_page_is_what_the_committed_table_gives(tmp_path):
+    from nerfaug.report.study_page import write_results_doc
+    from nerfaug.report.study_table import read_table
+
+    page = write_results_doc(read_table(TABLE), TABLE.relative_to(ROOT), tmp_path / "results.md")
+    generated, _ = split_page(PAGE.read_text())
+    assert without_provenance(page.read_text()).split() == without_provenance(generated).split()
+
+
+def test_every_number_in_the_reading_is_on_the_generated_page():
+    generated, reading = split_page(PAGE.read_text())
+    sources = generated + (json.dumps(json.loads(FISHER.read_text())) if FISHER.is_file() else "")
+    shown = {float(x) for x in NUMBER.findall(sources)} | {abs(float(x)) for x in NUMBER.findall(sources)}
+    missing = [x for x in NUMBER.findall(reading) if abs(float(x)) not in shown and float(x) not in shown]
+    assert not missing, f"numbers in the reading that the generated page does not show: {missing}"
