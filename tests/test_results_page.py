@@ -46,3 +46,24 @@ def test_every_number_in_the_reading_is_on_the_generated_page():
     shown = {float(x) for x in NUMBER.findall(sources)} | {abs(float(x)) for x in NUMBER.findall(sources)}
     missing = [x for x in NUMBER.findall(reading) if abs(float(x)) not in shown and float(x) not in shown]
     assert not missing, f"numbers in the reading that the generated page does not show: {missing}"
+
+
+@pytest.mark.slow
+def test_the_readmes_command_rederives_the_page_without_run_folders(tmp_path):
+    """The README's block, run as written in a folder holding only the committed table."""
+    import shlex
+    import subprocess
+    import sys
+
+    readme = (ROOT / "README.md").read_text()
+    (line,) = [x for x in readme.splitlines() if x.startswith("nerfaug study --summary-only --table")]
+    (tmp_path / "docs" / "results").mkdir(parents=True)
+    (tmp_path / "docs" / "results" / "study-table.json").write_bytes(TABLE.read_bytes())
+    argv = shlex.split(line)
+    done = subprocess.run(
+        [sys.executable, "-m", "nerfaug.cli", *argv[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=600
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    generated, _ = split_page(PAGE.read_text())
+    again, _ = split_page((tmp_path / "docs" / "results.md").read_text())
+    assert without_provenance(again).split() == without_provenance(generated).split()
