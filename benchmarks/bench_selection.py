@@ -34,12 +34,11 @@ from nerfaug.data.views import Views
 from nerfaug.device import configure_process
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses
 from nerfaug.selection import METHODS, SelectionConfig, hemisphere_candidates, select_views
+from nerfaug.selection.estimators import fisher_train_diagonal
 from nerfaug.uncertainty.entropy import view_entropy
 from nerfaug.uncertainty.fisher import (
-    fisher_diagonal,
     fisherrf_greedy,
     fisherrf_view_scores,
-    sample_pixel_rays,
 )
 from nerfaug.uncertainty.so3 import coverage_distance
 
@@ -131,18 +130,8 @@ def main() -> None:
         lambda: coverage_distance(candidates.rotations, train_cameras.rotations)
     )
     generator = torch.Generator().manual_seed(0)
-    origins, directions = sample_pixel_rays(train_cameras, config.fisher_train_pixels, generator)
-    rows["fisher H_train"], h_train = timed(
-        lambda: fisher_diagonal(
-            model,
-            origins,
-            directions,
-            config.fisher_method,
-            config.fisher_train_probes,
-            generator,
-            config.fisher_train_chunk,
-        )
-    )
+    # H_train as the study's FisherRF takes it (stratified, weighted training pixels).
+    rows["fisher H_train"], h_train = timed(lambda: fisher_train_diagonal(model, train_cameras, config, generator))
     rows["fisher candidate scores"], (scores, h_of) = timed(
         lambda: fisherrf_view_scores(
             model,
