@@ -220,7 +220,9 @@ def collect_study(table: dict) -> Study:
             if any(r.engine == engine and r.scene == scene for r in rows)
         ]
         cells += mine
-        regimes[engine] = regime_comparisons(mine)
+        # Over complete cells only: the seeds must be common to every cell, so one cell part-way
+        # through would cut every scene down to its few seeds.
+        regimes[engine] = regime_comparisons([c for c in mine if c.complete] or mine)
     results = {engine: engine_results(table, engine) for engine in engines}
     design_scenes = list(dict.fromkeys([*design.get("scenes", []), *scenes]))
     missing_cells = [

@@ -143,8 +143,8 @@ def _which_method(study: Study) -> list[Block]:
     if not rows:
         return [Heading("Which method to use"), Paragraph("No regime has paired results yet.")]
     note = (
-        "Per engine (a regime), across its scenes: each seed's mean over the scenes of (method - uniform) test "
-        "PSNR on the trials of that seed, then the exact sign-flip permutation test on those per-seed values, "
+        "Per engine (a regime), across its complete scenes: each seed's mean over the scenes of (method - uniform) "
+        "test PSNR on the trials of that seed, then the exact sign-flip permutation test on those per-seed values, "
         "Bonferroni over the methods compared. gain: the mean over seeds (dB); seeds: seeds whose mean favours "
         "the method."
     )
@@ -221,7 +221,8 @@ def _regime_section(study: Study, figures: dict) -> list[Block]:
         Paragraph(
             "Trial k of every cell shares its seed (hence uniform's picks and the NeRF's initialisation), so the "
             "cells' pairs are not independent units. Per engine, each seed's paired PSNR differences are averaged "
-            "over the scenes; the sign-flip test (exact, every sign pattern of the per-seed values) and the "
+            "over the scenes whose cells are complete (over every cell while none is); the sign-flip test "
+            "(exact, every sign pattern of the per-seed values) and the "
             "Wilcoxon signed-rank test on the same values are shown, each Bonferroni-corrected over the methods."
         ),
     ]
