@@ -146,7 +146,7 @@ def test_summary_only_without_a_study_or_a_table_says_so(tmp_path, capsys):
 
 def test_the_regime_test_uses_complete_cells_only():
     """A cell part-way through (chair at 2 of 10 trials) does not cut the other scenes' seeds."""
-    table = synthetic_table({"ours": 1.0, "fisherrf": -2.0})
+    table = synthetic_table({"ours": 1.0, "ours-paper-sum": 0.0, "fisherrf": -2.0})
     table["runs"] = [r for r in table["runs"] if r["scene"] != "chair" or r["trial"] < 2]
     study = collect_study(table)
     regime = study.regimes[ENGINE]["ours"]
