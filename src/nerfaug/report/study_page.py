@@ -103,11 +103,13 @@ def _which_method(study: Study) -> list[Block]:
         worse = [m for m, e in regime.items() if e["significant"] and not e["better"]]
         not_yet = [m.split(",")[0] for m in study.missing_cells if m.endswith(f", {engine}")]
         complete = all(c.complete for c in cells) and not not_yet
+        used = [c.scene for c in cells if c.complete] or [c.scene for c in cells]  # as the regime test
+        partial = [c.scene for c in cells if not c.complete]
         rows.append(
             [
                 engine,
                 background(study, engine),
-                ", ".join(c.scene for c in cells) + ("" if complete else " (incomplete)"),
+                ", ".join(used) + ("" if complete else " (incomplete)"),
                 f"{best} ({entry['difference']:+.2f} dB)",
                 f"{entry['wins']}/{entry['n_seeds']}",
                 p_value(entry["p_bonferroni"]),
@@ -135,11 +137,9 @@ def _which_method(study: Study) -> list[Block]:
                 " Worse than uniform: " + ", ".join(f"{m} ({regime[m]['difference']:+.2f} dB)" for m in worse) + "."
             )
         if not complete:
-            lines[-1] += (
-                f" A provisional answer: from {', '.join(c.scene for c in cells)} only"
-                + (f" ({', '.join(not_yet)} not run yet)" if not_yet else ", with incomplete cells")
-                + "."
-            )
+            why = [f"{', '.join(partial)} part-way"] if partial else []
+            why += [f"{', '.join(not_yet)} not run yet"] if not_yet else []
+            lines[-1] += f" A provisional answer: from {', '.join(used)} only ({'; '.join(why)})."
     if not rows:
         return [Heading("Which method to use"), Paragraph("No regime has paired results yet.")]
     note = (
