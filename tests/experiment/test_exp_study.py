@@ -53,42 +53,30 @@ def sphere(tmp_path_factory) -> Path:
     return root
 
 
+def toy_study(sphere: Path) -> list[str]:
+    """The options of the toy study every test here runs: the test engine, 2 methods x 2 trials."""
+    return ["--preset", "tiny", "--engines", "test", "--scenes", str(sphere), "--methods", "ours", "uniform"] + [
+        "--trials",
+        "2",
+        "--resolution",
+        str(SIZE),
+        "--steps",
+        "60",
+        "--workers",
+        "1",
+        "--device",
+        "cpu",
+    ]
+
+
 @pytest.fixture(scope="module")
 def study_out(sphere, tmp_path_factory):
     from nerfaug.cli import main
 
     out = tmp_path_factory.mktemp("study")
     docs = out.parent / f"{out.name}_docs" / "results.md"
-    main(
-        [
-            "study",
-            "--out",
-            str(out),
-            "--preset",
-            "tiny",
-            "--engines",
-            "test",
-            "--scenes",
-            str(sphere),
-            "--methods",
-            "ours",
-            "uniform",
-            "--trials",
-            "2",
-            "--resolution",
-            str(SIZE),
-            "--steps",
-            "60",
-            "--workers",
-            "1",
-            "--device",
-            "cpu",
-            "--table",
-            str(docs.parent / "results" / "study-table.json"),
-            "--results-doc",
-            str(docs),
-        ]
-    )
+    table = docs.parent / "results" / "study-table.json"
+    main(["study", "--out", str(out), *toy_study(sphere), "--table", str(table), "--results-doc", str(docs)])
     return out, docs
 
 
@@ -207,34 +195,7 @@ def test_a_study_resumes_from_its_table_without_run_folders(study_out, sphere, t
     out, docs = study_out
     table = docs.parent / "results" / "study-table.json"
     again = tmp_path / "again"
-    main(
-        [
-            "study",
-            "--out",
-            str(again),
-            "--table",
-            str(table),
-            "--preset",
-            "tiny",
-            "--engines",
-            "test",
-            "--scenes",
-            str(sphere),
-            "--methods",
-            "ours",
-            "uniform",
-            "--trials",
-            "2",
-            "--resolution",
-            str(SIZE),
-            "--steps",
-            "60",
-            "--workers",
-            "1",
-            "--device",
-            "cpu",
-        ]
-    )
+    main(["study", "--out", str(again), "--table", str(table), *toy_study(sphere)])
     assert "4 recorded in the table, 0 to run" in capsys.readouterr().err
     assert not list((again / "test" / "runs").glob("*/*/*"))  # nothing was run again
     assert len(table_of(out)["runs"]) == 4
