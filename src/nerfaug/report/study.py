@@ -22,7 +22,7 @@ import numpy as np
 from nerfaug.coverage import view_coverage
 from nerfaug.metrics import HIGHER_IS_BETTER, METRICS
 from nerfaug.report.collect import Results
-from nerfaug.report.study_table import RunRow, engine_results, homogeneous, previous_rows
+from nerfaug.report.study_table import RunRow, engine_results, homogeneous, table_rows
 from nerfaug.statistics import paired_comparison, seed_level_comparison, summarise
 
 REFERENCE = "uniform"
@@ -196,7 +196,7 @@ def regime_comparisons(cells: list[Cell], metric: str = "psnr") -> dict[str, dic
 def collect_study(table: dict) -> Study:
     """The study's cells (every planned engine x scene with results) and regimes, from its table."""
     plan = table["plan"]
-    rows = previous_rows(table)
+    rows = table_rows(table)
     ran = list(dict.fromkeys(r.engine for r in rows))
     engines = [e for e in plan.get("engines", []) if e in ran] + [e for e in ran if e not in plan.get("engines", [])]
     not_run = dict(plan.get("left_out", {}))

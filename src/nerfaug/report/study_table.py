@@ -168,7 +168,7 @@ def make_table(plan: dict, rows: list[RunRow], initial: dict[str, list], previou
     current = {(row.engine, row.method): row.fingerprint for row in rows}
     kept = [
         row
-        for row in (previous_rows(previous) if previous else [])
+        for row in (table_rows(previous) if previous else [])
         if current.get((row.engine, row.method), row.fingerprint) == row.fingerprint
     ]
     by_key = {row.key: row for row in kept}
@@ -187,7 +187,7 @@ def make_table(plan: dict, rows: list[RunRow], initial: dict[str, list], previou
     }
 
 
-def previous_rows(table: dict) -> list[RunRow]:
+def table_rows(table: dict) -> list[RunRow]:
     return [RunRow(**run) for run in table["runs"]]
 
 
@@ -276,7 +276,7 @@ def read_table(path: Path) -> dict:
 def engine_results(table: dict, engine: str) -> Results:
     """One engine's rows as the `Results` the report's figures and paired values read (runs
     without folders: every number comes from the table)."""
-    rows = [r for r in previous_rows(table) if r.engine == engine]
+    rows = [r for r in table_rows(table) if r.engine == engine]
     runs = [
         Run(
             r.scene,
