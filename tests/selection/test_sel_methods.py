@@ -309,20 +309,47 @@ def test_min_polar_holds_for_every_selector(scene, method):
 
 
 def test_a_new_method_is_one_function_and_one_line(scene, monkeypatch):
-    from nerfaug.selection import ESTIMATORS, METHODS, MethodSpec, Scoring, register_estimator
+    from nerfaug.selection import ESTIMATORS, METHODS, Estimate, MethodSpec
 
-    @register_estimator("test-height")
     def height(request):  # prefer views from high up
-        return Scoring(request.candidates.positions[:, 2].clamp_min(0).cpu() + 1e-3)
+        return Estimate(request.candidates.positions[:, 2].clamp_min(0).cpu() + 1e-3)
 
-    try:
-        monkeypatch.setitem(METHODS, "height-nbv", MethodSpec("height-nbv", "test-height", "top-k", "highest views"))
-        _, train, candidates = scene
-        selection = select_views("height-nbv", None, train, candidates, 3, torch.Generator().manual_seed(0))
-        z = candidates.positions[:, 2]
-        assert selection.indices.tolist() == torch.argsort(z, descending=True)[:3].tolist()
-    finally:
-        ESTIMATORS.pop("test-height")
+    monkeypatch.setitem(ESTIMATORS, "test-height", height)
+    monkeypatch.setitem(METHODS, "height-nbv", MethodSpec("height-nbv", "test-height", "top-k", "highest views"))
+    _, train, candidates = scene
+    selection = select_views("height-nbv", None, train, candidates, 3, torch.Generator().manual_seed(0))
+    z = candidates.positions[:, 2]
+    assert selection.indices.tolist() == torch.argsort(z, descending=True)[:3].tolist()
+
+
+def test_unknown_estimators_and_selectors_are_one_error_listing_the_known_ones():
+    from nerfaug.selection.registry import ESTIMATORS, SELECTORS, get_estimator, get_selector
+
+    with pytest.raises(ValueError, match="unknown estimator 'bayes'; valid: combined, entropy"):
+        get_estimator("bayes")
+    with pytest.raises(ValueError, match="unknown selector 'best'; valid: sampling, top-k"):
+        get_selector("best")
+    assert set(ESTIMATORS) == {"combined", "entropy", "distance", "none", "fisher"}
+    assert set(SELECTORS) == {"sampling", "top-k", "uniform", "farthest", "greedy-fisher", "batch-sampling"}
+
+
+def test_estimates_are_typed_and_name_their_components(scene):
+    """What an estimator hands a selector is read by attribute: a misspelt name fails at once."""
+    from nerfaug.selection.estimators import combined
+    from nerfaug.selection.interface import Estimate, Request
+
+    model, train, candidates = scene
+    estimate = combined(Request("ours", model, train, candidates, 3, None, FAST))
+    assert estimate.terms is not None and estimate.terms.weights == (1.0, 1.0)
+    assert estimate.fisher is None and estimate.exponent is None
+    assert list(estimate.components()) == ["entropy", "distance"]
+    with pytest.raises(AttributeError):
+        estimate.entropy  # noqa: B018 (the term is estimate.terms.entropy)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        estimate.scores = torch.ones(3)
+    sharpened = Estimate(torch.tensor([1.0, 0.25]), uncertainty=torch.tensor([2.0, 1.0]), exponent=2.0)
+    assert list(sharpened.components()) == ["uncertainty", "exponent"]
+    assert sharpened.components()["exponent"].tolist() == [2.0, 2.0]
 
 
 def test_method_specs_are_checked():

@@ -1,10 +1,11 @@
-"""Choosing which candidate views to add: candidates, selectors, and the registry of methods."""
+"""Choosing which candidate views to add: candidates, estimators and selectors, and the registry of methods."""
 
 from nerfaug.selection.batch import batch_aware_sample, batch_posterior
 from nerfaug.selection.candidates import hemisphere_candidates, matching_poses, pool_candidates
+from nerfaug.selection.config import AUTHORS_SETTINGS, SelectionConfig
 from nerfaug.selection.estimators import fisherrf_candidates
+from nerfaug.selection.interface import Estimate, Request
 from nerfaug.selection.methods import (
-    AUTHORS_SETTINGS,
     AUTHORS_VARIANTS,
     BATCH_AWARE,
     FAMILIES,
@@ -16,14 +17,11 @@ from nerfaug.selection.methods import (
     TABLE_II,
     TABLE_II_ROWS,
     MethodSpec,
-    Selection,
-    SelectionConfig,
-    candidate_scores,
     get_method,
     method_label,
-    select_views,
 )
-from nerfaug.selection.registry import ESTIMATORS, SELECTORS, Request, Scoring, register_estimator, register_selector
+from nerfaug.selection.registry import ESTIMATORS, SELECTORS
+from nerfaug.selection.select import Selection, candidate_scores, select_views
 from nerfaug.selection.selectors import (
     greedy_farthest,
     rejection_sample,
@@ -45,9 +43,9 @@ __all__ = [
     "TABLE_II",
     "TABLE_II_ROWS",
     "TABLE_I_ROWS",
+    "Estimate",
     "MethodSpec",
     "Request",
-    "Scoring",
     "Selection",
     "SelectionConfig",
     "batch_aware_sample",
@@ -60,8 +58,6 @@ __all__ = [
     "matching_poses",
     "method_label",
     "pool_candidates",
-    "register_estimator",
-    "register_selector",
     "rejection_sample",
     "select_top_k",
     "select_uniform",

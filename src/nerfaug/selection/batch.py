@@ -28,9 +28,10 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from nerfaug.selection.config import MAX_DRAWS
+from nerfaug.selection.interface import Estimate, Request
 from nerfaug.selection.posterior import sharpen
-from nerfaug.selection.registry import Request, Scoring, register_selector
-from nerfaug.selection.selectors import MAX_DRAWS, rejection_sample, sampling_density
+from nerfaug.selection.selectors import rejection_sample, sampling_density
 from nerfaug.uncertainty.combined import combined_uncertainty
 from nerfaug.uncertainty.so3 import so3_geodesic_sq
 
@@ -127,8 +128,7 @@ def batch_aware_sample(
     return torch.tensor(chosen, dtype=torch.long)
 
 
-@register_selector("batch-sampling", needs=("combined", "distance"))
-def _batch_sampling(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+def batch_sample_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate]:
     """Rejection sampling with the coverage term (and optionally the entropy) updated after each
     acceptance; the saved scores are the first draw's posterior."""
     config = request.config
@@ -137,18 +137,20 @@ def _batch_sampling(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring
             f"method {request.method!r} samples one view at a time with the paper's sampler; "
             f"SelectionConfig.sampler={config.sampler!r} is not supported (use 'paper')"
         )
-    shaped = sampling_density(request, scoring)
-    state = scoring.state
+    terms = estimate.terms
+    if terms is None:
+        raise ValueError(f"method {request.method!r}: batch-aware sampling needs the entropy and coverage terms")
+    shaped = sampling_density(request, estimate)
     indices = batch_aware_sample(
-        state["entropy"],
-        state.get("distance"),
-        state.get("rotations", request.candidates.rotations.cpu()),
+        terms.entropy,
+        terms.distance,
+        request.candidates.rotations.cpu() if terms.rotations is None else terms.rotations,
         request.n,
         request.generator,
-        state["weights"],
+        terms.weights,
         config.normalisation,
-        state.get("metric"),
-        shaped.state.get("exponent", 1.0),
+        terms.metric,
+        1.0 if shaped.exponent is None else shaped.exponent,
         config.batch_entropy_sigma,
         request.eligible,
         config.max_draws,

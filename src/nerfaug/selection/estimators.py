@@ -1,4 +1,5 @@
-"""The registered estimators: what scores the candidates.
+"""Estimators: what scores the candidates (each `fn(request) -> Estimate`, listed by name in
+`selection.registry.ESTIMATORS`).
 
 - "combined": the paper's U = a H + b D (`combined_uncertainty`), with the config's weights.
 - "entropy": H only (weights (1, 0)); "distance": D only (weights (0, 1)).
@@ -14,24 +15,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from dataclasses import replace
 
 import torch
 from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import angles_from_pose, pose_from_angles
-from nerfaug.selection.registry import Request, Scoring, register_estimator
+from nerfaug.selection.config import DISTANCE_ROTATIONS, SelectionConfig
+from nerfaug.selection.interface import Estimate, FisherGain, Request, Terms
 from nerfaug.uncertainty.combined import combined_uncertainty
 from nerfaug.uncertainty.entropy import authors_view_scores, mean_view_entropy
 from nerfaug.uncertainty.fisher import fisher_diagonal, fisherrf_view_scores, stratified_pixel_rays
 from nerfaug.uncertainty.rays import reduced_cameras
 from nerfaug.uncertainty.so3 import coverage_distance
-
-if TYPE_CHECKING:  # only for annotations: methods.py imports this module
-    from nerfaug.selection.methods import SelectionConfig
-
-DISTANCE_ROTATIONS = ("pose", "azimuth")
 
 
 def scoring_cameras(candidates: Cameras, resolution: int, fov_deg: float | None = None, crop: float = 1.0) -> Cameras:
@@ -96,57 +93,50 @@ def _metric(request: Request) -> Tensor | None:
     return None if metric is None else torch.tensor(metric, dtype=torch.float64)
 
 
-def _terms(request: Request, a: float, b: float) -> Scoring:
-    """U = a H + b D with the config's normalisation; the state carries what a batch-aware
-    selector needs to recompute D as views are accepted."""
+def _terms(request: Request, a: float, b: float) -> Estimate:
+    """U = a H + b D with the config's normalisation, with the terms a batch-aware selector needs
+    to recompute D as views are accepted."""
     config = request.config
-    components: dict[str, Tensor] = {}
-    state: dict = {"weights": (a, b), "entropy": None}
+    terms = Terms((a, b))
     if a:
-        state["entropy"] = candidate_entropy(request)
-        components["entropy"] = state["entropy"].float()
+        terms = replace(terms, entropy=candidate_entropy(request))
     if b:
         rotations = distance_rotations(request.candidates, config.distance_rotations)
         training = request.train_cameras.rotations.cpu().double()
         distance = coverage_distance(rotations, training, _metric(request))
-        state.update(distance=distance, rotations=rotations, metric=_metric(request))
-        components["distance"] = distance.float()
-    scores = combined_uncertainty(state["entropy"], state.get("distance"), a, b, config.normalisation).float()
-    return Scoring(scores, components, state)
+        terms = replace(terms, distance=distance, rotations=rotations, metric=_metric(request))
+    scores = combined_uncertainty(terms.entropy, terms.distance, a, b, config.normalisation).float()
+    return Estimate(scores, terms=terms)
 
 
-@register_estimator("combined")
-def combined(request: Request) -> Scoring:
+def combined(request: Request) -> Estimate:
     """The paper's U = a H + b D with the config's weights (a, b)."""
     return _terms(request, request.config.entropy_weight, request.config.distance_weight)
 
 
-@register_estimator("entropy")
-def entropy_only(request: Request) -> Scoring:
+def entropy_only(request: Request) -> Estimate:
     """H only (Table I "entropy only"; Lee et al.'s spatial entropy)."""
     return _terms(request, 1.0, 0.0)
 
 
-@register_estimator("distance")
-def distance_only(request: Request) -> Scoring:
+def distance_only(request: Request) -> Estimate:
     """D only (Table I "distance only")."""
     return _terms(request, 0.0, 1.0)
 
 
-@register_estimator("none")
-def no_scores(request: Request) -> Scoring:
+def no_scores(request: Request) -> Estimate:
     """Ones: for selectors that ignore scores (uniform, farthest)."""
-    return Scoring(torch.ones(len(request.candidates)))
+    return Estimate(torch.ones(len(request.candidates)))
 
 
-@register_estimator("fisher")
-def fisher(request: Request) -> Scoring:
-    """FisherRF's information gain per candidate; H_train and H_cand on demand in the state."""
+def fisher(request: Request) -> Estimate:
+    """FisherRF's information gain per candidate, with H_train and H_cand (on demand) for its
+    greedy selector."""
     h_train, scores, h_of = fisherrf_candidates(
         request.require_model(), request.train_cameras, request.candidates, request.config, request.generator
     )
     scores = scores.cpu()
-    return Scoring(scores, {"fisher": scores}, {"h_train": h_train, "h_of": h_of})
+    return Estimate(scores, fisher=FisherGain(scores, h_train, h_of))
 
 
 def fisher_background(config: SelectionConfig) -> Tensor | None:

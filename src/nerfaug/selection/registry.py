@@ -1,125 +1,73 @@
 """The two registries a view-selection method is made of: estimators (what scores the
-candidates) and selectors (how n are chosen from the scores).
+candidates) and selectors (how n are chosen from the scores), by name.
 
-Both are small functions behind one narrow interface, registered by name with a decorator:
-
-    @register_estimator("my-scores")
-    def my_scores(request: Request) -> Scoring: ...
-
-    @register_selector("my-picker")
-    def my_picker(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]: ...
-
-A new method is then one `MethodSpec` line in `nerfaug.selection.methods.METHODS` naming them.
+Both are small functions behind one narrow interface (`selection.interface`): an estimator is
+`fn(request) -> Estimate`, a selector `fn(request, estimate) -> (indices (n,), estimate)`. Adding
+one is its function (in `estimators.py`, `selectors.py` or a module of its own) and one line
+here; a new method is then one `MethodSpec` line in `selection.methods.METHODS` naming them.
+An unknown name is a ValueError that lists the known ones.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from nerfaug.selection import estimators, selectors
+from nerfaug.selection.batch import batch_sample_views
+from nerfaug.selection.interface import Estimator, Selector
 
-import torch
-from torch import Tensor, nn
+ESTIMATORS: dict[str, Estimator] = {
+    "combined": estimators.combined,
+    "entropy": estimators.entropy_only,
+    "distance": estimators.distance_only,
+    "none": estimators.no_scores,
+    "fisher": estimators.fisher,
+}
+"""Estimators: name -> `fn(request) -> Estimate`."""
 
-from nerfaug.cameras import Cameras
+SELECTORS: dict[str, Selector] = {
+    "sampling": selectors.sample_views,
+    "top-k": selectors.top_k_views,
+    "uniform": selectors.uniform_views,
+    "farthest": selectors.farthest_views,
+    "greedy-fisher": selectors.greedy_fisher_views,
+    "batch-sampling": batch_sample_views,
+}
+"""Selectors: name -> `fn(request, estimate) -> (indices (n,), estimate)`."""
 
-if TYPE_CHECKING:  # only for annotations: methods.py imports this module
-    from nerfaug.selection.methods import SelectionConfig
+SELECTOR_NEEDS: dict[str, tuple[str, ...]] = {
+    "greedy-fisher": ("fisher",),
+    "batch-sampling": ("combined", "distance"),
+}
+"""Selector -> the estimators whose `Estimate` fields it reads (a selector absent here works with
+any estimator)."""
 
 
-@dataclass
-class Request:
-    """Everything an estimator or a selector may use.
+def get_estimator(name: str) -> Estimator:
+    """The estimator `name`; ValueError listing the valid names otherwise.
 
-    Attributes:
-        method: the method's name (for error messages).
-        model: the NeRF (`NerfModel` interface), or None for methods that do not render.
-        train_cameras: the current training views.
-        candidates: the n_candidates views to choose from.
-        n: how many to choose.
-        generator: the random source (the same seed gives the same selection).
-        config: the method's effective `SelectionConfig` (its own settings applied).
+    Example:
+        >>> get_estimator("bayes")
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown estimator 'bayes'; valid: combined, entropy, distance, none, fisher
     """
-
-    method: str
-    model: nn.Module | None
-    train_cameras: Cameras
-    candidates: Cameras
-    n: int
-    generator: torch.Generator | None
-    config: SelectionConfig
-
-    def require_model(self) -> nn.Module:
-        """The model; ValueError naming the method when there is none."""
-        if self.model is None:
-            raise ValueError(f"method {self.method!r} scores candidates with the model; got model=None")
-        return self.model
-
-    @cached_property
-    def polar(self) -> Tensor:
-        """Polar angle (radians from +z about the origin, the scene centre in the engine frame) of
-        every candidate. Shape (n_candidates,), float64, CPU."""
-        from nerfaug.hemisphere import angles_from_pose
-
-        return angles_from_pose(self.candidates.camera_to_world.cpu())[1].double()
-
-    @cached_property
-    def eligible(self) -> Tensor | None:
-        """Bool mask (n_candidates,) of the candidates that may be chosen: those at least
-        `config.min_polar` from the pole. None when every candidate may be."""
-        if self.config.min_polar is None:
-            return None
-        return self.polar >= self.config.min_polar
+    if name not in ESTIMATORS:
+        raise ValueError(f"unknown estimator {name!r}; valid: {', '.join(ESTIMATORS)}")
+    return ESTIMATORS[name]
 
 
-@dataclass
-class Scoring:
-    """What an estimator gives the selector.
+def get_selector(name: str, estimator: str | None = None) -> Selector:
+    """The selector `name`; ValueError listing the valid names otherwise, or naming the estimators
+    it needs when `estimator` is not one of them.
 
-    Attributes:
-        scores: Tensor with shape (n_candidates,), on the CPU: the density or ranking.
-        components: name -> Tensor with shape (n_candidates,): the terms behind `scores`
-            (saved with the selection).
-        state: anything else a selector needs (not saved), e.g. FisherRF's H_train.
+    Example:
+        >>> get_selector("greedy-fisher", "combined")
+        Traceback (most recent call last):
+        ...
+        ValueError: the greedy-fisher selector needs the estimator fisher
     """
-
-    scores: Tensor
-    components: dict[str, Tensor] = field(default_factory=dict)
-    state: dict[str, Any] = field(default_factory=dict)
-
-
-Estimator = Callable[[Request], Scoring]
-Selector = Callable[[Request, Scoring], "tuple[Tensor, Scoring]"]
-
-ESTIMATORS: dict[str, Estimator] = {}
-SELECTORS: dict[str, Selector] = {}
-# Selector name -> the estimators it works with (a selector absent here works with any).
-SELECTOR_NEEDS: dict[str, tuple[str, ...]] = {}
-
-
-def register_estimator(name: str) -> Callable[[Estimator], Estimator]:
-    """Register `fn(request) -> Scoring` as the estimator `name`."""
-
-    def register(fn: Estimator) -> Estimator:
-        if name in ESTIMATORS:
-            raise ValueError(f"estimator {name!r} is registered twice")
-        ESTIMATORS[name] = fn
-        return fn
-
-    return register
-
-
-def register_selector(name: str, needs: tuple[str, ...] | None = None) -> Callable[[Selector], Selector]:
-    """Register `fn(request, scoring) -> (indices (n,), scoring)` as the selector `name`; `needs`
-    lists the estimators whose `Scoring.state` it relies on."""
-
-    def register(fn: Selector) -> Selector:
-        if name in SELECTORS:
-            raise ValueError(f"selector {name!r} is registered twice")
-        SELECTORS[name] = fn
-        if needs is not None:
-            SELECTOR_NEEDS[name] = needs
-        return fn
-
-    return register
+    if name not in SELECTORS:
+        raise ValueError(f"unknown selector {name!r}; valid: {', '.join(SELECTORS)}")
+    needs = SELECTOR_NEEDS.get(name)
+    if estimator is not None and needs is not None and estimator not in needs:
+        raise ValueError(f"the {name} selector needs the estimator {' or '.join(needs)}")
+    return SELECTORS[name]

@@ -6,24 +6,28 @@
   probability w / M, never draw an accepted candidate again; or the authors' code's variant.
 - `greedy_farthest`: "maximally apart", each pick the candidate farthest (geodesic angle) from
   the training views and the views picked so far.
+
+Below them, the selectors `selection.registry.SELECTORS` lists (`sample_views`, `top_k_views`,
+...): each `fn(request, estimate) -> (indices (n,), estimate)` over one of the functions above.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import torch
 from torch import Tensor
 
-from nerfaug.selection.registry import Request, Scoring, register_selector
+from nerfaug.selection.config import AUTHORS_THRESHOLD, MAX_DRAWS, REJECTION_SAMPLERS
+from nerfaug.selection.interface import Estimate, Request
+from nerfaug.selection.posterior import posterior_exponent, sharpen
+from nerfaug.uncertainty.fisher import fisherrf_greedy
 from nerfaug.uncertainty.so3 import min_geodesic_angle
 
-SAMPLERS = ("paper", "authors")
-# The authors' code accepts candidate i when w_i > AUTHORS_THRESHOLD * nu, nu ~ U[0.05, 1].
-AUTHORS_THRESHOLD = 15.0
+# The authors' sampler draws nu ~ U[0.05, 1] per visit (accept if w > AUTHORS_THRESHOLD * nu).
 AUTHORS_NU_RANGE = (0.05, 1.0)
-MAX_DRAWS = 1_000_000
 # Random numbers are drawn in blocks (same stream for a seed, far fewer calls).
 _BLOCK = 1024
 
@@ -135,8 +139,8 @@ def rejection_sample(
         ValueError: fewer than k candidates can ever be accepted (e.g. all scores 0), or bad input.
         RuntimeError: `max_draws` proposals were not enough.
     """
-    if variant not in SAMPLERS:
-        raise ValueError(f"unknown sampler variant {variant!r}; valid: {', '.join(SAMPLERS)}")
+    if variant not in REJECTION_SAMPLERS:
+        raise ValueError(f"unknown sampler variant {variant!r}; valid: {', '.join(REJECTION_SAMPLERS)}")
     w = _check_scores(scores)
     _check_k(w.numel(), k)
     allowed = _check_eligible(eligible, w.numel(), k)
@@ -250,35 +254,27 @@ def greedy_farthest(
     return torch.tensor(chosen, dtype=torch.long)
 
 
-# The registered selectors (`nerfaug.selection.registry`): adapters from a `Request` and the
-# estimator's `Scoring` to the functions above. Every one honours `Request.eligible`.
+# The selectors listed in `selection.registry.SELECTORS`: adapters from a `Request` and the
+# estimator's `Estimate` to the functions above. Every one honours `Request.eligible`.
 
 
-def sampling_density(request: Request, scoring: Scoring) -> Scoring:
-    """The scores a sampler draws from: `scoring.scores ** (1/T)` (see `posterior`). When T is not
-    1 the result's scores are that density and its components gain "uncertainty" (the scores
-    before) and "exponent" (1/T, repeated)."""
-    from nerfaug.selection.posterior import posterior_exponent, sharpen
-
+def sampling_density(request: Request, estimate: Estimate) -> Estimate:
+    """The scores a sampler draws from: `estimate.scores ** (1/T)` (see `posterior`). When T is not
+    1 the result's scores are that density, with the scores before as `uncertainty` and 1/T as
+    `exponent`."""
     config = request.config
-    exponent = posterior_exponent(scoring.scores, request.n, config.temperature, config.sharpness, request.eligible)
+    exponent = posterior_exponent(estimate.scores, request.n, config.temperature, config.sharpness, request.eligible)
     if exponent == 1.0:
-        return scoring
-    components = {
-        **scoring.components,
-        "uncertainty": scoring.scores,
-        "exponent": torch.full_like(scoring.scores, exponent),
-    }
-    return Scoring(sharpen(scoring.scores, exponent), components, {**scoring.state, "exponent": exponent})
+        return estimate
+    return replace(estimate, scores=sharpen(estimate.scores, exponent), uncertainty=estimate.scores, exponent=exponent)
 
 
-@register_selector("sampling")
-def _sampling(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+def sample_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate]:
     """The paper's rejection sampler (or the authors' sweep, `config.sampler`)."""
     config = request.config
-    scoring = sampling_density(request, scoring)
+    estimate = sampling_density(request, estimate)
     indices = rejection_sample(
-        scoring.scores,
+        estimate.scores,
         request.n,
         request.generator,
         config.scale_m,
@@ -287,43 +283,38 @@ def _sampling(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
         config.authors_threshold,
         request.eligible,
     )
-    return indices, scoring
+    return indices, estimate
 
 
-@register_selector("top-k")
-def _top_k(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+def top_k_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate]:
     """Next best views: the n highest scores."""
-    return select_top_k(scoring.scores, request.n, request.eligible), scoring
+    return select_top_k(estimate.scores, request.n, request.eligible), estimate
 
 
-@register_selector("uniform")
-def _uniform(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+def uniform_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate]:
     """n candidates uniformly at random."""
-    return select_uniform(len(request.candidates), request.n, request.generator, request.eligible), scoring
+    return select_uniform(len(request.candidates), request.n, request.generator, request.eligible), estimate
 
 
-@register_selector("farthest")
-def _farthest(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+def farthest_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate]:
     """Greedy farthest views; scored by the angle (radians) to the nearest training view."""
     rotations = request.candidates.rotations.cpu().double()
     training = request.train_cameras.rotations.cpu().double()
     indices = greedy_farthest(rotations, training, request.n, request.eligible)
     if training.shape[0]:
         angle = min_geodesic_angle(rotations, training).float()
-        scoring = Scoring(angle, {"min_angle": angle}, scoring.state)
-    return indices, scoring
+        estimate = Estimate(angle, min_angle=angle)
+    return indices, estimate
 
 
-@register_selector("greedy-fisher", needs=("fisher",))
-def _greedy_fisher(request: Request, scoring: Scoring) -> tuple[Tensor, Scoring]:
+def greedy_fisher_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate]:
     """FisherRF's greedy batch: add each pick's H_cand into H_train and rescore."""
-    from nerfaug.uncertainty.fisher import fisherrf_greedy
-
-    scores = scoring.scores
+    gain = estimate.fisher
+    if gain is None:
+        raise ValueError(f"method {request.method!r}: the greedy-fisher selector needs the fisher estimator")
+    scores = estimate.scores
     if request.eligible is not None:
         _check_eligible(request.eligible, scores.shape[0], request.n)
         scores = torch.where(request.eligible, scores.double(), -math.inf)
-    indices, _ = fisherrf_greedy(
-        scoring.state["h_train"], scoring.state["h_of"], request.n, request.config.fisher_lambda, scores
-    )
-    return indices, scoring
+    indices, _ = fisherrf_greedy(gain.h_train, gain.h_of, request.n, request.config.fisher_lambda, scores)
+    return indices, estimate

@@ -1,0 +1,222 @@
+"""`SelectionConfig`: the options of the estimators and selectors, and the settings the authors'
+code uses where the paper is silent (`AUTHORS_SETTINGS`).
+
+The names a choice field may take are listed here, next to the field: `REJECTION_SAMPLERS`
+(`sampler`: the rejection sampler's variants; the engine's ray samplers are
+`nerfaug.nerf.SAMPLERS`) and `DISTANCE_ROTATIONS` (`distance_rotations`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from types import MappingProxyType
+
+from nerfaug.uncertainty.combined import NORMALISATIONS
+from nerfaug.uncertainty.entropy import ENTROPY_MODES
+from nerfaug.uncertainty.fisher import (
+    CACHE_FLOATS,
+    DEFAULT_METHOD,
+    FISHER_LAMBDA,
+    FISHER_METHODS,
+)
+
+# The rejection sampler's variants (`selectors.rejection_sample`): the paper's, and the authors'
+# code's in-order sweep.
+REJECTION_SAMPLERS = ("paper", "authors")
+# The authors' code accepts candidate i when w_i > AUTHORS_THRESHOLD * nu, nu ~ U[0.05, 1].
+AUTHORS_THRESHOLD = 15.0
+# Proposals before a rejection sampler gives up.
+MAX_DRAWS = 1_000_000
+# The rotations the coverage term compares (`estimators.distance_rotations`).
+DISTANCE_ROTATIONS = ("pose", "azimuth")
+
+# What the authors' code (Agaggar/nerfstudio-low-data) does where the paper is silent, as
+# `SelectionConfig` settings; `SelectionConfig.authors_variant()` applies them. See the
+# SelectionConfig docstring for what the project cannot copy exactly.
+AUTHORS_SETTINGS = MappingProxyType(
+    {
+        "entropy_mode": "authors",  # p = w / max(w) over the view's rays, -10 sum p log2(p + 1e-9)
+        "normalisation": "authors",  # per-view H cubed + min-max; D min-max; (H' + D') / max
+        "sampler": "authors",  # in-order sweep, nu ~ U(0.05, 1), accept if w > 15 nu
+        "min_polar": 0.4,  # candidates within 0.4 rad of the pole are never accepted
+        "scoring_fov": 75.0,  # their scoring renders: 75-degree field of view ...
+        "scoring_crop": 0.5,  # ... of which only the central 400x400 of 800x800 is used
+    }
+)
+
+
+@dataclass
+class SelectionConfig:
+    """Options of the estimators and selectors. Defaults follow the paper; `authors_variant()`
+    switches to what the authors' code does (`AUTHORS_SETTINGS`; the method "ours-authors").
+
+    What the authors' variant cannot copy exactly, and why:
+    - Scoring renders: theirs are 800x800 with a 75-degree field of view, of which the central
+      400x400 are used (160k rays per candidate, 80M for 500 candidates: hours on a CPU). Here the
+      same field of view and crop (`scoring_fov` 75, `scoring_crop` 0.5) are rendered
+      `entropy_resolution` pixels across (40 by default): the same part of the scene, fewer rays.
+    - Their black background and bounding-box crop do not enter: the entropy is taken from the
+      volume-rendering weights alone (no colour), inside the engine's own scene bounds.
+    - Their entropy normalises by the maximum weight over a whole rendered chunk; here over each
+      view's rays (a chunk's extent depended on their renderer's batching, not on the method).
+    - Their distance has no 1/2 and is min-max normalised: min-max removes any constant factor,
+      so D here (with the 1/2) gives the same normalised term.
+    - Their polar test reads the pre-rendered poses' angles; here the polar angle is measured
+      about the origin, the scene centre in the engine's frame (experiments and capture sessions
+      alike).
+
+    Attributes:
+        entropy_resolution: width in pixels of the candidate renders the entropy is taken over.
+        entropy_mode: `ray_entropy` mode: "escape" (default), "renormalise", "raw", "authors".
+        normalisation: `combined_uncertainty` normalisation: "minmax" (default), "none", "authors".
+        entropy_weight: a in U = a H + b D (the entropy term's weight).
+        distance_weight: b in U = a H + b D (the coverage term's weight).
+        metric: the SPD 3x3 matrix M of the coverage term as nested lists; None for identity.
+        scale_m: the rejection sampler's M; None for the largest score.
+        sampler: "paper" or "authors" (the code's in-order loop, accept if w > 15 nu).
+        authors_threshold: the 15 of the authors' sampler.
+        max_draws: proposals before the rejection sampler gives up.
+        fisher_method: "random-sign" (default) or "exact"; see `nerfaug.uncertainty.fisher`.
+        fisher_train_pixels: training pixels H_train is taken over (a stratified, weighted
+            subsample of the training views, `fisher_train_rays`). With fisher_resolution 45, 4096
+            was chosen as the cheapest setting whose candidate ranking, at step 200 on lego
+            100x100, stays put when either side's pixels double (mean Spearman >= 0.9 and top-6
+            overlap >= 4/6 for each of 4 seeds), measured with unweighted uniform training pixels;
+            with this estimator the means hold but one seed of 4 keeps 2/6 when the training
+            pixels double (benchmarks/bench_fisher.py; BENCHMARKS.md, "FisherRF stability").
+        fisher_train_chunk: rays per squared probe for H_train ("random-sign").
+        fisher_train_probes: Rademacher probes per chunk for H_train ("random-sign"; each is
+            three backward passes, one per colour channel).
+        fisher_resolution: pixels across each candidate H_cand is taken over (a stratified,
+            weighted subsample of its image, `fisher_views`: unbiased for the whole image; the
+            image's width or more takes every pixel).
+        fisher_probes: Rademacher probes per candidate ("random-sign"; likewise).
+        fisher_lambda: lambda of the FisherRF score.
+        fisher_cache_floats: memory bound (floats) on the candidates' Fisher diagonals kept for
+            the greedy selection; beyond it they are recomputed when needed.
+        chunk: rays per forward pass when rendering candidates (small chunks are faster on a CPU).
+        background: colour composited behind rendered rays (FisherRF differentiates colours);
+            None for the model's default.
+        scoring_fov: horizontal field of view, degrees, of the entropy's candidate renders; None
+            for the candidates' own (the authors' code: 75).
+        scoring_crop: the central fraction (width and height) of that view the entropy is taken
+            over, rendered `entropy_resolution` pixels across (the authors' code: 0.5).
+        min_polar: candidates closer than this to the pole (polar angle from +z, radians) are
+            never chosen, by any selector; None for no limit (the authors' sampler: 0.4).
+        entropy_max_polar: candidates farther than this from the pole (radians) get entropy 0
+            before normalisation; None for no limit (the authors' entropy NBV: 0.75).
+        distance_rotations: the rotations the coverage term compares: "pose" (the cameras') or the
+            azimuth's alone, "azimuth" (polar angle set to 0, as the authors' NBV code does).
+        temperature: T of the sampling posterior, scores ** (1/T): 1 keeps the scores, < 1
+            sharpens towards next-best-view, > 1 flattens towards uniform. Samplers only.
+        sharpness: if set, in [0, 1]: T is solved per selection so the posterior's effective
+            sample size is C^(1 - s) n^s (C candidates, n views): 0 keeps it, 1 is next-best-view,
+            and 0.5 the geometric mean (see `nerfaug.selection.posterior`). Overrides `temperature`.
+        batch_entropy_sigma: for batch-aware sampling: the entropy of a candidate theta radians
+            from an accepted view is multiplied by 1 - exp(-theta^2 / (2 sigma^2)); None for no
+            entropy discount (see `nerfaug.selection.batch`).
+    """
+
+    entropy_resolution: int = 40
+    entropy_mode: str = "escape"
+    normalisation: str = "minmax"
+    entropy_weight: float = 1.0
+    distance_weight: float = 1.0
+    metric: list[list[float]] | None = None
+    scale_m: float | None = None
+    sampler: str = "paper"
+    authors_threshold: float = AUTHORS_THRESHOLD
+    max_draws: int = MAX_DRAWS
+    fisher_method: str = DEFAULT_METHOD
+    fisher_train_pixels: int = 4096
+    fisher_train_chunk: int = 128
+    fisher_train_probes: int = 4
+    fisher_resolution: int = 45
+    fisher_probes: int = 1
+    fisher_lambda: float = FISHER_LAMBDA
+    fisher_cache_floats: int = CACHE_FLOATS
+    chunk: int = 4096
+    background: tuple[float, float, float] | None = None
+    scoring_fov: float | None = None
+    scoring_crop: float = 1.0
+    min_polar: float | None = None
+    entropy_max_polar: float | None = None
+    distance_rotations: str = "pose"
+    temperature: float = 1.0
+    sharpness: float | None = None
+    batch_entropy_sigma: float | None = None
+
+    def __post_init__(self) -> None:
+        for name, value, valid in [
+            ("entropy_mode", self.entropy_mode, ENTROPY_MODES),
+            ("normalisation", self.normalisation, NORMALISATIONS),
+            ("sampler", self.sampler, REJECTION_SAMPLERS),
+            ("fisher_method", self.fisher_method, FISHER_METHODS),
+            ("distance_rotations", self.distance_rotations, DISTANCE_ROTATIONS),
+        ]:
+            if value not in valid:
+                raise ValueError(f"SelectionConfig.{name}={value!r} is not one of {', '.join(valid)}")
+        for name, ok, rule in [
+            ("entropy_resolution", self.entropy_resolution >= 1, ">= 1"),
+            ("scoring_crop", 0 < self.scoring_crop <= 1, "in (0, 1]"),
+            ("scoring_fov", self.scoring_fov is None or 0 < self.scoring_fov < 180, "in (0, 180) degrees"),
+            ("temperature", self.temperature > 0, "> 0"),
+            ("sharpness", self.sharpness is None or 0 <= self.sharpness <= 1, "in [0, 1]"),
+            ("batch_entropy_sigma", self.batch_entropy_sigma is None or self.batch_entropy_sigma > 0, "> 0"),
+            ("entropy_weight", self.entropy_weight >= 0, ">= 0"),
+            ("distance_weight", self.distance_weight >= 0, ">= 0"),
+            ("authors_threshold", self.authors_threshold >= 0, ">= 0"),
+            ("scale_m", self.scale_m is None or self.scale_m > 0, "> 0"),
+            *[
+                (name, getattr(self, name) >= 1, ">= 1")
+                for name in (
+                    "max_draws",
+                    "chunk",
+                    "fisher_train_pixels",
+                    "fisher_train_chunk",
+                    "fisher_train_probes",
+                    "fisher_resolution",
+                    "fisher_probes",
+                    "fisher_cache_floats",
+                )
+            ],
+            ("fisher_lambda", self.fisher_lambda > 0, "> 0"),
+        ]:
+            if not ok:
+                raise ValueError(f"SelectionConfig.{name}={getattr(self, name)!r} must be {rule}")
+
+    def authors_variant(self) -> SelectionConfig:
+        """This config with the authors' code's settings (`AUTHORS_SETTINGS`): entropy,
+        normalisation, sampler, polar limit and scoring view."""
+        return replace(self, **AUTHORS_SETTINGS)
+
+    def to_dict(self) -> dict:
+        """Plain data (JSON-serialisable), for saving next to a selection."""
+        return asdict(self)
+
+    def changes(self) -> dict:
+        """The fields that differ from `SelectionConfig()`'s defaults: what a user set with
+        `--selection.*` options, to apply over a preset's selection settings."""
+        default = SelectionConfig().to_dict()
+        return {k: getattr(self, k) for k, v in self.to_dict().items() if v != default[k]}
+
+    def flags(self) -> list[str]:
+        """The `--selection.*` options that give this config (its changes from the defaults)."""
+        words = []
+        for name, value in self.changes().items():
+            values = value if isinstance(value, (list, tuple)) else [value]
+            flat = [v for item in values for v in (item if isinstance(item, (list, tuple)) else [item])]
+            words += [f"--selection.{name.replace('_', '-')}", *map(str, flat)]
+        return words
+
+    @classmethod
+    def from_dict(cls, data: dict) -> SelectionConfig:
+        """The inverse of `to_dict`; unknown keys are refused with their names."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown SelectionConfig fields {unknown}; valid: {', '.join(sorted(known))}")
+        values = dict(data)
+        if values.get("background") is not None:
+            values["background"] = tuple(values["background"])
+        return cls(**values)

@@ -1,0 +1,114 @@
+"""`select_views`: choose n of the candidate views with a registered method, and the `Selection`
+it returns (the chosen indices, with the scores and terms they were chosen by)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import torch
+from torch import Tensor, nn
+
+from nerfaug.cameras import Cameras
+from nerfaug.selection.config import SelectionConfig
+from nerfaug.selection.interface import Request
+from nerfaug.selection.methods import get_method
+from nerfaug.selection.registry import get_estimator, get_selector
+
+
+@dataclass
+class Selection:
+    """The views a method chose, and the scores it chose them by.
+
+    Attributes:
+        indices: Tensor with shape (n,), candidate indices in the order chosen.
+        scores: Tensor with shape (n_candidates,), the density or ranking the selector used
+            (before any greedy update); ones for "uniform".
+        components: name -> Tensor with shape (n_candidates,), the terms behind `scores`
+            (e.g. "entropy", "distance" raw, before normalisation).
+        method: the method's name.
+    """
+
+    indices: Tensor
+    scores: Tensor
+    components: dict[str, Tensor] = field(default_factory=dict)
+    method: str = ""
+
+    def to_dict(self) -> dict:
+        """Plain lists and numbers (JSON-serialisable)."""
+        return {
+            "method": self.method,
+            "indices": [int(i) for i in self.indices.tolist()],
+            "scores": [float(s) for s in self.scores.tolist()],
+            "components": {k: [float(x) for x in v.tolist()] for k, v in self.components.items()},
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Selection:
+        return cls(
+            torch.tensor(data["indices"], dtype=torch.long),
+            torch.tensor(data["scores"]),
+            {k: torch.tensor(v) for k, v in data.get("components", {}).items()},
+            data.get("method", ""),
+        )
+
+
+def candidate_scores(
+    method: str,
+    model: nn.Module | None,
+    train_cameras: Cameras,
+    candidates: Cameras,
+    config: SelectionConfig | None = None,
+) -> tuple[Tensor, dict[str, Tensor]]:
+    """The scores a method's estimator gives the candidates, and the terms behind them (with
+    the method's own settings applied to `config`).
+
+    For "combined", "entropy" and "distance" the components are the raw terms ("entropy" in
+    bits, or the authors' score, "distance" in radians^2) and the scores their combination
+    (`combined_uncertainty` with weights (a, b), (1, 0) or (0, 1)). "none" gives ones.
+    FisherRF's need the model's Fisher diagonals (random probes: pass a generator to
+    `select_views` for reproducible ones).
+
+    Returns:
+        scores: Tensor with shape (n_candidates,), on the CPU.
+        components: name -> Tensor with shape (n_candidates,), on the CPU.
+    """
+    spec = get_method(method)
+    request = Request(spec.name, model, train_cameras, candidates, 0, None, spec.effective_config(config))
+    estimate = get_estimator(spec.estimator)(request)
+    return estimate.scores.cpu(), estimate.components()
+
+
+def select_views(
+    method: str,
+    model: nn.Module | None,
+    train_cameras: Cameras,
+    candidates: Cameras,
+    n: int,
+    generator: torch.Generator | None = None,
+    config: SelectionConfig | None = None,
+) -> Selection:
+    """Choose `n` of the candidate views with a registered method.
+
+    Args:
+        method: a name in `METHODS` ("ours", "ours-nbv", "uniform", "entropy", ...).
+        model: the NeRF being trained (`NerfModel` interface); may be None for methods that do not
+            score with it ("uniform", "distance", "distance-nbv", "furthest").
+        train_cameras: the current training views.
+        candidates: the n_candidates views to choose from.
+        n: how many to choose.
+        generator: random source for sampling, probes and pixel subsamples; the same seed gives
+            the same selection.
+        config: estimator and selector options; None for the defaults. The method's own
+            settings (`MethodSpec.settings`) are applied over it.
+
+    Returns:
+        Selection(indices (n,), scores (n_candidates,), components, method).
+    """
+    spec = get_method(method)
+    if not 0 <= n <= len(candidates):
+        raise ValueError(f"cannot choose {n} views out of {len(candidates)} candidates")
+    request = Request(spec.name, model, train_cameras, candidates, n, generator, spec.effective_config(config))
+    estimate = get_estimator(spec.estimator)(request)
+    indices, estimate = get_selector(spec.selector, spec.estimator)(request, estimate)
+    components = {k: v.detach().cpu() for k, v in estimate.components().items()}
+    return Selection(indices.cpu(), estimate.scores.detach().cpu(), components, spec.name)
