@@ -7,15 +7,15 @@ import torch
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views
 from nerfaug.experiment.config import ExperimentConfig, preset
-from nerfaug.experiment.protocol import engine_config, initial_view_indices
+from nerfaug.experiment.protocol import initial_view_indices
 from nerfaug.hemisphere import angles_from_pose, in_azimuth_window, sample_uniform_poses
 
 
 def test_paper_field_learning_rate_for_chair_and_materials():
     config = ExperimentConfig(engine="cpu")
-    assert engine_config(config, "chair").field_lr == 0.002
-    assert engine_config(config, "/data/nerf_synthetic/materials").field_lr == 0.002
-    assert engine_config(config, "lego").field_lr != 0.002
+    assert config.engine_config("chair").field_lr == 0.002
+    assert config.engine_config("/data/nerf_synthetic/materials").field_lr == 0.002
+    assert config.engine_config("lego").field_lr != 0.002
 
 
 def test_initial_views_of_a_user_dataset_lie_on_one_half():
