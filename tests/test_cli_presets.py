@@ -79,3 +79,17 @@ def test_given_fields_are_the_options_on_the_command_line_whatever_their_spellin
 def test_without_a_command_line_the_fields_that_differ_from_the_defaults_are_given():
     options = SelectionConfig(temperature=0.5, entropy_resolution=DEFAULT.entropy_resolution)
     assert given_fields(options, "selection", None) == {"temperature": 0.5}
+
+
+def test_a_flag_given_as_its_negation_is_given():
+    from dataclasses import dataclass
+
+    @dataclass(frozen=True)
+    class Options:
+        random_background: bool = False
+        no_cache: bool = False
+
+    found = given_fields(
+        Options(no_cache=True), "engine", ["run", "--engine.no-random-background", "--engine.no-cache"]
+    )
+    assert found == {"random_background": False, "no_cache": True}

@@ -58,7 +58,8 @@ def given_fields(options, prefix: str, argv: Sequence[str] | None) -> dict:
     for word in argv:
         option, _, _ = word.partition("=")
         if option.startswith(f"--{prefix}."):  # tyro takes FIELD with - or _ between its words
-            given.add(option.removeprefix(f"--{prefix}.").replace("-", "_"))
+            name = option.removeprefix(f"--{prefix}.").replace("-", "_")
+            given.add(name.removeprefix("no_") if name not in names else name)  # --PREFIX.no-FLAG
     return {name: getattr(options, name) for name in names if name in given}
 
 

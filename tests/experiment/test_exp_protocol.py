@@ -35,6 +35,17 @@ def test_presets_are_consistent():
         assert config.n_new <= config.pool
 
 
+def test_presets_are_settings_over_the_defaults_and_an_unknown_name_lists_the_known_ones():
+    from nerfaug.experiment.config import PRESET_SETTINGS, STUDY_PRESET_SETTINGS
+
+    assert preset("tiny") == dataclasses.replace(ExperimentConfig(), **PRESET_SETTINGS["tiny"])
+    assert preset("tiny") is not preset("tiny")  # a fresh config each time (it is mutable)
+    study_tiny = preset("tiny", STUDY_PRESET_SETTINGS)
+    assert study_tiny == preset("tiny").replace(view_uncertainty=False)
+    with pytest.raises(ValueError, match="unknown preset 'fast'; choose one of: quick, paper, ablation, tiny"):
+        preset("fast")
+
+
 def test_quick_preset_compares_the_main_methods_with_enough_trials_for_significance():
     from scipy.stats import mannwhitneyu
 
