@@ -5,7 +5,7 @@
         --train-pixels 4096 8192                                      # around the study's setting, 4 seeds
 
 Trains the `cpu` engine preset on the dataset's initial views (the protocol's `load_scene_data`
-and `engine_config`, seed 0) to `--steps` (200: where the protocol selects), then computes, with
+and `ExperimentConfig.engine_config`, seed 0) to `--steps` (200: where the protocol selects), then computes, with
 `SelectionConfig`'s fisher_* settings and the functions the study's estimator calls:
 
 - H_train over about n training pixels exactly as `fisherrf_candidates` computes it
@@ -47,7 +47,7 @@ from scipy.stats import spearmanr
 
 from nerfaug.device import configure_process
 from nerfaug.experiment.config import ExperimentConfig
-from nerfaug.experiment.protocol import engine_config, load_scene_data
+from nerfaug.experiment.protocol import load_scene_data
 from nerfaug.nerf.trainer import Trainer
 from nerfaug.selection import SelectionConfig
 from nerfaug.selection.estimators import fisher_background, fisher_train_diagonal
@@ -90,7 +90,7 @@ def timed(fn, *args):
 def trained(data, config: ExperimentConfig, steps: int, checkpoint: Path) -> tuple[Trainer, float]:
     """The protocol's trainer after `steps` steps (saved to `checkpoint`), and the seconds of one
     training step, timed over the last half of the steps in this process."""
-    engine = engine_config(config, "lego")
+    engine = config.engine_config("lego")
     trainer = Trainer(data.initial, engine, seed=config.seed, device="cpu", progress=False)
     trainer.train(steps // 2)
     seconds, _ = timed(trainer.train, steps)

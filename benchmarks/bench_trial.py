@@ -112,7 +112,7 @@ def trial(args) -> dict:
     from nerfaug.device import configure_process
     from nerfaug.evaluation import evaluate_views
     from nerfaug.experiment.config import ExperimentConfig
-    from nerfaug.experiment.protocol import cached_lpips, engine_config, load_scene_data
+    from nerfaug.experiment.protocol import cached_lpips, load_scene_data
     from nerfaug.maps import plot_hemisphere_map
     from nerfaug.nerf.trainer import Trainer
     from nerfaug.selection import select_views
@@ -133,7 +133,7 @@ def trial(args) -> dict:
         timing["load_cached"] = time.perf_counter() - start
         assert torch.equal(cached.pool.images, data.pool.images) and torch.equal(cached.test.images, data.test.images)
     cache.cleanup()
-    engine = engine_config(config, "lego").__class__.preset(config.engine, **parse_overrides(args.override))
+    engine = config.engine_config("lego").__class__.preset(config.engine, **parse_overrides(args.override))
     start = time.perf_counter()
     trainer = Trainer(data.initial, engine, seed=args.seed, device="cpu", progress=False)
     timing["setup"] = time.perf_counter() - start

@@ -19,6 +19,9 @@ import os
 import re
 import sys
 import warnings
+from collections.abc import Sequence
+from contextvars import ContextVar
+from dataclasses import fields
 from pathlib import Path
 from typing import Annotated, Literal, get_args
 
@@ -32,6 +35,32 @@ from nerfaug.selection.methods import SelectionConfig
 Positional = tyro.conf.Positional
 # The defaults `--selection.*` options start from (read-only use: never mutated).
 DEFAULT_SELECTION = SelectionConfig()
+COMMAND_LINE: ContextVar[tuple[str, ...] | None] = ContextVar("command_line", default=None)
+"""The arguments `main` is parsing (None outside it), for `given_fields`."""
+
+
+def given_fields(options, prefix: str, argv: Sequence[str] | None) -> dict:
+    """The fields of the dataclass `options` that `argv` gives as `--PREFIX.FIELD` options, with
+    their values in `options`: what to apply over a preset's settings. A field given applies even
+    at its default value; one not given leaves the preset's. Without a command line (`argv`
+    None: the command was called from Python), the fields that differ from the defaults.
+
+    Example:
+        >>> argv = ["run", "--selection.temperature", "1.0", "--selection.entropy_resolution=20"]
+        >>> given_fields(SelectionConfig(entropy_resolution=20), "selection", argv)
+        {'entropy_resolution': 20, 'temperature': 1.0}
+    """
+    names = [f.name for f in fields(options)]
+    if argv is None:
+        defaults = type(options)()
+        return {name: getattr(options, name) for name in names if getattr(options, name) != getattr(defaults, name)}
+    given = set()
+    for word in argv:
+        option, _, _ = word.partition("=")
+        if option.startswith(f"--{prefix}."):  # tyro takes FIELD with - or _ between its words
+            name = option.removeprefix(f"--{prefix}.").replace("-", "_")
+            given.add(name.removeprefix("no_") if name not in names else name)  # --PREFIX.no-FLAG
+    return {name: getattr(options, name) for name in names if name in given}
 
 
 def preset_default(name: str) -> str:
@@ -170,7 +199,7 @@ def run(
         device: where runs train, select and evaluate: auto (cuda when this machine has a GPU,
             else cpu), cpu or cuda. Part of the results' fingerprint (the numbers differ).
         selection: options of the selection methods (every one is part of the results'
-            fingerprint); those set here replace the preset's, and a method's own settings (e.g.
+            fingerprint); those given here replace the preset's, and a method's own settings (e.g.
             ours-authors') apply over them.
     """
     from dataclasses import replace
@@ -196,7 +225,7 @@ def run(
         changes["device"] = resolve_device(device).type
     except ValueError as error:
         raise SystemExit(f"--device: {error}") from None
-    changes["selection"] = replace(config.selection, **selection.changes())
+    changes["selection"] = replace(config.selection, **given_fields(selection, "selection", COMMAND_LINE.get()))
     config = config.replace(**changes)
     if workers is None:
         # One run per core on a CPU; on a GPU one run at a time (each holds its own CUDA context).
@@ -329,9 +358,16 @@ def _dispatch(argv: list[str]) -> None:
     if not argv or argv[0] in ("-h", "--help"):
         print(__doc__.strip())
         print()
-    tyro.extras.subcommand_cli_from_dict(
-        commands, args=argv, prog="nerfaug", description="Choose which views to add when a NeRF has too little data."
-    )
+    parsing = COMMAND_LINE.set(tuple(argv))
+    try:
+        tyro.extras.subcommand_cli_from_dict(
+            commands,
+            args=argv,
+            prog="nerfaug",
+            description="Choose which views to add when a NeRF has too little data.",
+        )
+    finally:
+        COMMAND_LINE.reset(parsing)
 
 
 if __name__ == "__main__":

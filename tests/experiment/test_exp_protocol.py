@@ -7,15 +7,15 @@ import torch
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views
 from nerfaug.experiment.config import ExperimentConfig, preset
-from nerfaug.experiment.protocol import engine_config, initial_view_indices
+from nerfaug.experiment.protocol import initial_view_indices
 from nerfaug.hemisphere import angles_from_pose, in_azimuth_window, sample_uniform_poses
 
 
 def test_paper_field_learning_rate_for_chair_and_materials():
     config = ExperimentConfig(engine="cpu")
-    assert engine_config(config, "chair").field_lr == 0.002
-    assert engine_config(config, "/data/nerf_synthetic/materials").field_lr == 0.002
-    assert engine_config(config, "lego").field_lr != 0.002
+    assert config.engine_config("chair").field_lr == 0.002
+    assert config.engine_config("/data/nerf_synthetic/materials").field_lr == 0.002
+    assert config.engine_config("lego").field_lr != 0.002
 
 
 def test_initial_views_of_a_user_dataset_lie_on_one_half():
@@ -33,6 +33,17 @@ def test_presets_are_consistent():
         config = preset(name)
         assert 0 < config.add_at_step < config.steps
         assert config.n_new <= config.pool
+
+
+def test_presets_are_settings_over_the_defaults_and_an_unknown_name_lists_the_known_ones():
+    from nerfaug.experiment.config import PRESET_SETTINGS, STUDY_PRESET_SETTINGS
+
+    assert preset("tiny") == dataclasses.replace(ExperimentConfig(), **PRESET_SETTINGS["tiny"])
+    assert preset("tiny") is not preset("tiny")  # a fresh config each time (it is mutable)
+    study_tiny = preset("tiny", STUDY_PRESET_SETTINGS)
+    assert study_tiny == preset("tiny").replace(view_uncertainty=False)
+    with pytest.raises(ValueError, match="unknown preset 'fast'; choose one of: quick, paper, ablation, tiny"):
+        preset("fast")
 
 
 def test_quick_preset_compares_the_main_methods_with_enough_trials_for_significance():

@@ -5,7 +5,8 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass, field
-from typing import Literal
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
 from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
@@ -19,7 +20,8 @@ from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
     SelectionConfig,
 )
 
-PresetName = Literal["quick", "paper", "ablation", "tiny"]
+if TYPE_CHECKING:
+    from nerfaug.nerf.config import NerfConfig
 
 # The paper lowers the field's learning rate for these scenes "for model stability when adding data".
 LOW_FIELD_LR_SCENES = {"chair": 0.002, "materials": 0.002}
@@ -57,7 +59,8 @@ class ExperimentConfig:
     render_samples: int = 16
     """Cycles samples per pixel for built-in scenes."""
     field_lr: dict[str, float] = field(default_factory=lambda: dict(LOW_FIELD_LR_SCENES))
-    """Per-scene field learning rate overrides (the paper: 0.002 for chair and materials)."""
+    """Field learning rate by scene name, over the engine preset's `field_lr` (the paper: 0.002 for
+    chair and materials); `engine_config` applies it."""
     threads_per_run: int = 1
     """torch threads in each run; fixed so local and Ray runs compute identically. One thread per
     run, with one run per core, measured faster and far steadier than two threads per run on a
@@ -116,9 +119,63 @@ class ExperimentConfig:
     def replace(self, **changes) -> ExperimentConfig:
         return dataclasses.replace(self, **changes)
 
+    def engine_config(self, scene: str) -> NerfConfig:
+        """The `NerfConfig` a run on `scene` (a built-in name or a dataset folder) trains with: the
+        engine preset's, with the field learning rate `field_lr` gives the scene's name, if any.
+        The one place a run's field learning rate is decided."""
+        from nerfaug.nerf.config import NerfConfig
 
-def preset(name: PresetName) -> ExperimentConfig:
-    """The named protocol.
+        name = Path(scene).name
+        return NerfConfig.preset(self.engine, **({"field_lr": self.field_lr[name]} if name in self.field_lr else {}))
+
+
+PRESET_SETTINGS: dict[str, dict[str, object]] = {
+    "quick": {"trials": 5, "steps": 800, "pool": 100, "n_test": 20},
+    "paper": {
+        "scenes": ("lego", "chair", "materials"),
+        "trials": 10,
+        "engine": "paper",
+        "resolution": 800,
+        "steps": 10_000,
+        "pool": 500,
+        "n_test": 200,
+        "render_samples": 64,
+    },
+    "ablation": {
+        "methods": tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
+        "trials": 5,
+    },
+    "tiny": {
+        "methods": ("ours", "uniform"),
+        "trials": 2,
+        "engine": "test",
+        "resolution": 24,
+        "steps": 60,
+        "add_at_step": 20,
+        "n_new": 2,
+        "n_initial": 3,
+        "pool": 12,
+        "n_test": 3,
+        "render_samples": 4,
+        "save_renders": 1,
+    },
+}
+"""Each protocol preset as the fields it sets over `ExperimentConfig`'s defaults (`preset`)."""
+
+PresetName = Literal[tuple(PRESET_SETTINGS)]  # type: ignore[valid-type]
+"""The protocol presets' names as a type, for a CLI (tyro) to offer and check."""
+
+STUDY_PRESET_SETTINGS: dict[str, dict[str, object]] = {
+    # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page does
+    # not show them, and they cost seconds per run.
+    "study": {"view_uncertainty": False},
+    "tiny": {**PRESET_SETTINGS["tiny"], "view_uncertainty": False},
+}
+"""The protocols a study can run every engine under, in the shape of `PRESET_SETTINGS`."""
+
+
+def preset(name: str, presets: dict[str, dict[str, object]] = PRESET_SETTINGS) -> ExperimentConfig:
+    """The protocol preset `name`: its settings in `presets` over `ExperimentConfig`'s defaults.
 
     quick: the default (`make demo`); the built-in lego at 100x100 with the CPU engine, the four
         methods of the main comparison, five trials each (the fewest with which Mann-Whitney with
@@ -129,36 +186,10 @@ def preset(name: PresetName) -> ExperimentConfig:
         paper's learning rates and its main comparison.
     ablation: the paper's Tables I and II (terms; NBV vs sampling) on lego.
     tiny: seconds-long smoke run for tests.
+
+    Raises:
+        ValueError: `name` is not in `presets` (the message lists those that are).
     """
-    if name == "quick":
-        return ExperimentConfig(trials=5, steps=800, pool=100, n_test=20)
-    if name == "paper":
-        return ExperimentConfig(
-            scenes=("lego", "chair", "materials"),
-            trials=10,
-            engine="paper",
-            resolution=800,
-            steps=10_000,
-            pool=500,
-            n_test=200,
-            render_samples=64,
-        )
-    if name == "ablation":
-        methods = tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS))
-        return ExperimentConfig(methods=methods, trials=5)
-    if name == "tiny":
-        return ExperimentConfig(
-            methods=("ours", "uniform"),
-            trials=2,
-            engine="test",
-            resolution=24,
-            steps=60,
-            add_at_step=20,
-            n_new=2,
-            n_initial=3,
-            pool=12,
-            n_test=3,
-            render_samples=4,
-            save_renders=1,
-        )
-    raise ValueError(f"unknown preset {name!r}; choose quick, paper, ablation or tiny")
+    if name not in presets:
+        raise ValueError(f"unknown preset {name!r}; choose one of: {', '.join(presets)}")
+    return ExperimentConfig(**presets[name])

@@ -186,14 +186,6 @@ def load_scene_data(folder: Path, config: ExperimentConfig, cache_dir: Path | No
     return SceneData(initial, pool, test)
 
 
-def engine_config(config: ExperimentConfig, scene: str):
-    from nerfaug.nerf.config import NerfConfig
-
-    name = Path(scene).name
-    overrides = {"field_lr": config.field_lr[name]} if name in config.field_lr else {}
-    return NerfConfig.preset(config.engine, **overrides)
-
-
 @functools.lru_cache(maxsize=1)
 def cached_lpips():
     """LPIPS loaded once per process (None, with a reason in each result, when its weights are absent)."""
@@ -265,7 +257,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
 
     start = time.perf_counter()
     data = load_scene_data(dataset_dir, config, cache_dir=dataset_cache_dir(root))
-    engine = engine_config(config, key.scene)
+    engine = config.engine_config(key.scene)
     trainer = Trainer(data.initial, engine, seed=seed, device=config.device, progress=progress, compile=config.compile)
     timing["setup"] = time.perf_counter() - start
 

@@ -28,7 +28,7 @@ from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.experiment.config import ExperimentConfig, SelectionConfig, preset
+from nerfaug.experiment.config import STUDY_PRESET_SETTINGS, ExperimentConfig, SelectionConfig, preset
 
 STUDY_FILE = "study.json"
 TABLE_FILE = "study-table.json"
@@ -41,7 +41,7 @@ SMOKE_ENGINES = ("test",)
 GPU_ENGINES = ("paper",)
 """Engine presets left out of a default study on a CPU: the paper's nerfacto-sized engine is about
 100x slower there than the cpu preset (BENCHMARKS.md), so one study would take weeks."""
-StudyPreset = Literal["study", "tiny"]
+StudyPreset = Literal[tuple(STUDY_PRESET_SETTINGS)]  # type: ignore[valid-type]
 
 
 def study_methods() -> tuple[str, ...]:
@@ -92,11 +92,7 @@ def base_config(name: StudyPreset) -> ExperimentConfig:
     protocol at 100x100: 6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50 test
     views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are rendered
     first, which takes minutes)."""
-    if name == "study":
-        return ExperimentConfig(view_uncertainty=False)
-    if name == "tiny":
-        return preset("tiny").replace(view_uncertainty=False)
-    raise ValueError(f"unknown study preset {name!r}; choose study or tiny")
+    return preset(name, STUDY_PRESET_SETTINGS)
 
 
 def machine() -> dict:

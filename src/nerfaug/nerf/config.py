@@ -187,71 +187,73 @@ class NerfConfig:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
-PRESETS: dict[str, NerfConfig] = {
-    "paper": NerfConfig(
-        encoding="hash",
-        sampler="proposal",
-        background_mode="last_sample",
-        batch_size=4096,
+PRESET_SETTINGS: dict[str, dict[str, object]] = {
+    "paper": {
+        "encoding": "hash",
+        "sampler": "proposal",
+        "background_mode": "last_sample",
+        "batch_size": 4096,
         # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
-        proposal_update_every=5,
-        proposal_warmup_steps=5000,
-    ),
-    "cpu": NerfConfig(
-        encoding="kplanes",
-        plane_resolutions=(64, 128),
-        plane_features=8,
-        color_layers=1,
-        average_init_density=1.0,
-        sampler="occupancy",
-        num_samples=64,
-        occupancy_warmup_steps=64,
-        batch_size=1024,
-        lr_final=1e-3,
-        lr_decay_steps=5000,
-    ),
-    "nerfacto-cpu": NerfConfig(
-        encoding="hash",
-        hash_levels=6,
-        hash_log2_table_size=14,
-        hash_max_resolution=256,
-        hidden_dim=32,
-        color_hidden_dim=32,
-        density_activation="trunc_exp",
-        average_init_density=0.01,
-        sampler="proposal",
-        num_samples=16,
-        proposal_samples=(32, 16),
-        proposal_hash_levels=3,
-        proposal_max_resolutions=(64, 128),
-        proposal_log2_table_size=12,
-        batch_size=512,
-        background_mode="fixed",
-    ),
-    "test": NerfConfig(
-        encoding="kplanes",
-        plane_resolutions=(16, 32),
-        plane_features=4,
-        hidden_dim=16,
-        geo_feat_dim=7,
-        color_hidden_dim=16,
-        color_layers=1,
-        sampler="occupancy",
-        num_samples=16,
-        occupancy_resolution=16,
-        occupancy_update_every=4,
-        occupancy_warmup_steps=8,
-        batch_size=128,
-        render_chunk=4096,
-    ),
+        "proposal_update_every": 5,
+        "proposal_warmup_steps": 5000,
+    },
+    "cpu": {
+        "encoding": "kplanes",
+        "plane_resolutions": (64, 128),
+        "plane_features": 8,
+        "color_layers": 1,
+        "average_init_density": 1.0,
+        "sampler": "occupancy",
+        "num_samples": 64,
+        "occupancy_warmup_steps": 64,
+        "batch_size": 1024,
+        "lr_final": 1e-3,
+        "lr_decay_steps": 5000,
+    },
+    "nerfacto-cpu": {
+        "encoding": "hash",
+        "hash_levels": 6,
+        "hash_log2_table_size": 14,
+        "hash_max_resolution": 256,
+        "hidden_dim": 32,
+        "color_hidden_dim": 32,
+        "density_activation": "trunc_exp",
+        "average_init_density": 0.01,
+        "sampler": "proposal",
+        "num_samples": 16,
+        "proposal_samples": (32, 16),
+        "proposal_hash_levels": 3,
+        "proposal_max_resolutions": (64, 128),
+        "proposal_log2_table_size": 12,
+        "batch_size": 512,
+        "background_mode": "fixed",
+    },
+    "test": {
+        "encoding": "kplanes",
+        "plane_resolutions": (16, 32),
+        "plane_features": 4,
+        "hidden_dim": 16,
+        "geo_feat_dim": 7,
+        "color_hidden_dim": 16,
+        "color_layers": 1,
+        "sampler": "occupancy",
+        "num_samples": 16,
+        "occupancy_resolution": 16,
+        "occupancy_update_every": 4,
+        "occupancy_warmup_steps": 8,
+        "batch_size": 128,
+        "render_chunk": 4096,
+    },
 }
+"""Each engine preset as the fields it sets over `NerfConfig`'s defaults."""
 
-# Named variants: a preset with one setting changed, each pinned by digest like the presets
-# (tests/nerf/test_nerf_presets.py). The study compares a variant with its base cell by cell.
-VARIANTS: dict[str, tuple[str, dict]] = {
-    "nerfacto-cpu-last-sample": ("nerfacto-cpu", {"background_mode": "last_sample"}),
-}
-PRESETS.update({name: replace(PRESETS[base], **changes) for name, (base, changes) in VARIANTS.items()})
+# A named variant is a preset with some settings changed: its base's settings, then its own. Each
+# is pinned by digest like the presets (tests/nerf/test_nerf_presets.py); the study compares a
+# variant with its base cell by cell.
+PRESET_SETTINGS["nerfacto-cpu-last-sample"] = {**PRESET_SETTINGS["nerfacto-cpu"], "background_mode": "last_sample"}
+
+PRESETS: dict[str, NerfConfig] = {name: replace(NerfConfig(), **settings) for name, settings in PRESET_SETTINGS.items()}
+"""The engine presets by name, each `PRESET_SETTINGS` entry applied over the defaults."""
 VARIANT_SEPARATOR = "+"
 
 

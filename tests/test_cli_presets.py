@@ -1,0 +1,95 @@
+"""`nerfaug run`'s options over its preset: an option given on the command line applies even when
+its value is the default, and one not given keeps the preset's value."""
+
+import pytest
+
+from nerfaug.cli import given_fields, main
+from nerfaug.experiment import config as experiment_config
+from nerfaug.experiment.sweep import SweepOutcome
+from nerfaug.selection.methods import SelectionConfig
+
+DEFAULT = SelectionConfig()
+
+
+@pytest.fixture
+def planned(monkeypatch, tmp_path):
+    """Run `nerfaug run --preset tiny ARGS` without running anything: the configs it would sweep.
+    The tiny preset is given selection settings of its own (none of the real presets has any)."""
+    import nerfaug.experiment.sweep as sweep
+
+    configs = []
+
+    def run_sweep(config, out, **_):
+        configs.append(config)
+        return SweepOutcome([], {})
+
+    monkeypatch.setattr(sweep, "run_sweep", run_sweep)
+    tiny = experiment_config.PRESET_SETTINGS["tiny"]
+    preset_selection = SelectionConfig(temperature=0.5, entropy_resolution=30, sharpness=0.2)
+    monkeypatch.setitem(experiment_config.PRESET_SETTINGS, "tiny", {**tiny, "selection": preset_selection})
+
+    def plan(*args: str):
+        main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", *args])
+        return configs[-1]
+
+    return plan
+
+
+def test_options_not_given_keep_the_presets_values(planned):
+    config = planned()
+    assert (config.selection.temperature, config.selection.entropy_resolution, config.selection.sharpness) == (
+        0.5,
+        30,
+        0.2,
+    )
+    assert config.trials == 2 and config.steps == 60  # the tiny preset's
+
+
+def test_a_selection_option_given_at_its_default_replaces_the_presets_value(planned):
+    assert DEFAULT.temperature == 1.0 and DEFAULT.entropy_resolution == 40 and DEFAULT.sharpness is None
+    config = planned("--selection.temperature", "1.0", "--selection.entropy_resolution=40")
+    assert (config.selection.temperature, config.selection.entropy_resolution) == (1.0, 40)
+    assert config.selection.sharpness == 0.2  # not given: the preset's
+    assert planned("--selection.sharpness", "None").selection.sharpness is None
+
+
+def test_a_protocol_option_given_at_the_dataclass_default_replaces_the_presets_value(planned):
+    default = experiment_config.ExperimentConfig()
+    config = planned("--trials", str(default.trials), "--steps", str(default.steps), "--seed", "0")
+    assert (config.trials, config.steps, config.seed) == (default.trials, default.steps, 0)
+    assert config.n_test == 3  # not given: the preset's
+
+
+@pytest.mark.parametrize(
+    "argv, given",
+    [
+        (["run", "--selection.temperature", "1.0"], {"temperature"}),
+        (["run", "--selection.min-polar=0.4", "--selection.scale_m", "2"], {"min_polar", "scale_m"}),
+        (["run", "--out", "selection.temperature", "--seed", "3"], set()),
+        (["propose", "RUN", "--selection.sharpness", "0.5", "--selection.sharpness", "0.6"], {"sharpness"}),
+    ],
+)
+def test_given_fields_are_the_options_on_the_command_line_whatever_their_spelling(argv, given):
+    options = SelectionConfig(min_polar=0.4, scale_m=2.0, sharpness=0.6)
+    found = given_fields(options, "selection", argv)
+    assert set(found) == given
+    assert all(found[name] == getattr(options, name) for name in found)
+
+
+def test_without_a_command_line_the_fields_that_differ_from_the_defaults_are_given():
+    options = SelectionConfig(temperature=0.5, entropy_resolution=DEFAULT.entropy_resolution)
+    assert given_fields(options, "selection", None) == {"temperature": 0.5}
+
+
+def test_a_flag_given_as_its_negation_is_given():
+    from dataclasses import dataclass
+
+    @dataclass(frozen=True)
+    class Options:
+        random_background: bool = False
+        no_cache: bool = False
+
+    found = given_fields(
+        Options(no_cache=True), "engine", ["run", "--engine.no-random-background", "--engine.no-cache"]
+    )
+    assert found == {"random_background": False, "no_cache": True}
