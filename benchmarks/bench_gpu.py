@@ -477,10 +477,11 @@ def protocol(args) -> dict:
         print(f"  stopped within --budget-s {args.budget_s:.0f}: run the same command again to go on")
     summary["report"] = None
     if args.report and results:
+        from nerfaug.cli import paper_tables
         from nerfaug.report import write_report
 
         try:  # the figures above are the benchmark; a report failure must not hide them
-            summary["report"] = [str(p) for p in write_report(args.out)]
+            summary["report"] = [str(p) for p in write_report(args.out, paper_tables())]
             print("  report: " + ", ".join(summary["report"]))
         except Exception as error:
             summary["report_error"] = f"{type(error).__name__}: {error}"

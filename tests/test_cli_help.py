@@ -84,6 +84,7 @@ def test_reflow_joins_paragraphs_and_argument_descriptions_but_keeps_headings():
 def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_defaults(monkeypatch, tmp_path):
     import nerfaug.experiment.study as study_module
     import nerfaug.report.study_page as study_page
+    import nerfaug.study_cli as study_cli
 
     planned = []
 
@@ -95,7 +96,7 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
 
     monkeypatch.setattr(study_module, "make_plan", make_plan)
     monkeypatch.setattr(study_module, "run_study", lambda plan, **kw: {})
-    monkeypatch.setattr(study_module, "record_table", lambda out, path, previous: {"runs": []})
+    monkeypatch.setattr(study_cli, "record_table", lambda out, path, previous: {"runs": []})
     monkeypatch.setattr(study_page, "write_study", lambda out, recorded: [])
     base = ["study", "--out", str(tmp_path / "s"), "--preset", "tiny", "--workers", "1"]
     main(base)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from nerfaug.cli import paper_tables
 from nerfaug.experiment.config import preset
 from nerfaug.experiment.runfolder import (
     FILES,
@@ -161,7 +162,7 @@ def first_table_after(markdown: str, heading: str) -> dict[str, list[str]]:
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     root = make_results(tmp_path_factory.mktemp("results"))
-    paths = write_report(root)
+    paths = write_report(root, paper_tables())
     return root, paths, (root / "report.md").read_text(), (root / "report.html").read_text()
 
 
@@ -202,12 +203,12 @@ def test_a_report_of_runs_without_view_arrays_has_no_such_section(tmp_path):
     atomic_write_json(tmp_path / "sweep.json", record)
     for method in ("ours", "uniform"):
         write_run(tmp_path, record, "lego", method, 0, 20.0, generator=torch.Generator().manual_seed(2))
-    paths = write_report(tmp_path)
+    paths = write_report(tmp_path, paper_tables())
     assert "Uncertainty of a test view" not in (tmp_path / "report.md").read_text()
     assert not any("view_uncertainty" in p.name for p in paths)
     # One run of two with the arrays: the other is counted as left out.
     write_view_uncertainty(RunKey("lego", "ours", 0).folder(tmp_path), view_arrays("ours"))
-    write_report(tmp_path)
+    write_report(tmp_path, paper_tables())
     section = (tmp_path / "report.md").read_text().split("## Uncertainty of a test view", 1)[1]
     assert "1 run(s) without the arrays" in section and first_table_after(section, "### lego")["ours"][1] == "1 of 1"
 
@@ -284,7 +285,7 @@ def test_table_ii_appears_only_with_its_methods(tmp_path):
     for method, values in (("ours", [20.0, 22.0]), ("ours-nbv", [13.0, 15.0])):
         for trial, psnr in enumerate(values):
             write_run(tmp_path, record, "lego", method, trial, psnr, generator=generator)
-    write_report(tmp_path)
+    write_report(tmp_path, paper_tables())
     markdown = (tmp_path / "report.md").read_text()
     assert "NBV vs sampling (Table II)" in markdown and "Table I)" not in markdown
     assert "ours vs ours-nbv" in markdown and "+7.00 dB (95% CI" in markdown  # 21 vs 14
@@ -292,7 +293,7 @@ def test_table_ii_appears_only_with_its_methods(tmp_path):
 
 def test_missing_planned_runs_and_no_valid_runs(tmp_path):
     atomic_write_json(tmp_path / "sweep.json", sweep_record(config(), ["nerfaug"]))
-    paths = write_report(tmp_path)
+    paths = write_report(tmp_path, paper_tables())
     markdown = (tmp_path / "report.md").read_text()
     assert "never run: 18" in markdown and "lego/ours/trial 0" in markdown
     assert paths == [tmp_path / "report.md", tmp_path / "report.html"]
@@ -300,7 +301,7 @@ def test_missing_planned_runs_and_no_valid_runs(tmp_path):
 
 def test_not_a_results_folder(tmp_path):
     with pytest.raises(ReportError, match="sweep.json"):
-        write_report(tmp_path)
+        write_report(tmp_path, paper_tables())
 
 
 @pytest.mark.parametrize(

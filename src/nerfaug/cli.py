@@ -251,13 +251,23 @@ def run(
     if report:
         from nerfaug.report import write_report
 
-        paths = write_report(out)
+        paths = write_report(out, paper_tables())
         print("report: " + ", ".join(str(p) for p in paths))
     if outcome.failed:
         print(f"{len(outcome.failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
         for key, why in outcome.failed.items():
             print(f"  {key}: {why}", file=sys.stderr)
         raise SystemExit(1)
+
+
+def paper_tables():
+    """The rows of the paper's ablation tables as the method registry defines them, and its
+    protocol's image side (the experiments' paper preset): what a report compares with the paper,
+    as `nerfaug.report.PaperTables`."""
+    from nerfaug.report import PaperTables
+    from nerfaug.selection import TABLE_I_ROWS, TABLE_II_ROWS
+
+    return PaperTables(TABLE_I_ROWS, TABLE_II_ROWS, make_preset("paper").resolution)
 
 
 def report(results: Positional[Path]) -> None:
@@ -269,7 +279,7 @@ def report(results: Positional[Path]) -> None:
     from nerfaug.report import ReportError, write_report
 
     try:
-        paths = write_report(results)
+        paths = write_report(results, paper_tables())
     except ReportError as error:
         raise SystemExit(str(error)) from None
     for path in paths:
@@ -346,7 +356,7 @@ def scene() -> None:
 
 def _dispatch(argv: list[str]) -> None:
     from nerfaug import session_cli
-    from nerfaug.experiment.study import study
+    from nerfaug.study_cli import study
 
     commands = {"scene": scene, "run": run, "report": report, "methods": methods, "study": study}
     commands.update(session_cli.COMMANDS)

@@ -2,11 +2,14 @@
 so the CLI prints it as one line without a traceback.
 
 `exit_code` is what the `nerfaug` command exits with: 2 for bad input (a value, a file, a folder
-the user gave), 1 for a failure of the work itself. `DatasetError` (`nerfaug.data`) is a
-`ValueError` and also means bad input.
+the user gave), 1 for a failure of the work itself. `DatasetError` is a `ValueError` and also
+means bad input; it lives here, beside the others, so that `nerfaug.jsonio` (a leaf every room
+uses) can raise it, and `nerfaug.data` re-exports it.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 
 class NerfaugError(Exception):
@@ -23,3 +26,23 @@ class Interrupted(NerfaugError):
     """Ctrl-C, with one line saying what was kept."""
 
     exit_code = 130
+
+
+class DatasetError(ValueError):
+    """A dataset file is missing or malformed.
+
+    The message always says which file, which frame/field and what value was found, so a user
+    can fix the data without reading the code.
+    """
+
+    def __init__(self, path: str | Path, problem: str, field: str | None = None, value=None):
+        self.path, self.field, self.value, self.problem = Path(path), field, value, problem
+        where = f"{path}"
+        if field is not None:
+            where += f", field '{field}'"
+        message = f"{where}: {problem}"
+        if value is not None:
+            text = repr(value)
+            message += f" (got {text[:200] + '...' if len(text) > 200 else text})"
+        # One line whatever the file held: a newline in a value or path is shown escaped.
+        super().__init__(message.replace("\r", "\\r").replace("\n", "\\n"))

@@ -12,7 +12,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from nerfaug.data.errors import DatasetError
+from nerfaug.errors import DatasetError
 
 # The process's umask, read once (os.umask can only be read by setting it); written files get
 # the permissions a plain open() would give them.

@@ -45,6 +45,7 @@ def tiny_config(scene: Path, **changes):
 
 
 def test_tiny_sweep_writes_every_file_and_a_report(tiny_scene, tmp_path):
+    from nerfaug.cli import paper_tables
     from nerfaug.report import write_report
 
     config = tiny_config(tiny_scene)
@@ -60,7 +61,7 @@ def test_tiny_sweep_writes_every_file_and_a_report(tiny_scene, tmp_path):
         assert len(selection["chosen_poses"]) == config.n_new
         assert len(selection["scores"]) == config.pool
         assert len(set(selection["indices"])) == config.n_new  # never the same view twice
-    paths = write_report(tmp_path)
+    paths = write_report(tmp_path, paper_tables())
     assert any(p.name == "report.html" for p in paths) and (tmp_path / "report.md").is_file()
     # A second identical sweep computes nothing.
     again = run_sweep(config, tmp_path, progress=False)

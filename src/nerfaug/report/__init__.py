@@ -26,6 +26,7 @@ from nerfaug.report.collect import (
 from nerfaug.report.document import Block, to_html, to_markdown
 from nerfaug.report.figures import Figures, history_series, make_figures
 from nerfaug.report.sections import (
+    PaperTables,
     figure_sections,
     header_section,
     problems_section,
@@ -38,22 +39,24 @@ from nerfaug.report.sections import (
 from nerfaug.report.view_uncertainty import view_uncertainty_section
 
 
-def build_report(results: Results, figures: Figures) -> list[Block]:
+def build_report(results: Results, figures: Figures, paper: PaperTables) -> list[Block]:
     blocks = header_section(results) + summary_section(results)
     for scene in results.scenes:
         blocks += scene_section(results, scene, figures.boxplots.get(scene))
-    blocks += table_i_section(results) + table_ii_section(results)
+    blocks += table_i_section(results, paper) + table_ii_section(results, paper)
     blocks += figure_sections(results, figures) + view_uncertainty_section(results, figures.view_uncertainty)
-    blocks += timing_section(results) + problems_section(results)
+    blocks += timing_section(results, paper) + problems_section(results)
     return blocks
 
 
-def write_report(results_dir: Path) -> list[Path]:
+def write_report(results_dir: Path, paper: PaperTables) -> list[Path]:
     """Write `report.md`, a self-contained `report.html` and the figures (`figures/*.png`) for a
     results folder written by `nerfaug run`.
 
     Args:
         results_dir: the folder holding sweep.json and runs/<scene>/<method>/trial_<k>/.
+        paper: the paper's ablation tables' rows and its protocol's image side
+            (`nerfaug.cli.paper_tables()` gives the method registry's).
 
     Returns:
         The paths written: report.md, report.html, then the figures.
@@ -63,7 +66,7 @@ def write_report(results_dir: Path) -> list[Path]:
     """
     results = collect_results(results_dir)
     figures = make_figures(results)
-    blocks = build_report(results, figures)
+    blocks = build_report(results, figures, paper)
     root = results.root
     markdown, page = root / "report.md", root / "report.html"
     atomic_write_bytes(markdown, to_markdown(blocks, root).encode())
@@ -73,6 +76,7 @@ def write_report(results_dir: Path) -> list[Path]:
 
 __all__ = [
     "NotAggregated",
+    "PaperTables",
     "ReportError",
     "Results",
     "Run",

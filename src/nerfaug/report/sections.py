@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import platform
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -28,7 +29,6 @@ from nerfaug.report.document import (
     seconds,
 )
 from nerfaug.report.figures import Figures
-from nerfaug.selection.methods import TABLE_I, TABLE_I_ROWS, TABLE_II, TABLE_II_ROWS
 from nerfaug.statistics import bootstrap_median_difference, compare, summarise, summary_table
 
 TIMING_FIELDS = (
@@ -41,11 +41,27 @@ TIMING_FIELDS = (
     "view_uncertainty",
     "total",
 )
-# The tables' rows come from the method registry's families (the one source of method families).
-TABLE_I_LABELS = {method: label for label, method in TABLE_I_ROWS}
-# The paper's run times (Sec. IV), cited in the run-time section; the resolution is its preset's.
+# The paper's run times (Sec. IV), cited in the run-time section at `PaperTables.resolution`.
 PAPER_MINUTES_PER_RUN = {"ours": 11, "others": 8}
 PAPER_GPU = "one RTX 6000 Ada"
+
+
+@dataclass(frozen=True)
+class PaperTables:
+    """What the report compares with the paper: the rows of its ablation tables and the image side
+    of its protocol. The caller gives them (the method registry's families and the experiments'
+    paper preset are their one source); the report only lays them out.
+
+    Attributes:
+        table_i: (row label, method) of Table I (the uncertainty terms), in the paper's order.
+        table_ii: (family, variant, method) of Table II (NBV vs sampling), in the paper's order,
+            each family's NBV variant first.
+        resolution: the image side in pixels the paper's run times were measured at.
+    """
+
+    table_i: tuple[tuple[str, str], ...]
+    table_ii: tuple[tuple[str, str, str], ...]
+    resolution: int
 
 
 def _lpips_notes(runs: list[Run]) -> list[str]:
@@ -297,15 +313,16 @@ def _present(results: Results, scene: str, methods) -> list[str]:
     return [m for m in methods if results.values(scene, m, "psnr")]
 
 
-def table_i_section(results: Results) -> list[Block]:
+def table_i_section(results: Results, paper: PaperTables) -> list[Block]:
+    row_labels = {method: label for label, method in paper.table_i}
     blocks: list[Block] = []
     for scene in results.scenes:
-        present = _present(results, scene, TABLE_I)
+        present = _present(results, scene, row_labels)
         if "ours" not in present or len(present) < 2:
             continue
-        labels = [([TABLE_I_LABELS[m]], m) for m in present]
+        labels = [([row_labels[m]], m) for m in present]
         table = _ablation_table(results, scene, labels, ["terms"], [list(range(len(present)))])
-        missing = [m for m in TABLE_I if m not in present]
+        missing = [m for m in row_labels if m not in present]
         if missing:
             table.notes.append(f"Not run: {', '.join(missing)}.")
         blocks += [Heading(f"{scene}", 3), table]
@@ -318,11 +335,11 @@ def table_i_section(results: Results) -> list[Block]:
     return [Heading("Ablation: uncertainty terms (Table I)"), intro] + blocks
 
 
-def _pair_comparisons(results: Results, scene: str) -> Table | None:
+def _pair_comparisons(results: Results, scene: str, table_ii: tuple[tuple[str, str, str], ...]) -> Table | None:
     """Sampling against NBV for each family present in both variants (Bonferroni over the pairs)."""
     pairs = []
-    for family in dict.fromkeys(f for f, _, _ in TABLE_II_ROWS):
-        nbv, sampling = [m for f, _, m in TABLE_II_ROWS if f == family]
+    for family in dict.fromkeys(f for f, _, _ in table_ii):
+        nbv, sampling = [m for f, _, m in table_ii if f == family]
         x, y = results.values(scene, sampling, "psnr"), results.values(scene, nbv, "psnr")
         if x and y:
             pairs.append((family, sampling, nbv, x, y))
@@ -352,22 +369,22 @@ def _pair_comparisons(results: Results, scene: str) -> Table | None:
     )
 
 
-def table_ii_section(results: Results) -> list[Block]:
+def table_ii_section(results: Results, paper: PaperTables) -> list[Block]:
     blocks: list[Block] = []
     for scene in results.scenes:
-        present = set(_present(results, scene, TABLE_II))
-        rows = [row for row in TABLE_II_ROWS if row[2] in present]
+        present = set(_present(results, scene, [m for _, _, m in paper.table_ii]))
+        rows = [row for row in paper.table_ii if row[2] in present]
         families = {f for f, _, _ in rows}
         if not any(sum(f == g for g, _, _ in rows) == 2 for f in families):
             continue  # the table is about NBV vs sampling: it needs at least one complete pair
         groups = [[i for i, row in enumerate(rows) if row[0] == f] for f in dict.fromkeys(f for f, _, _ in rows)]
         table = _ablation_table(results, scene, [([f, v], m) for f, v, m in rows], ["family", "variant"], groups)
         table.notes.insert(0, "Best of each family's two variants in bold, as in the paper.")
-        missing = [m for _, _, m in TABLE_II_ROWS if m not in present]
+        missing = [m for _, _, m in paper.table_ii if m not in present]
         if missing:
             table.notes.append(f"Not run: {', '.join(missing)}.")
         blocks += [Heading(f"{scene}", 3), table]
-        pairs = _pair_comparisons(results, scene)
+        pairs = _pair_comparisons(results, scene, paper.table_ii)
         if pairs is not None:
             blocks.append(pairs)
     if not blocks:
@@ -378,7 +395,7 @@ def table_ii_section(results: Results) -> list[Block]:
     return [Heading("Ablation: NBV vs sampling (Table II)"), intro] + blocks
 
 
-def timing_section(results: Results) -> list[Block]:
+def timing_section(results: Results, paper: PaperTables) -> list[Block]:
     rows = []
     for method in results.methods:
         runs = results.runs_of(method=method)
@@ -404,16 +421,13 @@ def timing_section(results: Results) -> list[Block]:
         ),
         Paragraph(
             f"Sweep total: {seconds(total)} of run time summed over {len(results.runs)} aggregated runs "
-            f"(wall-clock time is shorter when runs ran in parallel). {paper_run_times()}"
+            f"(wall-clock time is shorter when runs ran in parallel). {paper_run_times(paper.resolution)}"
         ),
     ]
 
 
-def paper_run_times() -> str:
-    """The sentence citing the paper's run times (PAPER_MINUTES_PER_RUN, at its preset's resolution)."""
-    from nerfaug.experiment.config import preset
-
-    side = preset("paper").resolution
+def paper_run_times(side: int) -> str:
+    """The sentence citing the paper's run times (PAPER_MINUTES_PER_RUN, at `side` x `side` pixels)."""
     return (
         f"The paper reports about {PAPER_MINUTES_PER_RUN['ours']} min per run for ours and "
         f"{PAPER_MINUTES_PER_RUN['others']} min for the others at {side}x{side} on {PAPER_GPU}."
@@ -475,6 +489,7 @@ def figure_sections(results: Results, figures: Figures) -> list[Block]:
 
 
 __all__ = [
+    "PaperTables",
     "figure_sections",
     "header_section",
     "problems_section",

@@ -149,22 +149,21 @@ def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dic
     return rows, initial
 
 
-def method_records(names) -> dict[str, dict]:
-    """name -> its label, description and definition, for every registered name in `names`."""
-    from nerfaug.selection import METHODS
-
-    return {
-        name: {"label": spec.label, "description": spec.description, "definition": spec.definition()}
-        for name in names
-        if (spec := METHODS.get(name)) is not None
-    }
-
-
-def make_table(plan: dict, rows: list[RunRow], initial: dict[str, list], previous: dict | None = None) -> dict:
+def make_table(
+    plan: dict,
+    rows: list[RunRow],
+    initial: dict[str, list],
+    previous: dict | None = None,
+    method_records: dict[str, dict] | None = None,
+) -> dict:
     """The table of `rows` over `previous`, with `plan`, the methods' records and the scenes'
     initial views. A row replaces the previous row of its run; where `rows` hold an (engine,
     method) with another fingerprint than the previous rows of it (its settings or its engine
-    changed), those previous rows are dropped: a cell never mixes runs of two configurations."""
+    changed), those previous rows are dropped: a cell never mixes runs of two configurations.
+
+    `method_records` maps method names to their {"label", "description", "definition"} (the
+    method registry's, given by the caller); the table records those of the plan's and the rows'
+    methods, over the previous table's records."""
     current = {(row.engine, row.method): row.fingerprint for row in rows}
     kept = [
         row
@@ -181,7 +180,10 @@ def make_table(plan: dict, rows: list[RunRow], initial: dict[str, list], previou
         "format": TABLE_FORMAT,
         "version": TABLE_VERSION,
         "plan": plan,
-        "methods": {**(previous or {}).get("methods", {}), **method_records(methods)},
+        "methods": {
+            **(previous or {}).get("methods", {}),
+            **{name: record for name in methods if (record := (method_records or {}).get(name)) is not None},
+        },
         "scenes": dict(sorted(scenes.items())),
         "runs": [asdict(row) for row in ordered],
     }
