@@ -3,7 +3,8 @@ its value is the default, and one not given keeps the preset's value."""
 
 import pytest
 
-from nerfaug.cli import given_fields, main
+from nerfaug.cli import main
+from nerfaug.cli_options import given_fields
 from nerfaug.experiment import config as experiment_config
 from nerfaug.experiment.sweep import SweepOutcome
 from nerfaug.selection.methods import SelectionConfig

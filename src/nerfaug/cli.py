@@ -19,14 +19,12 @@ import os
 import re
 import sys
 import warnings
-from collections.abc import Sequence
-from contextvars import ContextVar
-from dataclasses import fields
 from pathlib import Path
 from typing import Annotated, Literal, get_args
 
 import tyro
 
+from nerfaug.cli_options import COMMAND_LINE, given_fields
 from nerfaug.experiment.config import PresetName
 from nerfaug.experiment.config import preset as make_preset
 from nerfaug.nerf.config import EnginePreset
@@ -35,32 +33,6 @@ from nerfaug.selection.methods import SelectionConfig
 Positional = tyro.conf.Positional
 # The defaults `--selection.*` options start from (read-only use: never mutated).
 DEFAULT_SELECTION = SelectionConfig()
-COMMAND_LINE: ContextVar[tuple[str, ...] | None] = ContextVar("command_line", default=None)
-"""The arguments `main` is parsing (None outside it), for `given_fields`."""
-
-
-def given_fields(options, prefix: str, argv: Sequence[str] | None) -> dict:
-    """The fields of the dataclass `options` that `argv` gives as `--PREFIX.FIELD` options, with
-    their values in `options`: what to apply over a preset's settings. A field given applies even
-    at its default value; one not given leaves the preset's. Without a command line (`argv`
-    None: the command was called from Python), the fields that differ from the defaults.
-
-    Example:
-        >>> argv = ["run", "--selection.temperature", "1.0", "--selection.entropy_resolution=20"]
-        >>> given_fields(SelectionConfig(entropy_resolution=20), "selection", argv)
-        {'entropy_resolution': 20, 'temperature': 1.0}
-    """
-    names = [f.name for f in fields(options)]
-    if argv is None:
-        defaults = type(options)()
-        return {name: getattr(options, name) for name in names if getattr(options, name) != getattr(defaults, name)}
-    given = set()
-    for word in argv:
-        option, _, _ = word.partition("=")
-        if option.startswith(f"--{prefix}."):  # tyro takes FIELD with - or _ between its words
-            name = option.removeprefix(f"--{prefix}.").replace("-", "_")
-            given.add(name.removeprefix("no_") if name not in names else name)  # --PREFIX.no-FLAG
-    return {name: getattr(options, name) for name in names if name in given}
 
 
 def preset_default(name: str) -> str:

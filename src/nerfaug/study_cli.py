@@ -16,6 +16,7 @@ from typing import Annotated, Literal
 
 import tyro
 
+from nerfaug.cli_options import COMMAND_LINE, given_fields
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.config import SelectionConfig
 from nerfaug.experiment.study import StudyPreset
@@ -121,7 +122,8 @@ def study(
         )
         command += selection.flags()
         plan = study_runs.make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command)
-        plan.config = plan.config.replace(selection=replace(plan.config.selection, **selection.changes()))
+        given = given_fields(selection, "selection", COMMAND_LINE.get())
+        plan.config = plan.config.replace(selection=replace(plan.config.selection, **given))
         for engine, why in plan.left_out.items():
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)
         if workers is None:
