@@ -311,3 +311,16 @@ def collect_results_of(out: Path):
     from nerfaug.report.collect import collect_results
 
     return collect_results(out / "test")
+
+
+@pytest.mark.parametrize("engine", ["cpu+encoding=nope", "cpu+sampler=grid", "nerfacto"])
+def test_an_unknown_engine_or_part_is_one_line_before_any_dataset_is_rendered(tmp_path, capsys, engine):
+    from nerfaug.cli import main
+
+    out = tmp_path / "study"
+    with pytest.raises(SystemExit) as refused:
+        main(["study", "--out", str(out), "--engines", engine, "--scenes", "lego", "--device", "cpu"])
+    assert refused.value.code == 2
+    message = capsys.readouterr().err.strip()
+    assert message.startswith("nerfaug: --engines: ") and "\n" not in message
+    assert engine.rpartition("=")[2] in message and not (out / "datasets").exists()

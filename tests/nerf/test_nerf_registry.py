@@ -2,13 +2,15 @@
 encoding or sampler added by one registry entry, and the same numbers as before the sampler
 interface existed."""
 
+import re
+
 import pytest
 import torch
 from torch import nn
 
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.model import NerfModel
-from nerfaug.nerf.registry import ENCODINGS, SAMPLERS, build_field
+from nerfaug.nerf.registry import ENCODINGS, SAMPLERS, build_field, check_names
 from nerfaug.nerf.sampler import Sampler
 from nerfaug.nerf.sampling import stratified_edges
 from nerfaug.nerf.trainer import Trainer
@@ -83,11 +85,13 @@ def test_same_seed_gives_the_numbers_recorded_before_the_sampler_interface(case,
 @pytest.mark.parametrize("field, value", [("encoding", "nope"), ("sampler", "grid")])
 def test_an_unknown_name_is_one_line_naming_it_and_the_choices(field, value):
     with pytest.raises(ValueError) as error:
-        NerfConfig(**{field: value})
+        check_names(NerfConfig(**{field: value}))
     message = str(error.value)
     assert "\n" not in message and repr(value) in message
     registry = ENCODINGS if field == "encoding" else SAMPLERS
     assert all(name in message for name in registry)
+    with pytest.raises(ValueError, match=re.escape(message)):  # the same line when the parts are built
+        NerfModel(NerfConfig(**{field: value}))
 
 
 def test_an_unknown_field_is_rejected():

@@ -284,17 +284,18 @@ def make_plan(
     try:
         device_type = resolve_device(device).type
     except ValueError as error:
-        raise SystemExit(f"nerfaug study: --device: {error}") from None
-    from nerfaug.nerf.config import parse_variant
+        raise SystemExit(f"--device: {error}") from None
+    from nerfaug.nerf.config import NerfConfig
+    from nerfaug.nerf.registry import check_names
 
     if engines is None:
         chosen, left_out = default_engines(device_type)
     else:
         for engine in engines:
             try:
-                parse_variant(engine)
+                check_names(NerfConfig.preset(engine))
             except ValueError as error:
-                raise SystemExit(f"nerfaug study: --engines: {error}") from None
+                raise SystemExit(f"--engines: {error}") from None
         chosen, left_out = list(dict.fromkeys(engines)), {}
     methods = tuple(methods) if methods else study_methods()
     comparisons = max(1, sum(m != "uniform" for m in methods))

@@ -132,12 +132,8 @@ class NerfConfig:
             )
         if self.background_mode not in ("fixed", "last_sample"):
             raise ValueError(f"background_mode must be 'fixed' or 'last_sample', got {self.background_mode!r}")
-        # Names are checked against the registries where they enter. Imported here: the
-        # registry's modules import this one.
-        from nerfaug.nerf.registry import ENCODINGS, SAMPLERS, choose
-
-        choose(ENCODINGS, "encoding", self.encoding)
-        choose(SAMPLERS, "sampler", self.sampler)
+        # `encoding` and `sampler` are names in `nerf.registry`, which imports this module: they
+        # are checked there (`check_names`), where an engine is named and where parts are built.
 
     @classmethod
     def preset(cls, name: str, **overrides) -> NerfConfig:

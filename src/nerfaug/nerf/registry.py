@@ -55,6 +55,21 @@ def choose(registry: dict[str, T], kind: str, name: str) -> T:
     return registry[name]
 
 
+def check_names(config: NerfConfig) -> NerfConfig:
+    """`config`, once its encoding and sampler are names in the registries; a ValueError naming
+    the value and the valid choices otherwise (before any part is built or any run starts).
+
+    Example:
+        >>> check_names(NerfConfig(encoding="nope"))
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown encoding 'nope'; choose one of: hash, kplanes
+    """
+    choose(ENCODINGS, "encoding", config.encoding)
+    choose(SAMPLERS, "sampler", config.sampler)
+    return config
+
+
 def build_encoding(config: NerfConfig, name: str | None = None) -> nn.Module:
     """The position encoding `name` (default: `config.encoding`), sized by `config`."""
     return choose(ENCODINGS, "encoding", config.encoding if name is None else name)(config)

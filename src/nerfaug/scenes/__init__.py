@@ -5,7 +5,7 @@ bpy runs only in a child process (`nerfaug.scenes.worker`). This package imports
 torch when imported, so the child stays free of torch; the rendering functions load on first use.
 """
 
-BUILTIN_SCENES = ("lego", "chair", "materials")
+from nerfaug.scenes.builtin import BUILTIN_SCENES
 
 _RENDER_NAMES = (
     "BlenderNotAvailable",

@@ -45,7 +45,8 @@ from nerfaug.hemisphere import (
 )
 from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.progress import progress_bar
-from nerfaug.scenes import BUILTIN_SCENES, worker
+from nerfaug.scenes import worker
+from nerfaug.scenes.builtin import BUILTIN_SCENES
 
 # Bump when the layout or meaning of a rendered dataset changes; older caches then re-render.
 DATASET_FORMAT = 1
