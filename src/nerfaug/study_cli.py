@@ -158,7 +158,7 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     if not path.is_file():
         if previous is None:
             raise SystemExit(
-                f"nerfaug study: nothing to summarise: neither {path} nor the table {table_path} exists; run a "
+                f"study: nothing to summarise: neither {path} nor the table {table_path} exists; run a "
                 "study first, or pass --table FILE"
             )
         return previous
