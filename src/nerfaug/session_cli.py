@@ -23,12 +23,14 @@ import tyro
 from nerfaug import serve_cli
 from nerfaug.capture.constraints import ViewConstraints
 from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
+from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset
 from nerfaug.selection.methods import SelectionConfig
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
 Device = Literal["auto", "cpu", "cuda"]
+FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
 # The defaults `--selection.*` options start from (read-only use: never mutated).
 DEFAULT_SELECTION = SelectionConfig()
 DEFAULT_CONSTRAINTS = ViewConstraints()
@@ -313,17 +315,9 @@ def propose(
             to the hemisphere's candidates or to --candidates.
         force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
     """
-    from nerfaug.capture.choose import check_method
+    from nerfaug.capture.choose import ProposalRequest, RequestError
 
-    check_method(method)
-    for name, value in (("n", n), ("n-candidates", n_candidates)):
-        if value < 1:
-            raise ValueError(f"--{name} {value}: must be >= 1")
-    if seed is not None and seed < 0:
-        raise ValueError(f"--seed {seed}: must be >= 0")
-    _check_poses_out(out, force)
-    session = _open(run, device)
-    proposal = session.propose(
+    request = ProposalRequest(
         n,
         method,
         candidates=candidates,
@@ -331,6 +325,22 @@ def propose(
         seed=seed,
         config=selection,
         constraints=constraints,
+    )
+    try:
+        request = request.checked()  # before the session is opened: a refused call loads nothing
+    except RequestError as error:
+        option = "--" + error.argument.replace("_", "-")
+        raise ValueError(f"{option} {error.value}: {error.problem}") from None
+    _check_poses_out(out, force)
+    session = _open(run, device)
+    proposal = session.propose(
+        request.n,
+        request.method,
+        candidates=request.candidates,
+        n_candidates=request.n_candidates,
+        seed=request.seed,
+        config=request.config,
+        constraints=request.constraints,
     )
     path = proposal.write(out)
     session.save()
@@ -385,7 +395,7 @@ def add(
 def export(
     run: RunFolder,
     out: Path,
-    format: Literal["nerfstudio", "blender"] = "nerfstudio",
+    format: FormatName = EXCHANGE_FORMAT,
 ) -> None:
     """Write the session's grown dataset for other tools.
 
@@ -396,7 +406,7 @@ def export(
     Args:
         run: the session's run folder.
         out: the folder to write.
-        format: nerfstudio or blender.
+        format: the dataset format to write.
     """
     from nerfaug.capture import CaptureSession
 
