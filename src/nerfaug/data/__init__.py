@@ -23,6 +23,7 @@ _HOMES = {
     "Format": "nerfaug.data.format",
     "DatasetSplit": "nerfaug.data.format",
     "NewFrame": "nerfaug.data.format",
+    "EXCHANGE_FORMAT": "nerfaug.data.formats",
     "FORMATS": "nerfaug.data.formats",
     "detect_format": "nerfaug.data.formats",
     "find_split": "nerfaug.data.formats",
@@ -39,7 +40,15 @@ if TYPE_CHECKING:
     )
     from nerfaug.data.errors import DatasetError
     from nerfaug.data.format import DatasetSplit, Format, NewFrame
-    from nerfaug.data.formats import FORMATS, detect_format, find_split, get_format, load_dataset, register_format
+    from nerfaug.data.formats import (
+        EXCHANGE_FORMAT,
+        FORMATS,
+        detect_format,
+        find_split,
+        get_format,
+        load_dataset,
+        register_format,
+    )
     from nerfaug.data.nerfstudio import load_nerfstudio, write_nerfstudio
     from nerfaug.data.views import Views
 
@@ -57,6 +66,7 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
+    "EXCHANGE_FORMAT",
     "FORMATS",
     "DatasetError",
     "DatasetSplit",

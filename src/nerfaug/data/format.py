@@ -131,11 +131,17 @@ class Format(ABC):
 
     def append(self, root: Path, split: str, new: Sequence[NewFrame], camera: Cameras) -> list[dict]:
         """Write the images of `new` and list them after the split's frames (the listing last,
-        atomically). `camera`: one camera with the intrinsics of every new frame.
+        atomically), starting the split when it does not exist yet. `camera`: one camera with the
+        intrinsics of every new frame.
 
         Returns the new frames as listed.
         """
-        header, frames = self.read_listing(root, split)
+        if self.detect(root, split):
+            header, frames = self.read_listing(root, split)
+        elif self.fits(camera):
+            header, frames = self.describe(camera)[0], []
+        else:
+            raise ValueError(f"this camera does not fit the {self.name} format ({self.fits_rule})")
         folder = self.image_folder(split)
         added = []
         for frame in new:

@@ -28,7 +28,6 @@ from pydantic import ValidationError
 from starlette.exceptions import HTTPException
 
 import nerfaug
-from nerfaug.jsonio import atomic_write_json
 from nerfaug.service import models
 from nerfaug.service.errors import ServiceError, bad_input, status_of
 from nerfaug.service.hub import SessionHub, check_session_id
@@ -145,7 +144,11 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         settings: str = Form(description="JSON of CreateFromUploads: id, intrinsics, poses, preset, seed, ..."),
         images: list[UploadFile] = File(description="the images, in the order of the poses"),
     ):
+        import torch
+
+        from nerfaug.cameras import Cameras
         from nerfaug.capture import CaptureSession
+        from nerfaug.data import EXCHANGE_FORMAT, DatasetSplit, NewFrame, get_format
 
         request = models.CreateFromUploads.model_validate(parse_json_field(settings, "settings"))
         check_session_id(request.id)
@@ -154,18 +157,15 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         check_names(uploads)
         poses = check_poses(request.poses, "poses", len(uploads))
 
+        cx, cy = k.width / 2 if k.cx is None else k.cx, k.height / 2 if k.cy is None else k.cy
+        camera = Cameras(torch.eye(4), k.fx, k.fy or k.fx, cx, cy, k.width, k.height)
+        frames = [NewFrame(u.name, u.data, u.suffix, pose.double().tolist()) for u, pose in zip(uploads, poses)]
+
         def create(folder: Path):
             with hub.staging() as tmp:
-                data = Path(tmp) / "data"
-                files = write_uploads(data / "images", uploads)
-                frames = [
-                    {"file_path": f"images/{path.name}", "transform_matrix": pose.double().tolist()}
-                    for path, pose in zip(files, poses)
-                ]
-                cx, cy = k.width / 2 if k.cx is None else k.cx, k.height / 2 if k.cy is None else k.cy
-                meta = {"w": k.width, "h": k.height, "fl_x": k.fx, "fl_y": k.fy or k.fx, "cx": cx, "cy": cy}
-                atomic_write_json(data / "transforms.json", {**meta, "frames": frames})
-                return CaptureSession.create(data, folder, device=hub.device, **_settings(request))
+                data = DatasetSplit(Path(tmp) / "data", get_format(EXCHANGE_FORMAT))
+                data.append(frames, camera)
+                return CaptureSession.create(data.root, folder, device=hub.device, **_settings(request))
 
         return hub.created(request.id, create)
 
