@@ -462,14 +462,13 @@ def evaluate(
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
     """
     from nerfaug import __version__
-    from nerfaug.capture.evaluate import evaluate_session, load_held_out
     from nerfaug.jsonio import atomic_write_json
 
     if out is not None:
         _check_eval_out(out, data)
     session = _open(run, device)
-    views = load_held_out(session, data, split)
-    result = evaluate_session(session, views, lpips="auto" if lpips else None, progress=True)
+    views = session.held_out(data, split)
+    result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
     m = result.mean
     print(f"{run} (step {session.step}) on split '{split}' of {data}: {len(views)} views")
     print(f"  PSNR {_metric(m['psnr'], 2)} dB   SSIM {_metric(m['ssim'], 4)}   LPIPS {_metric(m['lpips'], 4)}")

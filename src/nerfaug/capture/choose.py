@@ -1,6 +1,6 @@
 """How a session chooses its next views: what is asked (`ProposalRequest`, checked here for the
-library, the CLI and the service), what a proposal needs of its session (`ProposalContext`), the
-candidate cameras, the selection method's call, and the proposal's record."""
+library, the CLI and the service), the candidate cameras, the selection method's call on the
+session's NeRF (`SessionModel`), and the proposal's record."""
 
 from __future__ import annotations
 
@@ -13,8 +13,9 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.capture.constraints import ViewConstraints, constrained_indices
-from nerfaug.capture.frame import ENGINE_RADIUS, Hemisphere
+from nerfaug.capture.frame import ENGINE_RADIUS
 from nerfaug.capture.images import as_array
+from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frames import check_pose
@@ -77,7 +78,7 @@ class ProposalRequest:
 
         check_method(self.method)
         if int(self.n) != self.n or int(self.n) < 1:
-            raise RequestError("n", self.n, "must be an integer >= 1 (views to propose)")
+            raise RequestError("n", self.n, "must be >= 1 (a whole number of views to propose)")
         if int(self.n_candidates) < 1:
             raise RequestError("n_candidates", self.n_candidates, "must be >= 1")
         if self.seed is not None and int(self.seed) < 0:
@@ -91,33 +92,6 @@ class ProposalRequest:
         return replace(self, n=int(self.n), config=config, constraints=constraints)
 
 
-@dataclass(frozen=True)
-class ProposalContext:
-    """What a proposal needs of its session, and nothing more.
-
-    Attributes:
-        model: the `NerfModel` that scores candidates.
-        train_cameras: the engine-frame cameras it trains on, at the training resolution.
-        device: where the model runs.
-        step: its training step.
-        template: one world-frame camera with the session's intrinsics, full resolution.
-        hemisphere: the session's hemisphere (world frame <-> engine frame).
-        seed: the session's seed.
-        number: this proposal's number in the session (0 for the first).
-        folder: where the proposal's files are written (`run/proposals`).
-    """
-
-    model: Any
-    train_cameras: Cameras
-    device: Any
-    step: int
-    template: Cameras
-    hemisphere: Hemisphere
-    seed: int
-    number: int
-    folder: Path
-
-
 def describe_candidates(candidates) -> str:
     """How session.json names the candidates of a proposal."""
     if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
@@ -128,13 +102,13 @@ def describe_candidates(candidates) -> str:
 
 
 def candidate_cameras(
-    context: ProposalContext, candidates=None, n_candidates: int = 500, generator: torch.Generator | None = None
+    model: SessionModel, candidates=None, n_candidates: int = 500, generator: torch.Generator | None = None
 ) -> Cameras:
     """World-frame candidate cameras (see `CaptureSession.propose`) minus the poses trained on."""
     from nerfaug.selection import hemisphere_candidates, matching_poses
 
-    template, hemisphere = context.template, context.hemisphere
-    engine_train = context.train_cameras.to("cpu")
+    template, hemisphere = model.template, model.hemisphere
+    engine_train = model.train_cameras.to("cpu")
     if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
         engine = hemisphere_candidates(
             template.resized(engine_train.width, engine_train.height),
@@ -161,12 +135,19 @@ def candidate_cameras(
 
 
 def propose(
-    request: ProposalRequest, context: ProposalContext, generator: torch.Generator | None = None
+    request: ProposalRequest,
+    model: SessionModel,
+    number: int,
+    folder: Path,
+    generator: torch.Generator | None = None,
 ) -> tuple[Proposal, ProposalRecord]:
     """Choose `request.n` views to capture next, and write them (with every candidate's score)
-    to `context.folder/proposal_NNN.json` (and the map beside it).
+    to `folder/proposal_NNN.json` (and the map beside it).
 
     Args:
+        model: the session's NeRF that scores the candidates.
+        number: this proposal's number in the session (0 for the first).
+        folder: where the proposal's files go (`run/proposals`).
         generator: random source for the candidates and the selector; None seeds one from the
             request's seed, else from the session seed and the proposal number (`proposal_seed`).
 
@@ -176,13 +157,13 @@ def propose(
     from nerfaug.selection import get_method, select_views
 
     request = request.checked()
-    n, method, hemisphere, number = request.n, request.method, context.hemisphere, context.number
+    n, method, hemisphere = request.n, request.method, model.hemisphere
     used_config = get_method(method).effective_config(request.config)
     used_seed = None
     if generator is None:
-        used_seed = proposal_seed(context.seed, number) if request.seed is None else int(request.seed)
+        used_seed = proposal_seed(model.seed, number) if request.seed is None else int(request.seed)
         generator = torch.Generator().manual_seed(used_seed)
-    world = candidate_cameras(context, request.candidates, request.n_candidates, generator)
+    world = candidate_cameras(model, request.candidates, request.n_candidates, generator)
     world = world[constrained_indices(world.camera_to_world, hemisphere, request.constraints, n).tolist()]
     if len(world) < n:
         raise ValueError(
@@ -190,13 +171,11 @@ def propose(
             "(poses the model already trains on are left out); ask for fewer views or give more "
             "candidates"
         )
-    engine_train = context.train_cameras
+    engine_train = model.train_cameras
     engine = hemisphere.cameras_to_engine(world)
     if (engine.width, engine.height) != (engine_train.width, engine_train.height):
         engine = engine.resized(engine_train.width, engine_train.height)
-    selection = select_views(
-        method, context.model, engine_train, engine.to(context.device), n, generator, request.config
-    )
+    selection = select_views(method, model.model, engine_train, engine.to(model.device), n, generator, request.config)
     chosen = selection.indices.long()
     poses = world.camera_to_world[chosen]
     azimuth, polar, _ = hemisphere.angles(poses)
@@ -210,8 +189,8 @@ def propose(
             selection.scores,
             engine_train.camera_to_world.cpu(),
             engine.camera_to_world[chosen],
-            path=context.folder / f"proposal_{number:03d}.png",
-            title=f"proposal {number}: {method} at step {context.step}",
+            path=folder / f"proposal_{number:03d}.png",
+            title=f"proposal {number}: {method} at step {model.step}",
         )
     proposal = Proposal(
         number=number,
@@ -225,17 +204,17 @@ def propose(
         scores=selection.scores.float(),
         components=dict(selection.components),
         map_path=map_path,
-        step=context.step,
+        step=model.step,
         seed=used_seed,
         camera_angle_x=float(world.camera_angle_x[0]),
         hemisphere=hemisphere,
     )
-    record_path = proposal.write(context.folder / f"proposal_{number:03d}.json", include_candidates=True)
+    record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
     record = ProposalRecord(
         number=number,
         method=proposal.method,
         n=n,
-        step=context.step,
+        step=model.step,
         seed=used_seed,
         candidates=describe_candidates(request.candidates),
         n_candidates=len(world),
@@ -243,7 +222,7 @@ def propose(
         poses=poses.tolist(),
         azimuth=azimuth.tolist(),
         polar=polar.tolist(),
-        file=f"{context.folder.name}/{record_path.name}",
+        file=f"{folder.name}/{record_path.name}",
         created=now(),
         extra={"selection": used_config.to_dict()} | constraints_record(request.constraints),
     )

@@ -1,5 +1,6 @@
 """What a session asks of the dataset it grows, beyond its format (`nerfaug.data.formats`): which
-split a new session trains on, the names new frames may take, and views that repeat a pose."""
+split a new session trains on, its frames as the trainer sees them, the names new frames may take,
+and views that repeat a pose."""
 
 from __future__ import annotations
 
@@ -7,8 +8,15 @@ import re
 from collections.abc import Sequence
 from pathlib import Path
 
+import torch
+
 from nerfaug.cameras import Cameras
+from nerfaug.capture.frame import Hemisphere
+from nerfaug.data.errors import DatasetError
+from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import has_split
+from nerfaug.data.frames import read_image
+from nerfaug.data.views import Views
 
 # A new frame's image name (file stem): no separators, no leading dot.
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
@@ -48,3 +56,37 @@ def duplicate_frames(cameras: Cameras, names: Sequence[str], tolerance: float = 
     poses = cameras.camera_to_world.reshape(len(names), -1).double()
     close = (poses[:, None] - poses[None]).abs().amax(-1) <= tolerance
     return [(names[i], names[j]) for i, j in close.triu(1).nonzero().tolist()]
+
+
+def engine_views(dataset: DatasetSplit, start: int, downscale: int, background, hemisphere: Hemisphere) -> Views:
+    """Frames `start:` of `dataset` as the trainer sees them: shrunk by `downscale`, composited
+    over `background` (RGB in [0, 1]), cameras in the engine frame of `hemisphere`.
+
+    Raises:
+        DatasetError: an image is missing, unreadable, or not the size of the dataset's camera.
+    """
+    frames = dataset.frames()[start:]
+    files = dataset.frame_files(frames, start)
+    background = torch.tensor(tuple(background), dtype=torch.float32)
+    loaded = [
+        read_image(f, background, downscale, dataset.listing, f"frames[{start + i}].file_path")
+        for i, f in enumerate(files)
+    ]
+    full = dataset.load(lazy=True).cameras
+    cameras = full[list(range(start, len(full)))]
+    height, width = full.height // downscale, full.width // downscale
+    for i, (image, _) in enumerate(loaded):
+        if image.shape[:2] != (height, width):
+            raise DatasetError(
+                dataset.listing,
+                f"image size differs from the dataset's {full.width}x{full.height}",
+                field=f"frames[{start + i}].file_path",
+                value=str(files[i]),
+            )
+    if (width, height) != (cameras.width, cameras.height):
+        cameras = cameras.resized(width, height)
+    cameras = hemisphere.cameras_to_engine(cameras)
+    alphas = None
+    if all(a is not None for _, a in loaded):
+        alphas = torch.stack([a for _, a in loaded])
+    return Views(cameras, torch.stack([im for im, _ in loaded]), [str(f["file_path"]) for f in frames], alphas)

@@ -29,10 +29,12 @@ from torch import Tensor
 from nerfaug import owned
 from nerfaug.cameras import Cameras
 from nerfaug.capture import add, choose, export, integrity
-from nerfaug.capture.dataset import duplicate_frames
+from nerfaug.capture.dataset import duplicate_frames, engine_views
+from nerfaug.capture.evaluate import evaluate_model, load_held_out
 from nerfaug.capture.frame import Hemisphere, estimate_hemisphere
-from nerfaug.capture.images import as_array
+from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
+from nerfaug.capture.runfolder import check_new_run
 from nerfaug.capture.state import (
     CHECKPOINT_FILE,
     DATASET_DIR,
@@ -51,14 +53,12 @@ from nerfaug.capture.state import (
     SourceInfo,
     now,
 )
-from nerfaug.data.errors import DatasetError
+from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
 from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format, plainest_format
-from nerfaug.data.frames import read_image
 from nerfaug.data.views import Views
-from nerfaug.errors import FolderRefused
+from nerfaug.evaluation import EvaluationResult
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
-from nerfaug.selection.candidates import with_poses
 
 
 class CaptureSession:
@@ -331,33 +331,8 @@ class CaptureSession:
 
     def engine_views(self, start: int) -> Views:
         """Dataset frames `start:` loaded as the trainer sees them: downscaled, engine frame."""
-        dataset = self.dataset_split()
-        frames = dataset.frames()[start:]
-        files = dataset.frame_files(frames, start)
-        background = torch.tensor(self.state.background, dtype=torch.float32)
-        downscale = self.state.downscale
-        loaded = [
-            read_image(f, background, downscale, dataset.listing, f"frames[{start + i}].file_path")
-            for i, f in enumerate(files)
-        ]
-        full = dataset.load(lazy=True).cameras
-        cameras = full[list(range(start, len(full)))]
-        height, width = full.height // downscale, full.width // downscale
-        for i, (image, _) in enumerate(loaded):
-            if image.shape[:2] != (height, width):
-                raise DatasetError(
-                    dataset.listing,
-                    f"image size differs from the dataset's {full.width}x{full.height}",
-                    field=f"frames[{start + i}].file_path",
-                    value=str(files[i]),
-                )
-        if (width, height) != (cameras.width, cameras.height):
-            cameras = cameras.resized(width, height)
-        cameras = self.hemisphere.cameras_to_engine(cameras)
-        alphas = None
-        if all(a is not None for _, a in loaded):
-            alphas = torch.stack([a for _, a in loaded])
-        return Views(cameras, torch.stack([im for im, _ in loaded]), [str(f["file_path"]) for f in frames], alphas)
+        state = self.state
+        return engine_views(self.dataset_split(), start, state.downscale, state.background, self.hemisphere)
 
     # -- the loop --
 
@@ -374,7 +349,7 @@ class CaptureSession:
     ) -> Cameras:
         """The world-frame candidate cameras for `propose` (see its `candidates`), without the
         poses the model already trains on."""
-        return choose.candidate_cameras(self.proposal_context(), candidates, n_candidates, generator)
+        return choose.candidate_cameras(self.session_model(), candidates, n_candidates, generator)
 
     def propose(
         self,
@@ -418,23 +393,23 @@ class CaptureSession:
             TooFewCandidates (a ValueError): the constraints leave fewer candidates than `n`.
         """
         request = choose.ProposalRequest(n, method, candidates, n_candidates, seed, config, map, constraints)
-        proposal, record = choose.propose(request, self.proposal_context(), generator)
+        folder = self.run_dir / PROPOSALS_DIR
+        proposal, record = choose.propose(request, self.session_model(), len(self.state.proposals), folder, generator)
         self.state.proposals.append(record)
         return proposal
 
-    def proposal_context(self) -> choose.ProposalContext:
-        """What the next proposal needs of this session."""
+    def session_model(self) -> SessionModel:
+        """What the steps that use the NeRF need of this session (`SessionModel`)."""
         self.require_model()
-        return choose.ProposalContext(
+        return SessionModel(
             model=self.trainer.model,
-            train_cameras=self.trainer.train_views.cameras,
             device=self.trainer.device,
+            train_cameras=self.trainer.train_views.cameras,
             step=self.step,
-            template=self.template(),
             hemisphere=self.hemisphere,
+            template=self.template(),
+            background=tuple(self.state.background),
             seed=self.seed,
-            number=len(self.state.proposals),
-            folder=self.run_dir / PROPOSALS_DIR,
         )
 
     def add_views(self, images, poses=None, names: Sequence[str] | None = None) -> list[str]:
@@ -479,17 +454,24 @@ class CaptureSession:
     def render(self, poses, width: int | None = None) -> Tensor:
         """What the NeRF sees from world-frame `poses` (n, 4, 4): images (n, H, W, 3) in [0, 1],
         at the training resolution (or `width` pixels across)."""
-        self.require_model()
-        train = self.trainer.train_views.cameras
-        camera = self.template(train.width, train.height)
-        if width is not None:
-            camera = camera.resized(width, max(1, round(width * train.height / train.width)))
-        engine = self.hemisphere.to_engine(torch.as_tensor(as_array(poses), dtype=torch.float32).reshape(-1, 4, 4))
-        cameras = with_poses(camera, engine).to(self.trainer.device)
-        background = torch.tensor(self.state.background, dtype=torch.float32, device=self.trainer.device)
-        return torch.stack(
-            [self.trainer.model.render_image(cameras, i, background)["rgb"].cpu() for i in range(len(cameras))]
-        )
+        return self.session_model().render(poses, width)
+
+    def uncertainty_maps(
+        self, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16
+    ) -> list[ViewMaps]:
+        """The render, depth, ray entropy and FisherRF images of world-frame `poses` (n, 4, 4);
+        see `nerfaug.capture.uncertainty_images.view_maps`."""
+        return view_maps(self.session_model(), poses, width, fisher, fisher_width)
+
+    def held_out(self, data: str | Path, split: str = "test", max_views: int | None = None) -> Views:
+        """`split` of the dataset folder `data` (same scene and world frame) at the training
+        resolution, over the session's background: what `evaluate` scores."""
+        return load_held_out(data, split, self.state.downscale, self.state.background, max_views)
+
+    def evaluate(self, views: Views, lpips="auto", progress: bool = False) -> EvaluationResult:
+        """PSNR, SSIM and LPIPS of the NeRF's renders of world-frame `views` (`held_out`) against
+        their images; see `nerfaug.capture.evaluate.evaluate_model`."""
+        return evaluate_model(self.session_model(), views, lpips, progress)
 
     def export(self, out: str | Path, format: str = EXCHANGE_FORMAT, source_splits: bool = True) -> Path:
         """Write the grown dataset to `out` in `format` (a name in `nerfaug.data.FORMATS`) so other
@@ -519,36 +501,4 @@ class CaptureSession:
             Path(source.data_dir),
             source.split,
             source_splits,
-        )
-
-
-def check_new_run(data_dir: Path, run_dir: Path) -> None:
-    """Refuse a run folder that would hold or hide the dataset or lie inside it, that holds files
-    nerfaug did not write, or that holds anything at all without a session.json: a damaged session
-    is never rebuilt over (its dataset may hold captures and the user's own files).
-
-    Raises:
-        FolderRefused: saying which folder and what to choose instead.
-    """
-    run_dir = Path(run_dir)
-    data_dir = Path(data_dir).resolve()
-    if data_dir == run_dir.resolve() or run_dir.resolve() in data_dir.parents:
-        raise FolderRefused(
-            f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
-            f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset"
-        )
-    if data_dir in run_dir.resolve().parents:
-        raise FolderRefused(
-            f"{run_dir}: the run folder lies inside the dataset {data_dir}; nothing is written into an "
-            "input folder, so choose a run folder outside the dataset"
-        )
-    if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
-        what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
-        raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder for --out")
-    left = sorted(p.name for p in run_dir.iterdir() if p.name != owned.MARKER) if run_dir.is_dir() else []
-    if left:
-        raise FolderRefused(
-            f"{run_dir}: a capture session without its {SESSION_FILE} (damaged or unfinished; it holds "
-            f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
-            f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
         )

@@ -229,12 +229,12 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
     @answers
     def uncertainty(session_id: str, request: models.UncertaintyRequest):
         """PNG: render, depth, ray entropy and FisherRF panels with colour bars; npz: the arrays."""
-        from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes, view_maps
+        from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 
         pose = check_poses(request.pose, "pose")
         maps = hub.run(
             session_id,
-            lambda session: view_maps(session, pose, request.width, request.fisher, request.fisher_width)[0],
+            lambda session: session.uncertainty_maps(pose, request.width, request.fisher, request.fisher_width)[0],
         )
         if request.format == "npz":
             return Response(npz_bytes(maps), media_type="application/octet-stream")
@@ -244,13 +244,11 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
     @answers
     def evaluate(session_id: str, request: models.EvaluateRequest):
         """The session's NeRF scored on a held-out split at its training resolution (`nerfaug eval`)."""
-        from nerfaug.capture.evaluate import evaluate_session, load_held_out
-
         data = hub.dataset_path(request.dataset)
 
         def score(session):
-            views = load_held_out(session, data, request.split, request.max_views)
-            result = evaluate_session(session, views, lpips="auto" if request.lpips else None)
+            views = session.held_out(data, request.split, request.max_views)
+            result = session.evaluate(views, lpips="auto" if request.lpips else None)
             return {
                 "step": session.step,
                 "dataset": request.dataset,
