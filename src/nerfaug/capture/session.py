@@ -108,12 +108,12 @@ class CaptureSession:
         save. Nothing is trained yet (call `train`).
 
         Args:
-            data_dir: a Blender-format (`transforms_{split}.json`) or nerfstudio-format
-                (`transforms.json`) dataset folder: the views captured so far.
+            data_dir: a dataset folder in a registered format (`nerfaug.data.FORMATS`: Blender's
+                `transforms_{split}.json`, nerfstudio's `transforms.json`): the views captured so far.
             run_dir: the run folder to create (must not hold a session already).
             preset: NeRF engine preset ("cpu", "paper", "test"); ignored if `config` is given.
             seed: seeds the model's initialisation, its training and every proposal.
-            split: the Blender split holding the captured views ("initial" for built-in scenes).
+            split: the split holding the captured views ("initial" for built-in scenes).
             config: a `NerfConfig` to use instead of the preset.
             centre, radius: the hemisphere; None estimates them from the cameras (centre: the
                 point closest to all optical axes; radius: the mean camera distance to it).
