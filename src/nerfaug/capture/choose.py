@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -20,6 +20,11 @@ from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frames import check_pose
 from nerfaug.selection.candidates import with_poses
+
+if TYPE_CHECKING:
+    from torch import Tensor
+
+    from nerfaug.selection import SelectionConfig
 
 
 class RequestError(ValueError):
@@ -59,12 +64,12 @@ class ProposalRequest:
 
     n: int = 6
     method: str = "ours"
-    candidates: Any = None
+    candidates: str | Path | Cameras | Tensor | np.ndarray | None = None
     n_candidates: int = 500
     seed: int | None = None
-    config: Any = None
+    config: SelectionConfig | dict | None = None
     map: bool = True
-    constraints: Any = None
+    constraints: ViewConstraints | dict | None = None
 
     def checked(self) -> ProposalRequest:
         """This request with `config` a `SelectionConfig` (or None) and `constraints` a checked

@@ -6,7 +6,7 @@ session itself."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor
@@ -14,6 +14,9 @@ from torch import Tensor
 from nerfaug.cameras import Cameras
 from nerfaug.capture.frame import Hemisphere
 from nerfaug.selection.candidates import with_poses
+
+if TYPE_CHECKING:
+    from nerfaug.nerf.model import NerfModel
 
 
 @dataclass(frozen=True)
@@ -32,8 +35,8 @@ class SessionModel:
         seed: the session's seed.
     """
 
-    model: Any
-    device: Any
+    model: NerfModel
+    device: torch.device | str
     train_cameras: Cameras
     step: int
     hemisphere: Hemisphere

@@ -62,6 +62,9 @@ class Format(ABC):
     png_only: ClassVar[bool] = False
     has_splits: ClassVar[bool] = True
 
+    def __repr__(self) -> str:
+        return f"<{self.name} format>"
+
     # -- where things are --
 
     @abstractmethod

@@ -87,7 +87,7 @@ def find_split(root: str | Path, split: str = "train") -> DatasetSplit:
         raise _missing(root, split)
     path = found.listing(root, split)
     if root.resolve() not in path.resolve().parents:
-        raise DatasetError(path, "the listing links to a file outside the dataset folder", value=str(path.resolve()))
+        raise DatasetError(path, "this file links to a file outside the dataset folder", value=str(path.resolve()))
     return DatasetSplit(root, found, split)
 
 
