@@ -86,9 +86,22 @@ def _warning_lines():
         yield
 
 
+@contextlib.contextmanager
+def _as_options():
+    """Show a library's `RequestError` as this command's option: `--n-candidates 0: must be >= 1`."""
+    from nerfaug.capture.requests import RequestError
+
+    try:
+        yield
+    except RequestError as error:
+        raise ValueError(f"--{error.argument.replace('_', '-')} {error.value}: {error.problem}") from None
+
+
 def _check_steps(steps: int) -> None:
-    if steps < 0:
-        raise ValueError(f"--steps {steps}: must be >= 0 (training steps to run)")
+    from nerfaug.capture.requests import check_steps
+
+    with _as_options():
+        check_steps(steps)
 
 
 def _check_period(seconds: float) -> None:
@@ -315,7 +328,7 @@ def propose(
             to the hemisphere's candidates or to --candidates.
         force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
     """
-    from nerfaug.capture.choose import ProposalRequest, RequestError
+    from nerfaug.capture.choose import ProposalRequest
 
     request = ProposalRequest(
         n,
@@ -326,11 +339,8 @@ def propose(
         config=selection,
         constraints=constraints,
     )
-    try:
+    with _as_options():
         request = request.checked()  # before the session is opened: a refused call loads nothing
-    except RequestError as error:
-        option = "--" + error.argument.replace("_", "-")
-        raise ValueError(f"{option} {error.value}: {error.problem}") from None
     _check_poses_out(out, force)
     session = _open(run, device)
     proposal = session.propose(

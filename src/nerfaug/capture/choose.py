@@ -17,6 +17,7 @@ from nerfaug.capture.frame import ENGINE_RADIUS
 from nerfaug.capture.images import as_array
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
+from nerfaug.capture.requests import RequestError
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frames import check_pose
 from nerfaug.selection.candidates import with_poses
@@ -25,21 +26,6 @@ if TYPE_CHECKING:
     from torch import Tensor
 
     from nerfaug.selection import SelectionConfig
-
-
-class RequestError(ValueError):
-    """An argument of a request is out of range: names the argument and its value.
-
-    Attributes:
-        argument: the argument's name as the library spells it ("n_candidates").
-        value: the value given.
-        problem: what is wrong with it.
-    """
-
-    def __init__(self, argument: str, value, problem: str):
-        self.argument, self.value, self.problem = argument, value, problem
-        shown = repr(value) if isinstance(value, str) else value
-        super().__init__(f"{argument} {shown}: {problem}")
 
 
 def check_method(method: str) -> None:

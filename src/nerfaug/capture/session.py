@@ -34,6 +34,7 @@ from nerfaug.capture.evaluate import evaluate_model, load_held_out
 from nerfaug.capture.frame import Hemisphere, estimate_hemisphere
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
+from nerfaug.capture.requests import check_steps
 from nerfaug.capture.runfolder import check_new_run
 from nerfaug.capture.state import (
     CHECKPOINT_FILE,
@@ -339,9 +340,7 @@ class CaptureSession:
     def train(self, steps: int) -> dict:
         """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"})."""
         self.require_model()
-        if steps < 0:
-            raise ValueError(f"steps must be >= 0, got {steps}")
-        self.trainer.train(self.trainer.step + int(steps))
+        self.trainer.train(self.trainer.step + check_steps(steps))
         return self.trainer.history[-1] if self.trainer.history else {"step": self.trainer.step}
 
     def candidate_cameras(
