@@ -27,6 +27,10 @@ def jpeg_nerfstudio(root, n: int = 3, size: int = 8):
     return root
 
 
+def test_each_format_is_registered_under_its_own_name():
+    assert all(name == fmt.name for name, fmt in FORMATS.items())
+
+
 def test_copies_keep_bytes_unless_the_format_reads_png_only(tmp_path):
     source = find_split(jpeg_nerfstudio(tmp_path / "src"))
     assert source.format is FORMATS["nerfstudio"]

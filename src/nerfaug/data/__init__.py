@@ -28,6 +28,7 @@ _HOMES = {
     "detect_format": "nerfaug.data.formats",
     "find_split": "nerfaug.data.formats",
     "get_format": "nerfaug.data.formats",
+    "has_split": "nerfaug.data.formats",
     "load_dataset": "nerfaug.data.formats",
     "register_format": "nerfaug.data.formats",
 }
@@ -46,6 +47,7 @@ if TYPE_CHECKING:
         detect_format,
         find_split,
         get_format,
+        has_split,
         load_dataset,
         register_format,
     )
@@ -76,6 +78,7 @@ __all__ = [
     "detect_format",
     "find_split",
     "get_format",
+    "has_split",
     "load_blender",
     "load_blender_split",
     "load_dataset",
