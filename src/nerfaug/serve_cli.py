@@ -115,7 +115,7 @@ def uncertainty(
     """
     from nerfaug import owned
     from nerfaug.capture import CaptureSession, read_poses
-    from nerfaug.capture.uncertainty_images import view_maps, write_maps
+    from nerfaug.capture.uncertainty_images import write_maps
     from nerfaug.device import resolve_device
     from nerfaug.errors import FolderRefused
 
@@ -129,7 +129,7 @@ def uncertainty(
         raise FolderRefused(f"{out}: lies inside or holds the session {run}; choose a folder outside it")
     matrices, names = read_poses(poses)
     session = CaptureSession.open(run, device=str(resolve_device(device)))
-    maps = view_maps(session, matrices, width, fisher, fisher_width)
+    maps = session.uncertainty_maps(matrices, width, fisher, fisher_width)
     owned.mark(out, UNCERTAINTY_KIND)
     for name, view in zip(names, maps):
         write_maps(view, out, name)

@@ -23,12 +23,14 @@ import tyro
 from nerfaug import serve_cli
 from nerfaug.capture.constraints import ViewConstraints
 from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
+from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset
 from nerfaug.selection.methods import SelectionConfig
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
 Device = Literal["auto", "cpu", "cuda"]
+FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
 # The defaults `--selection.*` options start from (read-only use: never mutated).
 DEFAULT_SELECTION = SelectionConfig()
 DEFAULT_CONSTRAINTS = ViewConstraints()
@@ -84,9 +86,22 @@ def _warning_lines():
         yield
 
 
+@contextlib.contextmanager
+def _as_options():
+    """Show a library's `RequestError` as this command's option: `--n-candidates 0: must be >= 1`."""
+    from nerfaug.capture.requests import RequestError
+
+    try:
+        yield
+    except RequestError as error:
+        raise ValueError(f"--{error.argument.replace('_', '-')} {error.value}: {error.problem}") from None
+
+
 def _check_steps(steps: int) -> None:
-    if steps < 0:
-        raise ValueError(f"--steps {steps}: must be >= 0 (training steps to run)")
+    from nerfaug.capture.requests import check_steps
+
+    with _as_options():
+        check_steps(steps)
 
 
 def _check_period(seconds: float) -> None:
@@ -313,17 +328,9 @@ def propose(
             to the hemisphere's candidates or to --candidates.
         force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
     """
-    from nerfaug.capture.choose import check_method
+    from nerfaug.capture.choose import ProposalRequest
 
-    check_method(method)
-    for name, value in (("n", n), ("n-candidates", n_candidates)):
-        if value < 1:
-            raise ValueError(f"--{name} {value}: must be >= 1")
-    if seed is not None and seed < 0:
-        raise ValueError(f"--seed {seed}: must be >= 0")
-    _check_poses_out(out, force)
-    session = _open(run, device)
-    proposal = session.propose(
+    request = ProposalRequest(
         n,
         method,
         candidates=candidates,
@@ -331,6 +338,19 @@ def propose(
         seed=seed,
         config=selection,
         constraints=constraints,
+    )
+    with _as_options():
+        request = request.checked()  # before the session is opened: a refused call loads nothing
+    _check_poses_out(out, force)
+    session = _open(run, device)
+    proposal = session.propose(
+        request.n,
+        request.method,
+        candidates=request.candidates,
+        n_candidates=request.n_candidates,
+        seed=request.seed,
+        config=request.config,
+        constraints=request.constraints,
     )
     path = proposal.write(out)
     session.save()
@@ -385,7 +405,7 @@ def add(
 def export(
     run: RunFolder,
     out: Path,
-    format: Literal["nerfstudio", "blender"] = "nerfstudio",
+    format: FormatName = EXCHANGE_FORMAT,
 ) -> None:
     """Write the session's grown dataset for other tools.
 
@@ -396,7 +416,7 @@ def export(
     Args:
         run: the session's run folder.
         out: the folder to write.
-        format: nerfstudio or blender.
+        format: the dataset format to write.
     """
     from nerfaug.capture import CaptureSession
 
@@ -452,14 +472,13 @@ def evaluate(
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
     """
     from nerfaug import __version__
-    from nerfaug.capture.evaluate import evaluate_session, load_held_out
     from nerfaug.jsonio import atomic_write_json
 
     if out is not None:
         _check_eval_out(out, data)
     session = _open(run, device)
-    views = load_held_out(session, data, split)
-    result = evaluate_session(session, views, lpips="auto" if lpips else None, progress=True)
+    views = session.held_out(data, split)
+    result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
     m = result.mean
     print(f"{run} (step {session.step}) on split '{split}' of {data}: {len(views)} views")
     print(f"  PSNR {_metric(m['psnr'], 2)} dB   SSIM {_metric(m['ssim'], 4)}   LPIPS {_metric(m['lpips'], 4)}")

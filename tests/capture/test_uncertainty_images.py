@@ -9,7 +9,6 @@ import pytest
 import torch
 
 from nerfaug.capture import CaptureSession
-from nerfaug.capture.uncertainty_images import view_maps
 from nerfaug.cli import main
 from nerfaug.hemisphere import pose_from_angles
 
@@ -51,7 +50,7 @@ def test_the_command_writes_a_figure_and_arrays_per_pose(run, tmp_path, capsys):
 def test_depth_is_in_world_units(run):
     session = CaptureSession.open(run)
     pose = pose_from_angles(torch.tensor([1.0]), torch.tensor([0.7]), 8.06)
-    maps = view_maps(session, pose, width=5, fisher=False)[0]
+    maps = session.uncertainty_maps(pose, width=5, fisher=False)[0]
     assert maps.fisher is None
     engine = session.hemisphere.to_engine(pose)
     camera = session.template(5, 5)

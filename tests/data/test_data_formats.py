@@ -8,6 +8,7 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.data import (
+    FORMATS,
     DatasetError,
     Views,
     load_blender,
@@ -322,3 +323,16 @@ def test_an_image_smaller_than_the_downscale_factor_is_refused(tmp_path):
     valid_meta(tmp_path, size=8)
     with pytest.raises(DatasetError, match=r"smaller than the downscale factor 9.*8x8"):
         load_blender_split(tmp_path, "train", downscale=9)
+
+
+def test_the_blender_format_fits_one_field_of_view_with_a_centred_principal_point(tmp_path):
+    views = make_views(n=2, size=8)
+    c, blender = views.cameras, FORMATS["blender"]
+    assert blender.fits(c) and FORMATS["nerfstudio"].fits(c)
+    other_fy = Cameras(c.camera_to_world, c.fx, c.fy * 1.01, c.cx, c.cy, 8, 8)
+    off_centre = Cameras(c.camera_to_world, c.fx, c.fy, c.cx + 0.5, c.cy, 8, 8)
+    for cameras in (other_fy, off_centre):
+        assert not blender.fits(cameras)
+        with pytest.raises(ValueError, match="centred principal point; use write_nerfstudio"):
+            write_blender_split(tmp_path, "train", Views(cameras, views.images, views.names))
+    assert not (tmp_path / "transforms_train.json").exists()

@@ -199,8 +199,6 @@ def test_uncertainty_images_of_a_pose(server):
 
 
 def test_held_out_views_are_scored_as_the_library_scores_them(server, root):
-    from nerfaug.capture.evaluate import evaluate_session, load_held_out
-
     tiny_dataset(root / "held-out", n=3, split="test", seed=5)
     assert create(server, "scored").status_code == 201
     assert server.client.post("/sessions/scored/train", json={"steps": 10}).status_code == 202
@@ -214,7 +212,7 @@ def test_held_out_views_are_scored_as_the_library_scores_them(server, root):
     assert scored["lpips"] is None and "smaller than" in scored["lpips_status"]  # 8x8 pixels: below AlexNet's size
     # The same numbers as `nerfaug eval` computes in process.
     session = CaptureSession.open(root / "scored")
-    local = evaluate_session(session, load_held_out(session, root / "held-out", "test", max_views=2), lpips=None)
+    local = session.evaluate(session.held_out(root / "held-out", "test", max_views=2), lpips=None)
     assert scored["psnr"] == pytest.approx(local.mean["psnr"], abs=1e-6)
     assert [v["name"] for v in scored["per_view"]] == [v["name"] for v in local.per_view]
     every = server.client.post("/sessions/scored/evaluate", json={"dataset": "held-out", "lpips": False}).json()

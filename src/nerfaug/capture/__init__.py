@@ -2,10 +2,14 @@
 its dataset with what you captured there.
 
 Rooms: `frame` (the hemisphere and the engine frame), `proposal` (proposed views, their JSON),
-`images` (captured images from any source, checked), `dataset` (the run's dataset folder and the
-one frame-copying helper), `state` (session.json, typed, and the run folder's names), `session`
-(`CaptureSession`: create, open, save, train), and what its methods do: `choose` (proposing the
-next views), `add` (adding captured views), `export` (writing the dataset for other tools).
+`images` (captured images from any source, checked), `dataset` (what a session reads of its
+dataset: the default split, frames as the trainer sees them, repeated poses; every read and write
+on disk goes through the dataset's format, `nerfaug.data.formats`), `state` (session.json, typed,
+and the run folder's names), `runfolder` (which folders may become a run folder), `session`
+(`CaptureSession`: create, open, save, train; it coordinates), and the steps it calls with the
+narrow pieces they need: `choose` (proposing the next views, `ProposalRequest`), `add` (adding
+captured views), `export` (writing the dataset in any format), and, through `model`
+(`SessionModel`: the NeRF seen from the world frame), `evaluate` and `uncertainty_images`.
 """
 
 from nerfaug.capture.frame import (

@@ -1,28 +1,61 @@
-"""Adding captured views to a session: every check first (poses, images, names), then the images,
-then the transforms file, then training sees them (what `CaptureSession.add_views` does)."""
+"""Adding captured views to a session's dataset: every check first (poses, images, names) into an
+`Addition`, then the images and the listing are written through the dataset's format (what
+`CaptureSession.add_views` does before training sees them)."""
 
 from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from nerfaug.capture.dataset import NAME, file_path, unique_stem
+from nerfaug.cameras import Cameras
+from nerfaug.capture.dataset import NAME
 from nerfaug.capture.images import as_array, check_capture, collect_images, stored_bytes
 from nerfaug.capture.integrity import sha256_bytes
 from nerfaug.capture.proposal import Proposal, read_poses
-from nerfaug.capture.state import AdditionRecord, DuplicateViews, now
-from nerfaug.data import DatasetError, Views
+from nerfaug.capture.state import DuplicateViews
+from nerfaug.data.errors import DatasetError
+from nerfaug.data.format import DatasetSplit, NewFrame, unique_stem
 from nerfaug.data.frames import check_pose
-from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
+from nerfaug.data.views import Views
 
 
-def add_views(session, images, poses=None, names: Sequence[str] | None = None) -> list[str]:
-    """`CaptureSession.add_views`: check everything, then write the images and the transforms file."""
-    session.require_model()
+@dataclass(frozen=True)
+class Addition:
+    """Captures checked against a dataset and ready to write; nothing is on disk yet.
+
+    Attributes:
+        names: the new frames' names (image file stems).
+        frames: the images as the bytes to store, with their world-frame poses.
+    """
+
+    names: list[str]
+    frames: list[NewFrame]
+
+
+def prepare_addition(
+    images,
+    poses,
+    names: Sequence[str] | None,
+    dataset: DatasetSplit,
+    camera: Cameras,
+    background=(1.0, 1.0, 1.0),
+) -> Addition:
+    """Check captured images and their poses against `dataset`; see `CaptureSession.add_views`
+    for `images`, `poses` and `names`.
+
+    Args:
+        dataset: the split the captures join.
+        camera: one camera with the dataset's intrinsics (its size is the images' size).
+        background: the colour `Views` images were composited over.
+
+    Raises:
+        DatasetError: naming the file or index and the value of the first bad input.
+    """
     expected_names: list[str] | None = None
     pose_source = "poses"
     if poses is None:
@@ -44,7 +77,7 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
     if names is not None:
         expected_names = list(names)
     is_folder = isinstance(images, (str, Path)) and Path(images).is_dir()
-    captures = collect_images(images, expected_names if is_folder else None, tuple(session.state.background))
+    captures = collect_images(images, expected_names if is_folder else None, tuple(background))
     if len(captures) != len(checked):
         where = str(images) if isinstance(images, (str, Path)) else "images"
         raise DatasetError(
@@ -54,13 +87,10 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
         )
     if expected_names is not None and len(expected_names) != len(checked):
         raise DatasetError(pose_source, f"got {len(expected_names)} names but {len(checked)} poses")
-    k = session.state.intrinsics
     for capture in captures:
-        check_capture(capture, k.width, k.height)
+        check_capture(capture, camera.width, camera.height)
 
-    json_path = session.json_path()
-    meta = read_json(json_path)
-    frames = session.frames()
+    frames = dataset.frames()
     existing = {Path(str(f["file_path"])).stem for f in frames}
     if expected_names is None:
         from_files = [c.name for c in captures]
@@ -80,7 +110,7 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
             )
         if name in existing:
             raise DatasetError(
-                json_path,
+                dataset.listing,
                 f"the dataset already has a frame named {name!r}; was this capture added before?",
                 field=f"names[{i}]",
                 value=name,
@@ -90,31 +120,18 @@ def add_views(session, images, poses=None, names: Sequence[str] | None = None) -
         seen.add(name)
 
     warn_repeated_poses(frames, checked, expected_names, pose_source)
-    fmt, folder = session.state.dataset.format, session.state.dataset.folder
     new_frames = []
     for name, capture, pose in zip(expected_names, captures, checked):
-        data, suffix = stored_bytes(capture, png_only=fmt == "blender")
-        atomic_write_bytes(session.dataset_dir / folder / f"{name}{suffix}", data)
-        frame = {"file_path": file_path(fmt, folder, name, suffix), "transform_matrix": pose.double().tolist()}
-        session.state.integrity.captures[frame["file_path"]] = sha256_bytes(data)
-        if fmt == "nerfstudio":
-            frame.update({"fl_x": k.fx, "fl_y": k.fy, "cx": k.cx, "cy": k.cy, "w": k.width, "h": k.height})
-        new_frames.append(frame)
-    start = len(frames)
-    atomic_write_json(json_path, {**meta, "frames": frames + new_frames})
+        data, suffix = stored_bytes(capture, png_only=dataset.format.png_only)
+        new_frames.append(NewFrame(name, data, suffix, pose.double().tolist()))
+    return Addition(list(expected_names), new_frames)
 
-    session.trainer.add_views(session.engine_views(start))
-    session.state.views_in_model = len(session.trainer.train_views)
-    matched = [p.number for p in session.state.proposals if set(expected_names) <= set(p.names)]
-    session.state.additions.append(
-        AdditionRecord(
-            step=session.step,
-            names=list(expected_names),
-            proposal=matched[-1] if matched else None,
-            created=now(),
-        )
-    )
-    return list(expected_names)
+
+def write_addition(addition: Addition, dataset: DatasetSplit, camera: Cameras) -> dict[str, str]:
+    """Write the images, then the listing (atomically). Returns each new frame's `file_path` ->
+    sha256 digest of its image (for the session's integrity record)."""
+    listed = dataset.append(addition.frames, camera)
+    return {str(f["file_path"]): sha256_bytes(new.data) for f, new in zip(listed, addition.frames)}
 
 
 def warn_repeated_poses(frames: list, poses: torch.Tensor, names: Sequence[str], source: str) -> None:
@@ -138,5 +155,5 @@ def warn_repeated_poses(frames: list, poses: torch.Tensor, names: Sequence[str],
             warnings.warn(
                 f"{source}: new view {names[i]} has the same pose as {labels[j]} (the same view added twice)",
                 DuplicateViews,
-                stacklevel=3,
+                stacklevel=4,
             )

@@ -1,9 +1,12 @@
-"""How a session chooses its next views: the candidate cameras, the selection method's call, and
-the proposal's record (what `CaptureSession.propose` does; `proposal` holds what it returns)."""
+"""How a session chooses its next views: what is asked (`ProposalRequest`, checked here for the
+library, the CLI and the service), the candidate cameras, the selection method's call on the
+session's NeRF (`SessionModel`), and the proposal's record."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -12,21 +15,72 @@ from nerfaug.cameras import Cameras
 from nerfaug.capture.constraints import ViewConstraints, constrained_indices
 from nerfaug.capture.frame import ENGINE_RADIUS
 from nerfaug.capture.images import as_array
+from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.state import PROPOSALS_DIR, ProposalRecord, now
+from nerfaug.capture.requests import RequestError
+from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frames import check_pose
 from nerfaug.selection.candidates import with_poses
 
+if TYPE_CHECKING:
+    from torch import Tensor
+
+    from nerfaug.selection import SelectionConfig
+
 
 def check_method(method: str) -> None:
-    """Raise ValueError unless `method` names a selection method."""
+    """Raise RequestError unless `method` names a selection method."""
     from nerfaug.selection import METHODS
 
     if method not in METHODS:
-        raise ValueError(
-            f"unknown selection method {method!r}; choose one of {', '.join(METHODS)} "
-            "(`nerfaug methods` describes them)"
+        raise RequestError(
+            "method",
+            method,
+            f"unknown selection method; choose one of {', '.join(METHODS)} (`nerfaug methods` describes them)",
         )
+
+
+@dataclass(frozen=True)
+class ProposalRequest:
+    """What to propose; see `CaptureSession.propose` for each argument.
+
+    `checked()` is the one place its values are checked: the library, the CLI (before it opens the
+    session) and the service call it.
+    """
+
+    n: int = 6
+    method: str = "ours"
+    candidates: str | Path | Cameras | Tensor | np.ndarray | None = None
+    n_candidates: int = 500
+    seed: int | None = None
+    config: SelectionConfig | dict | None = None
+    map: bool = True
+    constraints: ViewConstraints | dict | None = None
+
+    def checked(self) -> ProposalRequest:
+        """This request with `config` a `SelectionConfig` (or None) and `constraints` a checked
+        `ViewConstraints` (or None).
+
+        Raises:
+            RequestError: naming the first argument out of range and its value.
+            ValueError: a constraint or selection setting that is not valid (naming it).
+        """
+        from nerfaug.selection import SelectionConfig
+
+        check_method(self.method)
+        if int(self.n) != self.n or int(self.n) < 1:
+            raise RequestError("n", self.n, "must be >= 1 (a whole number of views to propose)")
+        if int(self.n_candidates) < 1:
+            raise RequestError("n_candidates", self.n_candidates, "must be >= 1")
+        if self.seed is not None and int(self.seed) < 0:
+            raise RequestError("seed", self.seed, "must be >= 0")
+        config = SelectionConfig.from_dict(self.config) if isinstance(self.config, dict) else self.config
+        constraints = self.constraints
+        if isinstance(constraints, dict):
+            constraints = ViewConstraints.from_dict(constraints)
+        elif constraints is not None:
+            constraints = constraints.check()
+        return replace(self, n=int(self.n), config=config, constraints=constraints)
 
 
 def describe_candidates(candidates) -> str:
@@ -39,23 +93,22 @@ def describe_candidates(candidates) -> str:
 
 
 def candidate_cameras(
-    session, candidates=None, n_candidates: int = 500, generator: torch.Generator | None = None
+    model: SessionModel, candidates=None, n_candidates: int = 500, generator: torch.Generator | None = None
 ) -> Cameras:
-    """`CaptureSession.candidate_cameras`: world-frame candidates minus the poses trained on."""
+    """World-frame candidate cameras (see `CaptureSession.propose`) minus the poses trained on."""
     from nerfaug.selection import hemisphere_candidates, matching_poses
 
-    session.require_model()
-    template = session.template()
-    engine_train = session.trainer.train_views.cameras.to("cpu")
+    template, hemisphere = model.template, model.hemisphere
+    engine_train = model.train_cameras.to("cpu")
     if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
         engine = hemisphere_candidates(
-            session.template(engine_train.width, engine_train.height),
+            template.resized(engine_train.width, engine_train.height),
             n_candidates,
             generator,
             radius=ENGINE_RADIUS,
             training=engine_train,
         )
-        return with_poses(template, session.hemisphere.to_world(engine.camera_to_world))
+        return with_poses(template, hemisphere.to_world(engine.camera_to_world))
     if isinstance(candidates, Cameras):
         given = candidates
     elif isinstance(candidates, (str, Path)):
@@ -68,68 +121,58 @@ def candidate_cameras(
             template, torch.stack([check_pose(p, Path("candidates"), f"candidates[{i}]") for i, p in enumerate(poses)])
         )
     # Compared in the engine frame, so the tolerance does not depend on the data's units.
-    known = matching_poses(session.hemisphere.to_engine(given.camera_to_world), engine_train.camera_to_world)
+    known = matching_poses(hemisphere.to_engine(given.camera_to_world), engine_train.camera_to_world)
     return given[torch.nonzero(~known).reshape(-1).tolist()]
 
 
 def propose(
-    session,
-    n: int = 6,
-    method: str = "ours",
-    candidates=None,
-    n_candidates: int = 500,
+    request: ProposalRequest,
+    model: SessionModel,
+    number: int,
+    folder: Path,
     generator: torch.Generator | None = None,
-    seed: int | None = None,
-    config=None,
-    map: bool = True,
-    constraints: ViewConstraints | dict | None = None,
-) -> Proposal:
-    """`CaptureSession.propose`: choose, record and write `n` views to capture next."""
-    session.require_model()
-    from nerfaug.selection import SelectionConfig, get_method, select_views
+) -> tuple[Proposal, ProposalRecord]:
+    """Choose `request.n` views to capture next, and write them (with every candidate's score)
+    to `folder/proposal_NNN.json` (and the map beside it).
 
-    check_method(method)
-    if isinstance(config, dict):
-        config = SelectionConfig.from_dict(config)
-    used_config = get_method(method).effective_config(config)
-    if int(n) < 1 or int(n) != n:
-        raise ValueError(f"n (views to propose) must be an integer >= 1, got {n}")
-    if int(n_candidates) < 1:
-        raise ValueError(f"n_candidates must be >= 1, got {n_candidates}")
-    if seed is not None and int(seed) < 0:
-        raise ValueError(f"seed must be >= 0, got {seed}")
-    if isinstance(constraints, dict):
-        constraints = ViewConstraints.from_dict(constraints)
-    elif constraints is not None:
-        constraints.check()
-    number = len(session.state.proposals)
+    Args:
+        model: the session's NeRF that scores the candidates.
+        number: this proposal's number in the session (0 for the first).
+        folder: where the proposal's files go (`run/proposals`).
+        generator: random source for the candidates and the selector; None seeds one from the
+            request's seed, else from the session seed and the proposal number (`proposal_seed`).
+
+    Returns:
+        The proposal, and its record for the session's history.
+    """
+    from nerfaug.selection import get_method, select_views
+
+    request = request.checked()
+    n, method, hemisphere = request.n, request.method, model.hemisphere
+    used_config = get_method(method).effective_config(request.config)
     used_seed = None
     if generator is None:
-        used_seed = proposal_seed(session.seed, number) if seed is None else int(seed)
+        used_seed = proposal_seed(model.seed, number) if request.seed is None else int(request.seed)
         generator = torch.Generator().manual_seed(used_seed)
-    world = candidate_cameras(session, candidates, n_candidates, generator)
-    world = world[constrained_indices(world.camera_to_world, session.hemisphere, constraints, n).tolist()]
+    world = candidate_cameras(model, request.candidates, request.n_candidates, generator)
+    world = world[constrained_indices(world.camera_to_world, hemisphere, request.constraints, n).tolist()]
     if len(world) < n:
         raise ValueError(
-            f"{describe_candidates(candidates)}: cannot propose {n} views from {len(world)} candidates "
+            f"{describe_candidates(request.candidates)}: cannot propose {n} views from {len(world)} candidates "
             "(poses the model already trains on are left out); ask for fewer views or give more "
             "candidates"
         )
-    hemisphere = session.hemisphere
-    engine_train = session.trainer.train_views.cameras
+    engine_train = model.train_cameras
     engine = hemisphere.cameras_to_engine(world)
     if (engine.width, engine.height) != (engine_train.width, engine_train.height):
         engine = engine.resized(engine_train.width, engine_train.height)
-    selection = select_views(
-        method, session.trainer.model, engine_train, engine.to(session.trainer.device), n, generator, config
-    )
+    selection = select_views(method, model.model, engine_train, engine.to(model.device), n, generator, request.config)
     chosen = selection.indices.long()
     poses = world.camera_to_world[chosen]
     azimuth, polar, _ = hemisphere.angles(poses)
     names = [f"capture_{number:03d}_{i:02d}" for i in range(n)]
-    folder = session.run_dir / PROPOSALS_DIR
     map_path = None
-    if map:
+    if request.map:
         from nerfaug.maps import plot_hemisphere_map
 
         map_path = plot_hemisphere_map(
@@ -138,44 +181,45 @@ def propose(
             engine_train.camera_to_world.cpu(),
             engine.camera_to_world[chosen],
             path=folder / f"proposal_{number:03d}.png",
-            title=f"proposal {number}: {method} at step {session.step}",
+            title=f"proposal {number}: {method} at step {model.step}",
         )
-    angle_x = float(world.camera_angle_x[0])
     proposal = Proposal(
-        number,
-        selection.method or method,
-        poses,
-        names,
-        azimuth,
-        polar,
-        chosen,
-        world,
-        selection.scores.float(),
-        dict(selection.components),
-        map_path,
-        session.step,
-        used_seed,
-        angle_x,
-        hemisphere,
+        number=number,
+        method=selection.method or method,
+        poses=poses,
+        names=names,
+        azimuth=azimuth,
+        polar=polar,
+        indices=chosen,
+        candidates=world,
+        scores=selection.scores.float(),
+        components=dict(selection.components),
+        map_path=map_path,
+        step=model.step,
+        seed=used_seed,
+        camera_angle_x=float(world.camera_angle_x[0]),
+        hemisphere=hemisphere,
     )
     record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
-    session.state.proposals.append(
-        ProposalRecord(
-            number=number,
-            method=proposal.method,
-            n=n,
-            step=session.step,
-            seed=used_seed,
-            candidates=describe_candidates(candidates),
-            n_candidates=len(world),
-            names=names,
-            poses=poses.tolist(),
-            azimuth=azimuth.tolist(),
-            polar=polar.tolist(),
-            file=str(record_path.relative_to(session.run_dir)),
-            created=now(),
-            extra={"selection": used_config.to_dict()}
-            | ({} if constraints is None or constraints.empty else {"constraints": constraints.to_dict()}),
-        )
+    record = ProposalRecord(
+        number=number,
+        method=proposal.method,
+        n=n,
+        step=model.step,
+        seed=used_seed,
+        candidates=describe_candidates(request.candidates),
+        n_candidates=len(world),
+        names=names,
+        poses=poses.tolist(),
+        azimuth=azimuth.tolist(),
+        polar=polar.tolist(),
+        file=f"{folder.name}/{record_path.name}",
+        created=now(),
+        extra={"selection": used_config.to_dict()} | constraints_record(request.constraints),
     )
-    return proposal
+    return proposal, record
+
+
+def constraints_record(constraints: ViewConstraints | None) -> dict:
+    """What a proposal's record keeps of its constraints: nothing when there were none."""
+    return {} if constraints is None or constraints.empty else {"constraints": constraints.to_dict()}

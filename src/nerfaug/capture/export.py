@@ -1,69 +1,69 @@
-"""Writing a session's grown dataset for other tools: nerfstudio (`transforms.json` + `images/`)
-or Blender (`transforms_train.json` + `train/`), only into a new, empty or earlier export folder
-(what `CaptureSession.export` does)."""
+"""Writing a session's grown dataset for other tools, in any registered format, only into a new,
+empty or earlier export folder (what `CaptureSession.export` does)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from nerfaug import owned
-from nerfaug.capture.dataset import DISTORTION_KEYS, blender_compatible, copy_frames, copy_split, frame_files
-from nerfaug.capture.state import EXPORT_KIND
+from nerfaug.capture.state import DATASET_SPLIT, EXPORT_KIND
+from nerfaug.data.format import DatasetSplit, Format
+from nerfaug.data.formats import FORMATS, find_split, has_split
 from nerfaug.errors import FolderRefused
-from nerfaug.jsonio import atomic_write_json, read_json
+
+# Held-out splits of the source dataset an export in a format with splits takes along.
+HELD_OUT_SPLITS = ("val", "test")
 
 
-def export(session, out: str | Path, format: str = "nerfstudio", source_splits: bool = True) -> Path:
-    """`CaptureSession.export`: the grown dataset in `format`; returns the transforms file."""
-    if format not in ("nerfstudio", "blender"):
-        raise ValueError(f"format must be 'nerfstudio' or 'blender', got {format!r}")
+def export(
+    dataset: DatasetSplit,
+    out: str | Path,
+    fmt: Format,
+    run_dir: Path,
+    source_dir: Path,
+    source_split: str,
+    held_out: bool = True,
+) -> Path:
+    """Copy `dataset` into `out` in `fmt`; returns the new listing's path.
+
+    Args:
+        dataset: the session's grown dataset.
+        fmt: the format to write.
+        run_dir: the session's run folder (`out` must lie outside it).
+        source_dir, source_split: the dataset folder and split the session started from (`out`
+            must lie outside the folder).
+        held_out: also copy the source folder's val and test splits (other than `source_split`),
+            when `fmt` has splits.
+
+    Raises:
+        FolderRefused: `out` holds files nerfaug did not write, or overlaps the run folder or the source.
+        ValueError: the cameras do not fit `fmt` (naming the formats that fit them).
+        DatasetError: an image of the dataset is missing or unreadable (before anything is written).
+    """
     out = Path(out)
-    if owned.overlaps(out, session.run_dir) or owned.overlaps(out, session.state.source.data_dir):
+    source_dir = Path(source_dir)
+    if owned.overlaps(out, run_dir) or owned.overlaps(out, source_dir):
         raise FolderRefused(
-            f"{out}: the export folder must lie outside the run folder {session.run_dir} and "
-            f"the source dataset {session.state.source.data_dir}; choose another --out"
+            f"{out}: the export folder must lie outside the run folder {run_dir} and "
+            f"the source dataset {source_dir}; choose another --out"
         )
     if not owned.is_empty(out) and not owned.marked(out, EXPORT_KIND):
         raise FolderRefused(
             f"{out}: not empty and not an earlier nerfaug export, so nothing is written "
             "there; choose a new or empty folder for --out"
         )
-    json_path = session.json_path()
-    meta = read_json(json_path)
-    frames = session.frames()
-    frame_files(session.dataset_dir, json_path, frames)  # every image found before anything is written
-    cameras = session.cameras
-    if format == "blender" and not blender_compatible(cameras):
+    dataset.frame_files()  # every image found before anything is written
+    cameras = dataset.load(lazy=True).cameras
+    if not fmt.fits(cameras):
+        fitting = " or ".join(repr(f.name) for f in FORMATS.values() if f.fits(cameras))
         raise ValueError(
-            "these cameras do not fit the Blender format (one camera_angle_x, square pixels, "
-            "centred principal point); export with format='nerfstudio'"
+            f"these cameras do not fit the {fmt.name} format ({fmt.fits_rule}); export with format={fitting}"
         )
-    folder = "images" if format == "nerfstudio" else "train"
     owned.mark(out, EXPORT_KIND)
-    new_frames = copy_frames(session.dataset_dir, json_path, frames, out, folder, format)
-    if format == "blender":
-        path = out / "transforms_train.json"
-        atomic_write_json(path, {"camera_angle_x": float(cameras.camera_angle_x[0]), "frames": new_frames})
-        source = Path(session.state.source.data_dir)
-        # The source is the user's dataset folder (recorded at creation); its files are read only.
-        if source_splits and session.state.source.format == "blender" and source.is_absolute() and source.is_dir():
-            for split in ("val", "test"):
-                split_json = source / f"transforms_{split}.json"
-                if split_json.exists() and split != session.state.source.split:
-                    copied = copy_split(source, split_json, out, split, "blender")
-                    atomic_write_json(out / split_json.name, copied)
-        return path
-    intrinsics = {"fl_x": cameras.fx, "fl_y": cameras.fy, "cx": cameras.cx, "cy": cameras.cy}
-    shared = all(bool((v - v[0]).abs().max() <= 1e-6 * max(1.0, float(v[0].abs()))) for v in intrinsics.values())
-    top = {"camera_model": "OPENCV", "w": cameras.width, "h": cameras.height}
-    if meta.get("camera_model"):
-        top["camera_model"] = meta["camera_model"]
-    top.update({k: meta[k] for k in DISTORTION_KEYS if k in meta})
-    if shared:
-        top.update({k: float(v[0]) for k, v in intrinsics.items()})
-    else:
-        for i, frame in enumerate(new_frames):
-            frame.update({k: float(v[i]) for k, v in intrinsics.items()})
-    path = out / "transforms.json"
-    atomic_write_json(path, {**top, "frames": new_frames})
+    path = fmt.copy(dataset, out, DATASET_SPLIT)
+    # The source is the user's dataset folder (recorded at creation); its files are only read.
+    if held_out and fmt.has_splits and source_dir.is_absolute() and source_dir.is_dir():
+        for split in HELD_OUT_SPLITS:
+            if split != source_split and has_split(source_dir, split):
+                fmt.copy(find_split(source_dir, split), out, split)
     return path

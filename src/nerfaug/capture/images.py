@@ -8,17 +8,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import imageio.v3 as iio
 import numpy as np
 import torch
 from torch import Tensor
 
-from nerfaug.data import DatasetError, Views
+from nerfaug.data.errors import DatasetError
+from nerfaug.data.frames import STORED_SUFFIXES, decode_image, encode_png
+from nerfaug.data.views import Views
 
 # Image files a capture folder may hold; anything else in it is ignored.
 CAPTURE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".tif", ".tiff", ".bmp", ".webp")
-# Formats every loader of both dataset formats reads; other captures are stored as PNG.
-STORED_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
 @dataclass
@@ -40,13 +39,7 @@ def image_files(folder: Path) -> list[Path]:
 
 
 def read_capture(path: Path, label: str | None = None) -> Capture:
-    if not path.is_file():
-        raise DatasetError(path, "image file not found", field=label)
-    try:
-        array = np.asarray(iio.imread(path))
-    except Exception as error:  # noqa: BLE001 -- imageio raises many types; all mean "cannot read"
-        raise DatasetError(path, f"cannot read image: {error}", field=label) from None
-    return Capture(str(path), array, source=path, name=path.stem)
+    return Capture(str(path), decode_image(path, label), source=path, name=path.stem)
 
 
 def as_array(image) -> np.ndarray:
@@ -170,12 +163,6 @@ def check_capture(capture: Capture, width: int, height: int) -> None:
         )
 
 
-def _encode_png(array: np.ndarray) -> bytes:
-    if array.dtype not in (np.uint8, np.uint16):
-        array = (np.clip(array, 0, 1) * 255.0 + 0.5).astype(np.uint8)
-    return iio.imwrite("<bytes>", np.ascontiguousarray(array), extension=".png")
-
-
 def stored_bytes(capture: Capture, png_only: bool) -> tuple[bytes, str]:
     """The bytes to store a capture as, and their suffix: the file itself when every loader reads
     its format (no re-encoding), else a lossless PNG of its pixels."""
@@ -183,4 +170,4 @@ def stored_bytes(capture: Capture, png_only: bool) -> tuple[bytes, str]:
         suffix = capture.source.suffix.lower()
         if suffix == ".png" or (not png_only and suffix in STORED_SUFFIXES):
             return capture.source.read_bytes(), suffix
-    return _encode_png(capture.array), ".png"
+    return encode_png(capture.array), ".png"

@@ -14,10 +14,9 @@ from pathlib import Path
 
 import torch
 
-from nerfaug.capture.dataset import frame_files
 from nerfaug.capture.state import SESSION_FILE, Integrity, SessionError
-from nerfaug.data import DatasetError
-from nerfaug.data.frames import resolve_image
+from nerfaug.data.errors import DatasetError
+from nerfaug.data.format import DatasetSplit
 
 _RESTORE = "put the session's own file back, or start a new session with `nerfaug train DATA --out NEW_RUN`"
 
@@ -58,13 +57,14 @@ def check_checkpoint(path: Path, integrity: Integrity) -> None:
         )
 
 
-def capture_digests(root: Path, json_path: Path, frames: list) -> dict[str, str]:
-    """Each frame's `file_path` -> the digest of its image file (found as the dataset reader finds it)."""
-    files = frame_files(root, json_path, frames)
+def capture_digests(dataset: DatasetSplit, frames: list, start: int = 0) -> dict[str, str]:
+    """Each frame's `file_path` -> the digest of its image file (found as the dataset reader finds
+    it); `start` numbers the frames in error messages."""
+    files = dataset.frame_files(frames, start)
     return {str(frame["file_path"]): sha256_file(path) for frame, path in zip(frames, files)}
 
 
-def check_captures(root: Path, json_path: Path, frames: list, recorded: dict[str, str]) -> None:
+def check_captures(dataset: DatasetSplit, frames: list, recorded: dict[str, str]) -> None:
     """Refuse a dataset whose recorded images were deleted, edited or unlisted since the session stored them.
 
     Frames without a recorded digest (added after the last save) are not checked here.
@@ -76,12 +76,12 @@ def check_captures(root: Path, json_path: Path, frames: list, recorded: dict[str
     for file_path, digest in recorded.items():
         if file_path not in listed:
             raise SessionError(
-                f"{json_path} lists {len(frames)} frames, without the captured view {file_path!r}, one of the "
+                f"{dataset.listing} lists {len(frames)} frames, without the captured view {file_path!r}, one of the "
                 f"{len(recorded)} {SESSION_FILE} records (the dataset was edited outside the session); {_RESTORE}"
             )
         index = listed[file_path]
         try:
-            path = resolve_image(root, file_path, json_path, f"frames[{index}].file_path")
+            path = dataset.frame_files([frames[index]], start=index)[0]
         except DatasetError as error:
             raise SessionError(
                 f"{error}: the captured image was deleted or moved since nerfaug stored it; {_RESTORE}"

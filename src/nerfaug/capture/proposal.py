@@ -24,9 +24,9 @@ def proposal_seed(seed: int, number: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(number)]).generate_state(1, np.uint64)[0] >> np.uint64(1))
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Proposal:
-    """The views a session proposes to capture next.
+    """The views a session proposes to capture next (built by keyword).
 
     Attributes:
         number: the session's proposal counter (0 for the first).

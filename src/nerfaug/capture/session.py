@@ -7,9 +7,10 @@ A session lives in a run folder:
       .nerfaug              marker: nerfaug made this folder (nothing is removed from a folder without it)
       session.json          state (`SessionState`): step, seed, engine, intrinsics, hemisphere, proposals, additions
       checkpoint.pt         the trainer (`Trainer.save_checkpoint`): model, optimiser, RNG, views
-      dataset/              the dataset as it has grown, in the source's standard format:
-                              Blender (`transforms_train.json` + `train/*.png`) or
-                              nerfstudio (`transforms.json` + `images/*`)
+      dataset/              the dataset as it has grown, as the train split of a registered format
+                              (`nerfaug.data.FORMATS`): Blender (`transforms_train.json` + `train/*.png`)
+                              when one camera_angle_x describes its cameras, else the source's own
+                              (nerfstudio: `transforms.json` + `images/*`)
       proposals/            proposal_000.json (poses + every candidate's score), proposal_000.png (map)
 
 Poses given to and returned by a session are in the dataset's world frame; the NeRF is trained in
@@ -28,23 +29,22 @@ from torch import Tensor
 from nerfaug import owned
 from nerfaug.cameras import Cameras
 from nerfaug.capture import add, choose, export, integrity
-from nerfaug.capture.dataset import (
-    blender_compatible,
-    copy_split,
-    dataset_json,
-    duplicate_frames,
-    frame_files,
-    has_distortion,
-)
+from nerfaug.capture.dataset import duplicate_frames, engine_views
+from nerfaug.capture.evaluate import evaluate_model, load_held_out
 from nerfaug.capture.frame import Hemisphere, estimate_hemisphere
-from nerfaug.capture.images import as_array
+from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
+from nerfaug.capture.requests import check_steps
+from nerfaug.capture.runfolder import check_new_run
 from nerfaug.capture.state import (
     CHECKPOINT_FILE,
     DATASET_DIR,
     DATASET_KIND,
+    DATASET_SPLIT,
+    PROPOSALS_DIR,
     RUN_KIND,
     SESSION_FILE,
+    AdditionRecord,
     DatasetInfo,
     DuplicateViews,
     Intrinsics,
@@ -54,11 +54,12 @@ from nerfaug.capture.state import (
     SourceInfo,
     now,
 )
-from nerfaug.data import DatasetError, Views, load_dataset
-from nerfaug.data.frames import read_image
-from nerfaug.errors import FolderRefused
-from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
-from nerfaug.selection.candidates import with_poses
+from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
+from nerfaug.data.format import DatasetSplit
+from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format, plainest_format
+from nerfaug.data.views import Views
+from nerfaug.evaluation import EvaluationResult
+from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
 
 
 class CaptureSession:
@@ -108,12 +109,12 @@ class CaptureSession:
         save. Nothing is trained yet (call `train`).
 
         Args:
-            data_dir: a Blender-format (`transforms_{split}.json`) or nerfstudio-format
-                (`transforms.json`) dataset folder: the views captured so far.
+            data_dir: a dataset folder in a registered format (`nerfaug.data.FORMATS`: Blender's
+                `transforms_{split}.json`, nerfstudio's `transforms.json`): the views captured so far.
             run_dir: the run folder to create (must not hold a session already).
             preset: NeRF engine preset ("cpu", "paper", "test"); ignored if `config` is given.
             seed: seeds the model's initialisation, its training and every proposal.
-            split: the Blender split holding the captured views ("initial" for built-in scenes).
+            split: the split holding the captured views ("initial" for built-in scenes).
             config: a `NerfConfig` to use instead of the preset.
             centre, radius: the hemisphere; None estimates them from the cameras (centre: the
                 point closest to all optical axes; radius: the mean camera distance to it).
@@ -146,36 +147,31 @@ class CaptureSession:
             raise ValueError(f"downscale must be a positive integer, got {downscale}")
         if len(background) != 3 or not all(0 <= float(c) <= 1 for c in background):
             raise ValueError(f"background must be three numbers in [0, 1], got {background}")
-        source = load_dataset(data_dir, split, lazy=True)  # validates the JSON and every path
-        json_path, fmt = dataset_json(data_dir, split)
-        cameras = source.cameras
-        for a, b in duplicate_frames(cameras, source.names):
-            same = f"{json_path}: frames {a} and {b} have the same pose (the same view twice)"
+        source = find_split(data_dir, split)
+        views = source.load(lazy=True)  # validates the listing and every path
+        cameras = views.cameras
+        for a, b in duplicate_frames(cameras, views.names):
+            same = f"{source.listing}: frames {a} and {b} have the same pose (the same view twice)"
             warnings.warn(same, DuplicateViews, stacklevel=2)
         if int(downscale) > min(cameras.width, cameras.height):
             raise ValueError(
                 f"downscale must be at most the image size ({cameras.width}x{cameras.height}), got {downscale}"
             )
-        if fmt == "nerfstudio" and blender_compatible(cameras) and not has_distortion(read_json(json_path)):
-            fmt_out = "blender"
-        else:
-            fmt_out = fmt
+        store = plainest_format(source, cameras)
         hemisphere = estimate_hemisphere(cameras.camera_to_world, centre, radius, up)
         preset_name = preset if config is None else "custom"
         config = config if config is not None else NerfConfig.preset(preset)
 
         # Everything is checked: from here on the run folder is written, and marked as nerfaug's first.
         owned.mark(run_dir, RUN_KIND)
-        dataset = run_dir / DATASET_DIR  # new: check_new_run refused a run folder holding anything
-        owned.mark(dataset, DATASET_KIND)
-        folder = "train" if fmt_out == "blender" else "images"
-        copied = copy_split(data_dir, json_path, dataset, folder, fmt_out, float(cameras.camera_angle_x[0]))
-        out_json = dataset / ("transforms_train.json" if fmt_out == "blender" else "transforms.json")
-        atomic_write_json(out_json, copied)
+        # The dataset folder is new: check_new_run refused a run folder holding anything.
+        dataset = DatasetSplit(run_dir / DATASET_DIR, store, DATASET_SPLIT)
+        owned.mark(dataset.root, DATASET_KIND)
+        store.copy(source, dataset.root, DATASET_SPLIT)
 
         state = SessionState(
-            source=SourceInfo(str(data_dir), split, fmt),
-            dataset=DatasetInfo(fmt_out, folder, out_json.name),
+            source=SourceInfo(str(data_dir), split, source.format.name),
+            dataset=DatasetInfo.of(store),
             preset=preset_name,
             engine=config.to_dict(),
             seed=int(seed),
@@ -193,7 +189,7 @@ class CaptureSession:
             hemisphere=hemisphere,
             hemisphere_estimated={"centre": centre is None, "radius": radius is None, "up": isinstance(up, str)},
         )
-        state.integrity.captures = integrity.capture_digests(dataset, out_json, copied["frames"])
+        state.integrity.captures = integrity.capture_digests(dataset, dataset.frames())
         session = cls(run_dir, None, state)
         views = session.engine_views(0)
         session.trainer = Trainer(
@@ -220,8 +216,8 @@ class CaptureSession:
         run_dir = Path(run_dir)
         state = SessionState.read(run_dir)
         session = cls(run_dir, None, state)
-        json_path = session.json_path()  # checks it stays inside the run folder
-        integrity.check_captures(session.dataset_dir, json_path, session.frames(), state.integrity.captures)
+        dataset = session.dataset_split()  # checks it stays inside the run folder
+        integrity.check_captures(dataset, session.frames(), state.integrity.captures)
         if not load_model:
             return session
         checkpoint = run_dir / CHECKPOINT_FILE
@@ -243,12 +239,12 @@ class CaptureSession:
         frames = session.frames()
         if len(frames) < in_model:
             raise SessionError(
-                f"{json_path} lists {len(frames)} frames but the checkpoint was "
+                f"{dataset.listing} lists {len(frames)} frames but the checkpoint was "
                 f"trained on {in_model}: the dataset was edited outside the session"
             )
         if len(frames) > in_model:  # added after the last save: train on them too
             trainer.add_views(session.engine_views(in_model))
-            added = integrity.capture_digests(session.dataset_dir, json_path, frames[in_model:])
+            added = integrity.capture_digests(dataset, frames[in_model:], start=in_model)
             state.integrity.captures.update({k: v for k, v in added.items() if k not in state.integrity.captures})
         state.views_in_model = len(frames)
         state.step = trainer.step
@@ -306,7 +302,7 @@ class CaptureSession:
 
     def dataset(self) -> Views:
         """The grown dataset, world frame, full resolution (images loaded on access)."""
-        return load_dataset(self.dataset_dir, "train", lazy=True, background=tuple(self.state.background))
+        return self.dataset_split().load(lazy=True, background=tuple(self.state.background))
 
     def template(self, width: int | None = None, height: int | None = None) -> Cameras:
         """One camera with the session's intrinsics at the identity pose (full resolution unless a
@@ -319,62 +315,32 @@ class CaptureSession:
         if self.trainer is None:
             raise SessionError(f"{self.run_dir} was opened with load_model=False; open it with the model to do this")
 
-    def json_path(self) -> Path:
-        """The dataset's transforms file; SessionError if session.json sends it outside the run folder."""
-        path = self.dataset_dir / self.state.dataset.json
+    def dataset_split(self) -> DatasetSplit:
+        """The grown dataset's split in its format; SessionError if its listing lies outside the run folder."""
+        dataset = DatasetSplit(self.dataset_dir, FORMATS[self.state.dataset.format], DATASET_SPLIT)
+        path = dataset.listing
         if not owned.overlaps(path, self.run_dir) or path.resolve() == self.run_dir.resolve():
             raise SessionError(
                 f"{self.run_dir / SESSION_FILE}, field 'dataset.json': the dataset file must lie "
                 f"inside the run folder (got {str(path.resolve())!r})"
             )
-        return path
+        return dataset
 
     def frames(self) -> list:
-        """The frames of the dataset's transforms file (DatasetError unless a list)."""
-        json_path = self.json_path()
-        frames = read_json(json_path).get("frames")
-        if not isinstance(frames, list):
-            raise DatasetError(json_path, "frames must be a list", field="frames", value=frames)
-        return frames
+        """The frames listed by the dataset (DatasetError unless a list)."""
+        return self.dataset_split().frames()
 
     def engine_views(self, start: int) -> Views:
         """Dataset frames `start:` loaded as the trainer sees them: downscaled, engine frame."""
-        json_path = self.json_path()
-        frames = self.frames()[start:]
-        files = frame_files(self.dataset_dir, json_path, frames)
-        background = torch.tensor(self.state.background, dtype=torch.float32)
-        downscale = self.state.downscale
-        loaded = [
-            read_image(f, background, downscale, json_path, f"frames[{start + i}].file_path")
-            for i, f in enumerate(files)
-        ]
-        full = load_dataset(self.dataset_dir, "train", lazy=True).cameras
-        cameras = full[list(range(start, len(full)))]
-        height, width = full.height // downscale, full.width // downscale
-        for i, (image, _) in enumerate(loaded):
-            if image.shape[:2] != (height, width):
-                raise DatasetError(
-                    json_path,
-                    f"image size differs from the dataset's {full.width}x{full.height}",
-                    field=f"frames[{start + i}].file_path",
-                    value=str(files[i]),
-                )
-        if (width, height) != (cameras.width, cameras.height):
-            cameras = cameras.resized(width, height)
-        cameras = self.hemisphere.cameras_to_engine(cameras)
-        alphas = None
-        if all(a is not None for _, a in loaded):
-            alphas = torch.stack([a for _, a in loaded])
-        return Views(cameras, torch.stack([im for im, _ in loaded]), [str(f["file_path"]) for f in frames], alphas)
+        state = self.state
+        return engine_views(self.dataset_split(), start, state.downscale, state.background, self.hemisphere)
 
     # -- the loop --
 
     def train(self, steps: int) -> dict:
         """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"})."""
         self.require_model()
-        if steps < 0:
-            raise ValueError(f"steps must be >= 0, got {steps}")
-        self.trainer.train(self.trainer.step + int(steps))
+        self.trainer.train(self.trainer.step + check_steps(steps))
         return self.trainer.history[-1] if self.trainer.history else {"step": self.trainer.step}
 
     def candidate_cameras(
@@ -382,7 +348,7 @@ class CaptureSession:
     ) -> Cameras:
         """The world-frame candidate cameras for `propose` (see its `candidates`), without the
         poses the model already trains on."""
-        return choose.candidate_cameras(self, candidates, n_candidates, generator)
+        return choose.candidate_cameras(self.session_model(), candidates, n_candidates, generator)
 
     def propose(
         self,
@@ -425,7 +391,25 @@ class CaptureSession:
         Raises:
             TooFewCandidates (a ValueError): the constraints leave fewer candidates than `n`.
         """
-        return choose.propose(self, n, method, candidates, n_candidates, generator, seed, config, map, constraints)
+        request = choose.ProposalRequest(n, method, candidates, n_candidates, seed, config, map, constraints)
+        folder = self.run_dir / PROPOSALS_DIR
+        proposal, record = choose.propose(request, self.session_model(), len(self.state.proposals), folder, generator)
+        self.state.proposals.append(record)
+        return proposal
+
+    def session_model(self) -> SessionModel:
+        """What the steps that use the NeRF need of this session (`SessionModel`)."""
+        self.require_model()
+        return SessionModel(
+            model=self.trainer.model,
+            device=self.trainer.device,
+            train_cameras=self.trainer.train_views.cameras,
+            step=self.step,
+            hemisphere=self.hemisphere,
+            template=self.template(),
+            background=tuple(self.state.background),
+            seed=self.seed,
+        )
 
     def add_views(self, images, poses=None, names: Sequence[str] | None = None) -> list[str]:
         """Add captured images, taken at world-frame `poses`, to the dataset and to training.
@@ -452,32 +436,52 @@ class CaptureSession:
             DatasetError: naming the file or index and the value: count mismatch, wrong image
                 size, unreadable file, values out of range, non-rigid pose, duplicate name.
         """
-        return add.add_views(self, images, poses, names)
+        self.require_model()
+        dataset, camera = self.dataset_split(), self.template()
+        addition = add.prepare_addition(images, poses, names, dataset, camera, self.state.background)
+        start = len(dataset.frames())
+        self.state.integrity.captures.update(add.write_addition(addition, dataset, camera))
+        self.trainer.add_views(self.engine_views(start))
+        self.state.views_in_model = len(self.trainer.train_views)
+        matched = [p.number for p in self.state.proposals if set(addition.names) <= set(p.names)]
+        record = AdditionRecord(
+            step=self.step, names=list(addition.names), proposal=matched[-1] if matched else None, created=now()
+        )
+        self.state.additions.append(record)
+        return list(addition.names)
 
     def render(self, poses, width: int | None = None) -> Tensor:
         """What the NeRF sees from world-frame `poses` (n, 4, 4): images (n, H, W, 3) in [0, 1],
         at the training resolution (or `width` pixels across)."""
-        self.require_model()
-        train = self.trainer.train_views.cameras
-        camera = self.template(train.width, train.height)
-        if width is not None:
-            camera = camera.resized(width, max(1, round(width * train.height / train.width)))
-        engine = self.hemisphere.to_engine(torch.as_tensor(as_array(poses), dtype=torch.float32).reshape(-1, 4, 4))
-        cameras = with_poses(camera, engine).to(self.trainer.device)
-        background = torch.tensor(self.state.background, dtype=torch.float32, device=self.trainer.device)
-        return torch.stack(
-            [self.trainer.model.render_image(cameras, i, background)["rgb"].cpu() for i in range(len(cameras))]
-        )
+        return self.session_model().render(poses, width)
 
-    def export(self, out: str | Path, format: str = "nerfstudio", source_splits: bool = True) -> Path:
-        """Write the grown dataset to `out` so other tools open it.
+    def uncertainty_maps(
+        self, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16
+    ) -> list[ViewMaps]:
+        """The render, depth, ray entropy and FisherRF images of world-frame `poses` (n, 4, 4);
+        see `nerfaug.capture.uncertainty_images.view_maps`."""
+        return view_maps(self.session_model(), poses, width, fisher, fisher_width)
+
+    def held_out(self, data: str | Path, split: str = "test", max_views: int | None = None) -> Views:
+        """`split` of the dataset folder `data` (same scene and world frame) at the training
+        resolution, over the session's background: what `evaluate` scores."""
+        return load_held_out(data, split, self.state.downscale, self.state.background, max_views)
+
+    def evaluate(self, views: Views, lpips="auto", progress: bool = False) -> EvaluationResult:
+        """PSNR, SSIM and LPIPS of the NeRF's renders of world-frame `views` (`held_out`) against
+        their images; see `nerfaug.capture.evaluate.evaluate_model`."""
+        return evaluate_model(self.session_model(), views, lpips, progress)
+
+    def export(self, out: str | Path, format: str = EXCHANGE_FORMAT, source_splits: bool = True) -> Path:
+        """Write the grown dataset to `out` in `format` (a name in `nerfaug.data.FORMATS`) so other
+        tools open it.
 
         "nerfstudio": `transforms.json` (OPENCV camera model, intrinsics global or per frame) and
         `images/`, for nerfstudio (`ns-train nerfacto --data OUT`) and instant-ngp.
         "blender": `transforms_train.json` and `train/*.png` (NeRF-synthetic), plus the source's
         val and test splits when it has them (nerfstudio's blender parser needs a val split).
         Images are copied byte for byte (never decoded and re-encoded), except non-PNG images
-        in the Blender format, which become lossless PNGs.
+        in a format that reads PNG only (Blender), which become lossless PNGs.
 
         `out` must be new, empty, or an earlier export (nerfaug's marker): nothing else is written over.
 
@@ -485,37 +489,15 @@ class CaptureSession:
 
         Raises:
             FolderRefused: `out` holds files nerfaug did not write, or overlaps the run folder.
+            ValueError: an unknown format, or one that cannot describe the session's cameras.
         """
-        return export.export(self, out, format, source_splits)
-
-
-def check_new_run(data_dir: Path, run_dir: Path) -> None:
-    """Refuse a run folder that would hold or hide the dataset or lie inside it, that holds files
-    nerfaug did not write, or that holds anything at all without a session.json: a damaged session
-    is never rebuilt over (its dataset may hold captures and the user's own files).
-
-    Raises:
-        FolderRefused: saying which folder and what to choose instead.
-    """
-    run_dir = Path(run_dir)
-    data_dir = Path(data_dir).resolve()
-    if data_dir == run_dir.resolve() or run_dir.resolve() in data_dir.parents:
-        raise FolderRefused(
-            f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
-            f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset"
-        )
-    if data_dir in run_dir.resolve().parents:
-        raise FolderRefused(
-            f"{run_dir}: the run folder lies inside the dataset {data_dir}; nothing is written into an "
-            "input folder, so choose a run folder outside the dataset"
-        )
-    if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
-        what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
-        raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder for --out")
-    left = sorted(p.name for p in run_dir.iterdir() if p.name != owned.MARKER) if run_dir.is_dir() else []
-    if left:
-        raise FolderRefused(
-            f"{run_dir}: a capture session without its {SESSION_FILE} (damaged or unfinished; it holds "
-            f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
-            f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
+        source = self.state.source
+        return export.export(
+            self.dataset_split(),
+            out,
+            get_format(format),
+            self.run_dir,
+            Path(source.data_dir),
+            source.split,
+            source_splits,
         )

@@ -17,6 +17,8 @@ from pathlib import Path, PurePosixPath
 
 import nerfaug
 from nerfaug.capture.frame import Hemisphere
+from nerfaug.data.format import Format
+from nerfaug.data.formats import FORMATS
 from nerfaug.errors import NerfaugError
 
 SESSION_FORMAT = 1
@@ -27,7 +29,8 @@ DATASET_DIR = "dataset"
 PROPOSALS_DIR = "proposals"
 # Marker kinds (`nerfaug.owned`): the run folder, its dataset copy, and a folder `export` wrote.
 RUN_KIND, DATASET_KIND, EXPORT_KIND = "capture-session", "capture-dataset", "capture-export"
-DATASET_FORMATS = ("blender", "nerfstudio")
+# The split the run's dataset copy holds the views in, whatever the source's split was.
+DATASET_SPLIT = "train"
 
 
 class SessionError(NerfaugError, RuntimeError):
@@ -58,6 +61,11 @@ class DatasetInfo:
     format: str
     folder: str
     json: str
+
+    @classmethod
+    def of(cls, fmt: Format) -> DatasetInfo:
+        """The names a copy in `fmt` has (recorded so that every version can read the folder)."""
+        return cls(fmt.name, fmt.image_folder(DATASET_SPLIT), fmt.listing(Path(), DATASET_SPLIT).name)
 
 
 @dataclass
@@ -192,10 +200,17 @@ class SessionState:
             )
         source = reader.section(data, "source", SourceInfo, {"data_dir": str, "split": str, "format": str})
         dataset = reader.section(data, "dataset", DatasetInfo, {"format": str, "folder": str, "json": str})
-        if dataset.format not in DATASET_FORMATS:
-            reader.fail("dataset.format", dataset.format, f"must be one of {DATASET_FORMATS}")
+        if dataset.format not in FORMATS:
+            reader.fail("dataset.format", dataset.format, f"must be one of {tuple(FORMATS)}")
+        expected = DatasetInfo.of(FORMATS[dataset.format])
         for key in ("folder", "json"):
             reader.relative_name(f"dataset.{key}", getattr(dataset, key))
+            if getattr(dataset, key) != getattr(expected, key):
+                reader.fail(
+                    f"dataset.{key}",
+                    getattr(dataset, key),
+                    f"the {dataset.format} format names it {getattr(expected, key)!r}",
+                )
         intrinsics = reader.section(
             data,
             "intrinsics",

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from nerfaug.selection.candidates import with_poses
+from nerfaug.capture.model import SessionModel
 from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
 
 ARRAYS = ("rgb", "depth", "entropy", "fisher")
@@ -43,8 +43,8 @@ class ViewMaps:
     elevation: float
 
 
-def training_fisher(session, generator: torch.Generator | None = None) -> Tensor:
-    """H_train of the session's model as its FisherRF proposals take it (`fisher_train_diagonal`
+def training_fisher(model: SessionModel, generator: torch.Generator | None = None) -> Tensor:
+    """H_train of the session's NeRF as its FisherRF proposals take it (`fisher_train_diagonal`
     with the `SelectionConfig` defaults).
 
     Returns:
@@ -53,16 +53,18 @@ def training_fisher(session, generator: torch.Generator | None = None) -> Tensor
     from nerfaug.selection import SelectionConfig
     from nerfaug.selection.estimators import fisher_train_diagonal
 
-    generator = generator if generator is not None else torch.Generator().manual_seed(session.seed)
-    train = session.trainer.train_views.cameras.to(session.trainer.device)
-    return fisher_train_diagonal(session.trainer.model, train, SelectionConfig(), generator)
+    generator = generator if generator is not None else torch.Generator().manual_seed(model.seed)
+    train = model.train_cameras.to(model.device)
+    return fisher_train_diagonal(model.model, train, SelectionConfig(), generator)
 
 
-def view_maps(session, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16) -> list[ViewMaps]:
+def view_maps(
+    model: SessionModel, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16
+) -> list[ViewMaps]:
     """The images of world-frame `poses` seen by the session's NeRF.
 
     Args:
-        session: a `CaptureSession` with its model.
+        model: the session's NeRF.
         poses: Tensor with shape (n, 4, 4) (or (4, 4)), world-frame camera-to-world.
         width: pixels across of the render, depth and entropy; None: the training resolution.
         fisher: also compute FisherRF's per-pixel score (3 backward passes per pixel).
@@ -71,40 +73,30 @@ def view_maps(session, poses, width: int | None = None, fisher: bool = True, fis
     Returns:
         One `ViewMaps` per pose.
     """
-    session.require_model()
     if width is not None and int(width) < 1:
         raise ValueError(f"width {width}: must be >= 1 pixel")
     if int(fisher_width) < 1:
         raise ValueError(f"fisher_width {fisher_width}: must be >= 1 pixel")
     world = torch.as_tensor(poses, dtype=torch.float32).reshape(-1, 4, 4)
-    model, device = session.trainer.model, session.trainer.device
-    train = session.trainer.train_views.cameras
-    template = session.template(train.width, train.height)
-
-    def sized(pixels: int):
-        height = max(1, round(pixels * template.height / template.width))
-        camera = template.resized(int(pixels), height)
-        return with_poses(camera, session.hemisphere.to_engine(world)).to(device)
-
-    cameras = sized(width or template.width)
-    background = torch.tensor(session.state.background, dtype=torch.float32, device=device)
-    h_train = training_fisher(session) if fisher else None
-    fisher_cameras = sized(fisher_width) if fisher else None
-    azimuth, polar, _ = session.hemisphere.angles(world)
+    cameras = model.engine_cameras(world, width)
+    background = model.background_tensor()
+    h_train = training_fisher(model) if fisher else None
+    fisher_cameras = model.engine_cameras(world, fisher_width) if fisher else None
+    azimuth, polar, _ = model.hemisphere.angles(world)
     maps = []
     for i in range(len(world)):
-        images = view_images(model, cameras, i, background)
+        images = view_images(model.model, cameras, i, background)
         scores = None
         if fisher:
-            scores = fisher_pixel_scores(model, fisher_cameras, h_train, i, background=background).numpy()
+            scores = fisher_pixel_scores(model.model, fisher_cameras, h_train, i, background=background).numpy()
         maps.append(
             ViewMaps(
                 pose=world[i].double().numpy(),
                 rgb=images["rgb"].clamp(0, 1).numpy().astype(np.float32),
-                depth=(images["depth"] * session.hemisphere.scale).numpy().astype(np.float32),
+                depth=(images["depth"] * model.hemisphere.scale).numpy().astype(np.float32),
                 entropy=images["entropy"].numpy().astype(np.float32),
                 fisher=None if scores is None else scores.astype(np.float32),
-                step=session.step,
+                step=model.step,
                 azimuth=math.degrees(float(azimuth[i])),
                 elevation=90.0 - math.degrees(float(polar[i])),
             )

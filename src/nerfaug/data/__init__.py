@@ -1,7 +1,8 @@
 """Datasets: images with their cameras, read from and written to NeRF-synthetic (Blender) and
-nerfstudio/instant-ngp `transforms.json` folders.
+nerfstudio/instant-ngp `transforms.json` folders, through one registry of formats (`FORMATS`).
 
-Inside the package imports go one way: errors <- views <- frames <- {blender, nerfstudio} <- formats.
+Inside the package imports go one way: errors <- views <- frames <- format <- {blender, nerfstudio}
+<- formats.
 The names below are imported on first use, so that `nerfaug.data.errors` (and `nerfaug.jsonio`,
 which raises its `DatasetError`) stay free of torch and imageio.
 """
@@ -19,9 +20,17 @@ _HOMES = {
     "write_blender_split": "nerfaug.data.blender",
     "load_nerfstudio": "nerfaug.data.nerfstudio",
     "write_nerfstudio": "nerfaug.data.nerfstudio",
+    "Format": "nerfaug.data.format",
+    "DatasetSplit": "nerfaug.data.format",
+    "NewFrame": "nerfaug.data.format",
+    "EXCHANGE_FORMAT": "nerfaug.data.formats",
     "FORMATS": "nerfaug.data.formats",
     "detect_format": "nerfaug.data.formats",
+    "find_split": "nerfaug.data.formats",
+    "get_format": "nerfaug.data.formats",
+    "has_split": "nerfaug.data.formats",
     "load_dataset": "nerfaug.data.formats",
+    "register_format": "nerfaug.data.formats",
 }
 
 if TYPE_CHECKING:
@@ -31,7 +40,17 @@ if TYPE_CHECKING:
         write_blender_split,
     )
     from nerfaug.data.errors import DatasetError
-    from nerfaug.data.formats import FORMATS, detect_format, load_dataset
+    from nerfaug.data.format import DatasetSplit, Format, NewFrame
+    from nerfaug.data.formats import (
+        EXCHANGE_FORMAT,
+        FORMATS,
+        detect_format,
+        find_split,
+        get_format,
+        has_split,
+        load_dataset,
+        register_format,
+    )
     from nerfaug.data.nerfstudio import load_nerfstudio, write_nerfstudio
     from nerfaug.data.views import Views
 
@@ -49,13 +68,21 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
+    "EXCHANGE_FORMAT",
     "FORMATS",
     "DatasetError",
+    "DatasetSplit",
+    "Format",
+    "NewFrame",
     "Views",
     "detect_format",
+    "find_split",
+    "get_format",
+    "has_split",
     "load_blender",
     "load_blender_split",
     "load_dataset",
+    "register_format",
     "load_nerfstudio",
     "write_blender_split",
     "write_nerfstudio",

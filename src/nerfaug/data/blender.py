@@ -12,7 +12,9 @@ from pathlib import Path
 
 import torch
 
+from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
+from nerfaug.data.format import Format
 from nerfaug.data.frames import MIN_ANGLE, is_number, load_frames, require, write_image
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
@@ -75,16 +77,15 @@ def write_blender_split(
     """Write `views` as a Blender-format split (PNG images + `transforms_{split}.json`).
 
     Images are written with their alpha when known (RGBA, un-composited from `background`, the
-    colour they were loaded over), else RGB. Cameras must share one
-    horizontal field of view with square pixels, as the format has a single `camera_angle_x`.
-    Returns the JSON path.
+    colour they were loaded over), else RGB. The cameras must fit the format (`blender_fits`), as
+    it has a single `camera_angle_x`. Returns the JSON path.
     """
     root = Path(root)
     views = views.materialised()
     cameras = views.cameras
     angles = cameras.camera_angle_x
-    if (angles - angles[0]).abs().max() > 1e-5 or (cameras.fx - cameras.fy).abs().max() > 1e-3 * cameras.fx.abs().max():
-        raise ValueError("the Blender format needs one camera_angle_x and square pixels; use write_nerfstudio")
+    if not blender_fits(cameras):
+        raise ValueError(f"the Blender format needs {BlenderFormat.fits_rule}; use write_nerfstudio")
     folder = image_folder or split
     frames = []
     for i, name in enumerate(views.names):
@@ -101,3 +102,46 @@ def write_blender_split(
     path = root / f"transforms_{split}.json"
     atomic_write_json(path, {"camera_angle_x": float(angles[0]), "frames": frames})
     return path
+
+
+def blender_fits(cameras: Cameras) -> bool:
+    """Whether one `camera_angle_x` describes every camera: one focal length, square pixels and
+    the principal point at the image centre (up to float32 round-off of the stored values)."""
+    fx, fy, cx, cy = cameras.fx.double(), cameras.fy.double(), cameras.cx.double(), cameras.cy.double()
+    tolerance = 1e-4 * float(fx.abs().max())
+    return bool(
+        (fx - fx[0]).abs().max() <= tolerance
+        and (fy - fx).abs().max() <= tolerance
+        and (cx - cameras.width / 2).abs().max() <= 1e-3 * cameras.width
+        and (cy - cameras.height / 2).abs().max() <= 1e-3 * cameras.height
+    )
+
+
+class BlenderFormat(Format):
+    """NeRF-synthetic: `transforms_{split}.json` (one `camera_angle_x`) and `{split}/*.png`."""
+
+    name = "blender"
+    fits_rule = "one camera_angle_x: square pixels, centred principal point"
+    camera_keys = ("camera_angle_x",)
+    png_only = True
+
+    def listing(self, root: Path, split: str) -> Path:
+        return Path(root) / f"transforms_{split}.json"
+
+    def image_folder(self, split: str) -> str:
+        return split
+
+    def file_path(self, folder: str, stem: str, suffix: str) -> str:
+        return f"./{folder}/{stem}"  # the format's readers add ".png"
+
+    def load(self, root, split="train", background=(1.0, 1.0, 1.0), downscale=1, lazy=False) -> Views:
+        return load_blender_split(root, split, background=background, downscale=downscale, lazy=lazy)
+
+    def fits(self, cameras: Cameras) -> bool:
+        return blender_fits(cameras)
+
+    def describe(self, cameras: Cameras) -> tuple[dict, list[dict]]:
+        return {"camera_angle_x": float(cameras.camera_angle_x[0])}, [{} for _ in range(len(cameras))]
+
+    def write(self, root, split, views, background=(1.0, 1.0, 1.0)) -> Path:
+        return write_blender_split(root, split, views, background=background)

@@ -1,65 +1,116 @@
-"""Which reader a dataset folder needs: the registry of on-disk formats, and `load_dataset`.
+"""The registry of on-disk dataset formats (`FORMATS`), and what picks one: `detect_format`,
+`find_split`, `load_dataset`.
 
-Adding a format is one reader module plus one `Format` entry in `FORMATS`. Nothing inside
-`nerfaug.data` imports this module, so the readers never import back the code that picks them.
+A format is one `Format` object with every operation on a folder in it (`nerfaug.data.format`).
+Adding a format is one module defining it plus one entry in `FORMATS` (or, for a format defined
+outside the package, `with register_format(MyFormat()):`). Nothing inside `nerfaug.data` imports
+this module, so the formats never import back the code that picks them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
-from nerfaug.data.blender import load_blender_split
+from nerfaug.data.blender import BlenderFormat
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.nerfstudio import load_nerfstudio
+from nerfaug.data.format import DatasetSplit, Format
+from nerfaug.data.nerfstudio import NerfstudioFormat
 from nerfaug.data.views import Views
 
+FORMATS: dict[str, Format] = {
+    # Blender first: a folder holding both kinds of listing is read by its split files. It is also
+    # the plainest: a session keeps a dataset in it whenever it describes the cameras exactly.
+    "blender": BlenderFormat(),
+    "nerfstudio": NerfstudioFormat(),
+}
+"""Dataset formats by name, in the order they are detected."""
 
-@dataclass(frozen=True)
-class Format:
-    """A dataset format: the file that marks a folder as holding `split` in it, and its reader.
+EXCHANGE_FORMAT = "nerfstudio"
+"""The format other tools open most widely: what an export writes unless told otherwise."""
 
-    Attributes:
-        name: short name ("blender", "nerfstudio").
-        marker: `marker(root, split)` is the file whose presence identifies the format.
-        load: `load(root, split, **kwargs)` reads that split as `Views`.
+
+@contextlib.contextmanager
+def register_format(fmt: Format) -> Iterator[Format]:
+    """Register `fmt` (after the built-in formats) while the block runs.
+
+    Example:
+        >>> with register_format(MyFormat()):  # doctest: +SKIP
+        ...     views = load_dataset("data/mine")
     """
+    if fmt.name in FORMATS:
+        raise ValueError(f"a dataset format named {fmt.name!r} is registered already")
+    FORMATS[fmt.name] = fmt
+    try:
+        yield fmt
+    finally:
+        FORMATS.pop(fmt.name, None)
 
-    name: str
-    marker: Callable[[Path, str], Path]
-    load: Callable[..., Views]
 
-
-FORMATS: tuple[Format, ...] = (
-    # Blender first: a folder holding both kinds of file is read by its split files.
-    Format("blender", lambda root, split: root / f"transforms_{split}.json", load_blender_split),
-    # nerfstudio's one transforms.json has no splits: every split reads all of its frames.
-    Format(
-        "nerfstudio",
-        lambda root, split: root / "transforms.json",
-        lambda root, split, **kwargs: load_nerfstudio(root, **kwargs),
-    ),
-)
+def get_format(name: str) -> Format:
+    """The format `name`, or a ValueError naming it and the known ones."""
+    if name not in FORMATS:
+        raise ValueError(f"unknown dataset format {name!r}; choose one of: {', '.join(FORMATS)}")
+    return FORMATS[name]
 
 
 def detect_format(root: str | Path, split: str = "train") -> Format | None:
-    """The first format in `FORMATS` whose marker file exists for `split` under `root`."""
+    """The first format in `FORMATS` that holds `split` under `root`."""
     root = Path(root)
-    return next((f for f in FORMATS if f.marker(root, split).exists()), None)
+    return next((f for f in FORMATS.values() if f.detect(root, split)), None)
+
+
+def has_split(root: str | Path, split: str) -> bool:
+    """Whether `root` holds `split` as a split of its own (not a listing every split reads)."""
+    root = Path(root)
+    return any(f.has_splits and f.detect(root, split) for f in FORMATS.values())
+
+
+def _missing(root: Path, split: str) -> DatasetError:
+    if not root.is_dir():
+        return DatasetError(root, "dataset folder does not exist")
+    expected = " nor ".join(f"{f.listing(root, split).relative_to(root)} ({f.name} format)" for f in FORMATS.values())
+    return DatasetError(root, f"no {expected}")
+
+
+def find_split(root: str | Path, split: str = "train") -> DatasetSplit:
+    """`split` of the dataset folder `root`, in the format that holds it.
+
+    Raises:
+        DatasetError: the folder does not exist, holds no known format, or its listing is a link
+            to a file outside it (what is copied from a dataset is read from the dataset itself).
+    """
+    root = Path(root)
+    found = detect_format(root, split)
+    if found is None:
+        raise _missing(root, split)
+    path = found.listing(root, split)
+    if root.resolve() not in path.resolve().parents:
+        raise DatasetError(path, "this file links to a file outside the dataset folder", value=str(path.resolve()))
+    return DatasetSplit(root, found, split)
 
 
 def load_dataset(root: str | Path, split: str = "train", **kwargs) -> Views:
-    """Load a split from a Blender (`transforms_{split}.json`) or nerfstudio (`transforms.json`)
-    folder, whichever `root` holds. `kwargs` go to the reader (background, downscale, lazy).
+    """Load a split from a folder in any registered format (Blender: `transforms_{split}.json`;
+    nerfstudio: `transforms.json`), whichever `root` holds. `kwargs` go to the reader
+    (background, downscale, lazy).
 
     Raises:
         DatasetError: the folder does not exist, holds no known format, or its files are bad.
     """
     root = Path(root)
     found = detect_format(root, split)
-    if found is not None:
-        return found.load(root, split, **kwargs)
-    if not root.is_dir():
-        raise DatasetError(root, "dataset folder does not exist")
-    raise DatasetError(root, f"no transforms_{split}.json (Blender format) nor transforms.json (nerfstudio format)")
+    if found is None:
+        raise _missing(root, split)
+    return found.load(root, split, **kwargs)
+
+
+def plainest_format(source: DatasetSplit, cameras) -> Format:
+    """The format a copy of `source` is kept in: the first of `FORMATS` when it describes
+    `cameras` exactly and the source records no lens distortion, else the source's own."""
+    plainest = next(iter(FORMATS.values()))
+    header, frames = source.read()
+    if plainest.fits(cameras) and not source.format.lens_distortion(header, frames):
+        return plainest
+    return source.format

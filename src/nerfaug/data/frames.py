@@ -22,6 +22,8 @@ from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_bytes
 
 IMAGE_SUFFIXES = ("", ".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".exr")
+# Image files every reader of every format takes as they are; others are stored as PNG.
+STORED_SUFFIXES = (".png", ".jpg", ".jpeg")
 # Smallest field of view accepted (radians): a smaller one gives a focal length float32 cannot hold.
 MIN_ANGLE = 1e-6
 
@@ -206,6 +208,34 @@ def write_image(path: Path, image: Tensor, alpha: Tensor | None = None, backgrou
         array = torch.cat([torch.where(alpha > 0, straight, torch.zeros_like(array)).clamp(0, 1), alpha], dim=-1)
     data = (array.numpy() * 255.0 + 0.5).astype(np.uint8)
     atomic_write_bytes(path, iio.imwrite("<bytes>", data, extension=".png"))
+
+
+def encode_png(array: np.ndarray) -> bytes:
+    """A lossless PNG of an (H, W, 3 | 4) image: uint8 and uint16 as they are, floats in [0, 1] as 8 bits."""
+    if array.dtype not in (np.uint8, np.uint16):
+        array = (np.clip(array, 0, 1) * 255.0 + 0.5).astype(np.uint8)
+    return iio.imwrite("<bytes>", np.ascontiguousarray(array), extension=".png")
+
+
+def decode_image(path: Path, label: str | None = None) -> np.ndarray:
+    """The pixels of an image file as decoded (DatasetError naming `path` and `label` if it cannot be read)."""
+    if not path.is_file():
+        raise DatasetError(path, "image file not found", field=label)
+    try:
+        return np.asarray(iio.imread(path))
+    except Exception as error:  # noqa: BLE001 -- imageio raises many types; all mean "cannot read"
+        raise DatasetError(path, f"cannot read image: {error}", field=label) from None
+
+
+def stored_image(path: Path, png_only: bool, label: str | None = None) -> tuple[bytes, str]:
+    """The bytes an image file is stored as in a dataset, and their suffix: the file itself when
+    the format's readers take it (PNG; JPEG too unless `png_only`), else a lossless PNG of its
+    pixels. The file is decoded either way: an unreadable image is refused (DatasetError)."""
+    array = decode_image(path, label)
+    suffix = path.suffix.lower()
+    if suffix == ".png" or (not png_only and suffix in STORED_SUFFIXES):
+        return path.read_bytes(), suffix
+    return encode_png(array), ".png"
 
 
 # (camera_angle_x, None) or (None, (fx, fy, cx, cy)) for frame i at a file resolution (w, h).

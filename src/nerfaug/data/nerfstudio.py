@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
+from nerfaug.data.format import Format
 from nerfaug.data.frames import (
     MIN_ANGLE,
     check_number,
@@ -17,6 +19,25 @@ from nerfaug.data.frames import (
 )
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
+
+# Keys describing the camera (globally or per frame), kept when a listing is copied as nerfstudio.
+CAMERA_KEYS = (
+    "camera_model",
+    "fl_x",
+    "fl_y",
+    "cx",
+    "cy",
+    "w",
+    "h",
+    "k1",
+    "k2",
+    "k3",
+    "k4",
+    "p1",
+    "p2",
+    "camera_angle_x",
+)
+DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 
 def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int = 1, lazy: bool = False) -> Views:
@@ -108,3 +129,52 @@ def write_nerfstudio(root: str | Path, views: Views, image_folder: str = "images
     path = root / "transforms.json"
     atomic_write_json(path, {"camera_model": "OPENCV", "w": cams.width, "h": cams.height, "frames": frames})
     return path
+
+
+def _intrinsics(cameras: Cameras) -> dict:
+    return {"fl_x": cameras.fx, "fl_y": cameras.fy, "cx": cameras.cx, "cy": cameras.cy}
+
+
+class NerfstudioFormat(Format):
+    """nerfstudio / instant-ngp: one `transforms.json` for every split, images in `images/`."""
+
+    name = "nerfstudio"
+    fits_rule = "any pinhole cameras, intrinsics per frame"
+    camera_keys = CAMERA_KEYS
+    has_splits = False
+
+    def listing(self, root: Path, split: str) -> Path:
+        return Path(root) / "transforms.json"  # no splits: every split reads all of its frames
+
+    def image_folder(self, split: str) -> str:
+        return "images"
+
+    def file_path(self, folder: str, stem: str, suffix: str) -> str:
+        return f"{folder}/{stem}{suffix}"
+
+    def load(self, root, split="train", background=(1.0, 1.0, 1.0), downscale=1, lazy=False) -> Views:
+        return load_nerfstudio(root, background=background, downscale=downscale, lazy=lazy)
+
+    def fits(self, cameras: Cameras) -> bool:
+        return True
+
+    def describe(self, cameras: Cameras) -> tuple[dict, list[dict]]:
+        """OPENCV pinhole: the intrinsics once at the top level when every camera shares them, else per frame."""
+        intrinsics = _intrinsics(cameras)
+        header = {"camera_model": "OPENCV", "w": cameras.width, "h": cameras.height}
+        shared = all(bool((v - v[0]).abs().max() <= 1e-6 * max(1.0, float(v[0].abs()))) for v in intrinsics.values())
+        if shared:
+            return header | {k: float(v[0]) for k, v in intrinsics.items()}, [{} for _ in range(len(cameras))]
+        return header, [{k: float(v[i]) for k, v in intrinsics.items()} for i in range(len(cameras))]
+
+    def frame_keys(self, camera: Cameras) -> dict:
+        keys = {k: float(v[0]) for k, v in _intrinsics(camera).items()}
+        return keys | {"w": camera.width, "h": camera.height}
+
+    def lens_distortion(self, header: dict, frames: list) -> bool:
+        return any(float(header.get(k) or 0) != 0 for k in DISTORTION_KEYS) or any(
+            float(f.get(k) or 0) != 0 for f in frames if isinstance(f, dict) for k in DISTORTION_KEYS
+        )
+
+    def write(self, root, split, views, background=(1.0, 1.0, 1.0)) -> Path:
+        return write_nerfstudio(root, views)

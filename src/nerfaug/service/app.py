@@ -28,7 +28,6 @@ from pydantic import ValidationError
 from starlette.exceptions import HTTPException
 
 import nerfaug
-from nerfaug.jsonio import atomic_write_json
 from nerfaug.service import models
 from nerfaug.service.errors import ServiceError, bad_input, status_of
 from nerfaug.service.hub import SessionHub, check_session_id
@@ -145,7 +144,11 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         settings: str = Form(description="JSON of CreateFromUploads: id, intrinsics, poses, preset, seed, ..."),
         images: list[UploadFile] = File(description="the images, in the order of the poses"),
     ):
+        import torch
+
+        from nerfaug.cameras import Cameras
         from nerfaug.capture import CaptureSession
+        from nerfaug.data import EXCHANGE_FORMAT, DatasetSplit, NewFrame, get_format
 
         request = models.CreateFromUploads.model_validate(parse_json_field(settings, "settings"))
         check_session_id(request.id)
@@ -154,18 +157,15 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         check_names(uploads)
         poses = check_poses(request.poses, "poses", len(uploads))
 
+        cx, cy = k.width / 2 if k.cx is None else k.cx, k.height / 2 if k.cy is None else k.cy
+        camera = Cameras(torch.eye(4), k.fx, k.fy or k.fx, cx, cy, k.width, k.height)
+        frames = [NewFrame(u.name, u.data, u.suffix, pose.double().tolist()) for u, pose in zip(uploads, poses)]
+
         def create(folder: Path):
             with hub.staging() as tmp:
-                data = Path(tmp) / "data"
-                files = write_uploads(data / "images", uploads)
-                frames = [
-                    {"file_path": f"images/{path.name}", "transform_matrix": pose.double().tolist()}
-                    for path, pose in zip(files, poses)
-                ]
-                cx, cy = k.width / 2 if k.cx is None else k.cx, k.height / 2 if k.cy is None else k.cy
-                meta = {"w": k.width, "h": k.height, "fl_x": k.fx, "fl_y": k.fy or k.fx, "cx": cx, "cy": cy}
-                atomic_write_json(data / "transforms.json", {**meta, "frames": frames})
-                return CaptureSession.create(data, folder, device=hub.device, **_settings(request))
+                data = DatasetSplit(Path(tmp) / "data", get_format(EXCHANGE_FORMAT))
+                data.append(frames, camera)
+                return CaptureSession.create(data.root, folder, device=hub.device, **_settings(request))
 
         return hub.created(request.id, create)
 
@@ -229,12 +229,12 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
     @answers
     def uncertainty(session_id: str, request: models.UncertaintyRequest):
         """PNG: render, depth, ray entropy and FisherRF panels with colour bars; npz: the arrays."""
-        from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes, view_maps
+        from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 
         pose = check_poses(request.pose, "pose")
         maps = hub.run(
             session_id,
-            lambda session: view_maps(session, pose, request.width, request.fisher, request.fisher_width)[0],
+            lambda session: session.uncertainty_maps(pose, request.width, request.fisher, request.fisher_width)[0],
         )
         if request.format == "npz":
             return Response(npz_bytes(maps), media_type="application/octet-stream")
@@ -244,13 +244,11 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
     @answers
     def evaluate(session_id: str, request: models.EvaluateRequest):
         """The session's NeRF scored on a held-out split at its training resolution (`nerfaug eval`)."""
-        from nerfaug.capture.evaluate import evaluate_session, load_held_out
-
         data = hub.dataset_path(request.dataset)
 
         def score(session):
-            views = load_held_out(session, data, request.split, request.max_views)
-            result = evaluate_session(session, views, lpips="auto" if request.lpips else None)
+            views = session.held_out(data, request.split, request.max_views)
+            result = session.evaluate(views, lpips="auto" if request.lpips else None)
             return {
                 "step": session.step,
                 "dataset": request.dataset,

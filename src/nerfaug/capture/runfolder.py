@@ -1,0 +1,42 @@
+"""Which folders may become a capture session's run folder (`check_new_run`): never one that holds
+or hides the dataset, lies inside it, holds files nerfaug did not write, or is a damaged session."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from nerfaug import owned
+from nerfaug.capture.state import DATASET_DIR, RUN_KIND, SESSION_FILE
+from nerfaug.errors import FolderRefused
+
+
+def check_new_run(data_dir: Path, run_dir: Path) -> None:
+    """Refuse a run folder that would hold or hide the dataset or lie inside it, that holds files
+    nerfaug did not write, or that holds anything at all without a session.json: a damaged session
+    is never rebuilt over (its dataset may hold captures and the user's own files).
+
+    Raises:
+        FolderRefused: saying which folder and what to choose instead.
+    """
+    run_dir = Path(run_dir)
+    data_dir = Path(data_dir).resolve()
+    if data_dir == run_dir.resolve() or run_dir.resolve() in data_dir.parents:
+        raise FolderRefused(
+            f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
+            f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset"
+        )
+    if data_dir in run_dir.resolve().parents:
+        raise FolderRefused(
+            f"{run_dir}: the run folder lies inside the dataset {data_dir}; nothing is written into an "
+            "input folder, so choose a run folder outside the dataset"
+        )
+    if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
+        what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
+        raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder for --out")
+    left = sorted(p.name for p in run_dir.iterdir() if p.name != owned.MARKER) if run_dir.is_dir() else []
+    if left:
+        raise FolderRefused(
+            f"{run_dir}: a capture session without its {SESSION_FILE} (damaged or unfinished; it holds "
+            f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
+            f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
+        )
