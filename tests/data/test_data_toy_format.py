@@ -79,12 +79,13 @@ def toy():
         yield fmt
 
 
-def toy_views(poses: torch.Tensor) -> Views:
+def toy_views(poses: torch.Tensor, size: int = SIZE) -> Views:
     """Views of a camera whose principal point is off the centre (no Blender camera_angle_x)."""
     n = len(poses)
-    focal = torch.full((n,), 14.0)
-    cameras = Cameras(poses, focal, focal, torch.full((n,), 5.0), torch.full((n,), 7.0), SIZE, SIZE)
-    images = torch.rand(n, SIZE, SIZE, 3, generator=torch.Generator().manual_seed(n))
+    focal = torch.full((n,), 14.0 * size / SIZE)
+    cx, cy = torch.full((n,), 5.0 * size / SIZE), torch.full((n,), 7.0 * size / SIZE)
+    cameras = Cameras(poses, focal, focal, cx, cy, size, size)
+    images = torch.rand(n, size, size, 3, generator=torch.Generator().manual_seed(n))
     return Views(cameras, (images * 255).round() / 255, [f"v{i}" for i in range(n)])
 
 
@@ -121,6 +122,27 @@ def test_a_session_grows_and_exports_a_dataset_in_a_registered_format(toy, tmp_p
     assert len(load_dataset(session.export(tmp_path / "ns", "nerfstudio").parent)) == 6
     with pytest.raises(ValueError, match="export with format='nerfstudio' or 'toy'"):
         session.export(tmp_path / "bl", "blender")
+
+
+def test_an_experiment_runs_on_a_dataset_in_a_registered_format(toy, tmp_path):
+    from nerfaug.experiment.config import preset
+    from nerfaug.experiment.store import RunKey
+    from nerfaug.experiment.sweep import run_sweep
+    from nerfaug.hemisphere import sample_uniform_poses
+
+    config = preset("tiny").replace(methods=("ours",), trials=1)
+    data = tmp_path / "data"
+    poses = sample_uniform_poses(config.pool, torch.Generator().manual_seed(0))
+    toy.write(data, "train", toy_views(poses, config.resolution))
+    toy.write(data, "initial", toy_views(half_hemisphere_poses(config.n_initial), config.resolution))
+    toy.write(data, "test", toy_views(poses[: config.n_test] * 1.0, config.resolution))
+    outcome = run_sweep(config.replace(scenes=(str(data),)), tmp_path / "results", progress=False)
+    assert not outcome.failed and len(outcome.results) == 1
+    assert RunKey("data", "ours", 0).folder(tmp_path / "results").joinpath("result.json").is_file()
+
+    (data / "toy_test.json").unlink()  # a missing split is named by the file that would list it
+    with pytest.raises(ValueError, match=r"toy_test\.json.*a test split is needed for evaluation: file not found"):
+        run_sweep(config.replace(scenes=(str(data),)), tmp_path / "other", progress=False)
 
 
 def test_registration_ends_with_its_block():

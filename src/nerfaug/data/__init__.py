@@ -31,6 +31,7 @@ _HOMES = {
     "has_split": "nerfaug.data.formats",
     "load_dataset": "nerfaug.data.formats",
     "register_format": "nerfaug.data.formats",
+    "require_split": "nerfaug.data.formats",
 }
 
 if TYPE_CHECKING:
@@ -50,6 +51,7 @@ if TYPE_CHECKING:
         has_split,
         load_dataset,
         register_format,
+        require_split,
     )
     from nerfaug.data.nerfstudio import load_nerfstudio, write_nerfstudio
     from nerfaug.data.views import Views
@@ -83,6 +85,7 @@ __all__ = [
     "load_blender_split",
     "load_dataset",
     "register_format",
+    "require_split",
     "load_nerfstudio",
     "write_blender_split",
     "write_nerfstudio",

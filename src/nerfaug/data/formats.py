@@ -91,6 +91,27 @@ def find_split(root: str | Path, split: str = "train") -> DatasetSplit:
     return DatasetSplit(root, found, split)
 
 
+def require_split(root: str | Path, split: str, purpose: str) -> DatasetSplit:
+    """`split` of the dataset folder `root` as a split of its own, for `purpose` (e.g. "a test
+    split is needed for evaluation").
+
+    Raises:
+        DatasetError: `root` holds no known format, or its format holds no such split: naming the
+            file that would list it, or saying that the format keeps one listing for every split.
+    """
+    root = Path(root)
+    if has_split(root, split):
+        return find_split(root, split)
+    fmt = find_split(root, "train").format
+    if not fmt.has_splits:
+        raise DatasetError(
+            fmt.listing(root, split),
+            f"{purpose}: the {fmt.name} format keeps one listing for every split; write the {split} views "
+            f"in a format with splits ({', '.join(f.name for f in FORMATS.values() if f.has_splits)})",
+        )
+    raise DatasetError(fmt.listing(root, split), f"{purpose}: file not found")
+
+
 def load_dataset(root: str | Path, split: str = "train", **kwargs) -> Views:
     """Load a split from a folder in any registered format (Blender: `transforms_{split}.json`;
     nerfstudio: `transforms.json`), whichever `root` holds. `kwargs` go to the reader

@@ -12,8 +12,7 @@ from pathlib import Path
 
 import torch
 
-from nerfaug.data import Views, load_dataset
-from nerfaug.data.errors import DatasetError
+from nerfaug.data import Views, has_split, load_dataset, require_split
 from nerfaug.device import describe_device
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.runfolder import (
@@ -91,8 +90,7 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
     folder = scene_dataset_dir(root, scene, config)
     if scene_folder(scene) is not None:
         load_dataset(folder, "train", lazy=True)  # fail early, with the dataset's own error
-        if not (folder / "transforms_test.json").exists():
-            raise DatasetError(folder / "transforms_test.json", "a test split is needed for evaluation: file not found")
+        require_split(folder, "test", "a test split is needed for evaluation")
         return folder
     from nerfaug.scenes import BUILTIN_SCENES
 
@@ -177,7 +175,7 @@ def load_scene_data(folder: Path, config: ExperimentConfig, cache_dir: Path | No
     pool = load(split="train")
     test = load(split="test")
     test = test.subset(range(min(config.n_test, len(test))))
-    if (folder / "transforms_initial.json").exists():
+    if has_split(folder, "initial"):
         initial = load(split="initial")
     else:
         chosen = initial_view_indices(pool, config.n_initial)

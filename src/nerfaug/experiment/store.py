@@ -326,32 +326,43 @@ def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> No
         )
 
 
+LISTED_SPLITS = ("train", "initial", "test", "val")
+"""The splits whose listings identify a dataset folder (`dataset_digest`)."""
+
+
 def dataset_digest(folder: Path) -> str:
-    """A short hash of a dataset folder's transforms files (what its frames and cameras are)."""
+    """A short hash of a dataset folder's listings (what its frames and cameras are): every
+    `transforms*.json`, and the listing of each split the experiments read in whatever format
+    holds it."""
+    from nerfaug.data import detect_format
+
+    folder = Path(folder)
+    listings = set(folder.glob("transforms*.json"))
+    for split in LISTED_SPLITS:
+        if (fmt := detect_format(folder, split)) is not None:
+            listings.add(fmt.listing(folder, split))
     digest = hashlib.sha256()
-    for path in sorted(Path(folder).glob("transforms*.json")):
+    for path in sorted(listings, key=lambda p: p.name):
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     return digest.hexdigest()[:16]
 
 
 def dataset_content_digest(folder: Path, splits: tuple[str, ...]) -> str:
-    """A short hash of what runs read from a Blender-format dataset: the transforms files of
-    `splits` and every image their frames name (relative path and bytes). Other files in the
-    folder (notes, a results folder placed inside it) do not count.
+    """A short hash of what runs read from a dataset: the listings of `splits` (in whatever
+    format holds them) and every image their frames name (relative path and bytes). Other files in
+    the folder (notes, a results folder placed inside it) do not count.
 
     Raises:
-        DatasetError: a frame's image is missing or lies outside the folder.
+        DatasetError: a split or a frame's image is missing, or an image lies outside the folder.
     """
-    from nerfaug.data.frames import resolve_image
+    from nerfaug.data import find_split
 
     folder = Path(folder)
     root = folder.resolve()
     digest = hashlib.sha256()
     for split in splits:
-        path = folder / f"transforms_{split}.json"
-        text = path.read_bytes()
-        digest.update(path.name.encode() + b"\0" + text)
-        for i, frame in enumerate(json.loads(text)["frames"]):
-            image = resolve_image(folder, frame["file_path"], path, f"frames[{i}].file_path")
+        source = find_split(folder, split)
+        digest.update(source.listing.name.encode() + b"\0" + source.listing.read_bytes())
+        for image in source.frame_files():
             digest.update(image.relative_to(root).as_posix().encode() + b"\0" + image.read_bytes())
     return digest.hexdigest()[:16]

@@ -137,12 +137,13 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
 
 def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
     """What a user dataset supplies, checked against the config (see `check_config`)."""
-    from nerfaug.data import DatasetError, load_dataset
+    from nerfaug.data import find_split, has_split, require_split
 
-    train = load_dataset(folder, "train", lazy=True)
-    if not (folder / "transforms_test.json").exists():
-        raise DatasetError(folder / "transforms_test.json", "a test split is needed for evaluation: file not found")
-    test = load_dataset(folder, "test", lazy=True)
+    train_split = find_split(folder, "train")
+    train = train_split.load(lazy=True)
+    test_split = require_split(folder, "test", "a test split is needed for evaluation")
+    test = test_split.load(lazy=True)
+    has_initial = has_split(folder, "initial")
     width, height = train.cameras.width, train.cameras.height
     _need(
         config.resolution <= width,
@@ -160,13 +161,14 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
             f"{folder}'s {width}-px images shrink by whole factors only; the nearest sizes are "
             f"{', '.join(str(v) for v in sorted(sizes[:3]))}",
         )
-    if (folder / "transforms_initial.json").exists():
-        initial = len(load_dataset(folder, "initial", lazy=True))
+    if has_initial:
+        initial_split = find_split(folder, "initial")
+        initial = len(initial_split.load(lazy=True))
         _need(
             initial == config.n_initial,
             "n_initial",
             config.n_initial,
-            f"{folder / 'transforms_initial.json'} holds {initial} initial views; they are all used",
+            f"{initial_split.listing} holds {initial} initial views; they are all used",
         )
         pool = len(train)
     else:
@@ -174,7 +176,7 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
             len(train) >= config.n_initial + config.n_new,
             "n_initial",
             config.n_initial,
-            f"{folder / 'transforms_train.json'} holds {len(train)} views, fewer than {config.n_initial} initial + "
+            f"{train_split.listing} holds {len(train)} views, fewer than {config.n_initial} initial + "
             f"{config.n_new} new ones",
         )
         initial, pool = config.n_initial, len(train) - config.n_initial
@@ -183,9 +185,9 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
         len(test) >= config.n_test,
         "n_test",
         config.n_test,
-        f"{folder / 'transforms_test.json'} holds only {len(test)} test views",
+        f"{test_split.listing} holds only {len(test)} test views",
     )
-    splits = ("train", "test", "initial") if (folder / "transforms_initial.json").exists() else ("train", "test")
+    splits = ("train", "test", "initial") if has_initial else ("train", "test")
     return {
         "path": str(Path(folder).resolve()),
         "digest": dataset_digest(folder),
