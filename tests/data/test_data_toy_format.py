@@ -1,5 +1,5 @@
 """A dataset format defined outside the package and registered with one line works everywhere a
-dataset is read or grown: `load_dataset` (experiments) and a capture session (create, add,
+dataset is read or grown: `load_dataset`, an experiment (a sweep) and a capture session (create, add,
 export, reopen). The toy format stores its listing under keys of its own, so every operation
 goes through the `Format` interface, not through the layout of the built-in formats."""
 
