@@ -35,3 +35,20 @@ def given_fields(options, prefix: str, argv: Sequence[str] | None) -> dict:
             name = option.removeprefix(f"--{prefix}.").replace("-", "_")
             given.add(name.removeprefix("no_") if name not in names else name)  # --PREFIX.no-FLAG
     return {name: getattr(options, name) for name in names if name in given}
+
+
+def given_options(names: Sequence[str], argv: Sequence[str]) -> set[str]:
+    """Which of the options `names` (written as on the command line, e.g. "estimate-up") `argv`
+    gives, whatever their value: `--name`, `--name=value`, `--name_with_underscores`, `--no-name`.
+
+    Example:
+        >>> sorted(given_options(["seed", "estimate-up", "up"], ["train", "run", "--seed=0", "--no-estimate-up"]))
+        ['estimate-up', 'seed']
+    """
+    wanted = {name.replace("_", "-"): name for name in names}
+    given = set()
+    for word in argv:
+        option = word.partition("=")[0].removeprefix("--").replace("_", "-")
+        if word.startswith("--") and (option in wanted or option.removeprefix("no-") in wanted):
+            given.add(wanted.get(option) or wanted[option.removeprefix("no-")])
+    return given

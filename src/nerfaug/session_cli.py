@@ -23,6 +23,7 @@ import tyro
 from nerfaug import serve_cli
 from nerfaug.capture.constraints import ViewConstraints
 from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
+from nerfaug.cli_options import COMMAND_LINE, given_options
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset
@@ -249,7 +250,7 @@ def train(
     if (path / SESSION_FILE).exists():
         if out is not None:
             raise SystemExit(f"{path} is already a session folder; drop --out to train it further")
-        given = {
+        differs = {  # from Python (no command line): what differs from the defaults
             "preset": preset != "cpu",
             "seed": seed != 0,
             "split": split is not None,
@@ -259,8 +260,11 @@ def train(
             "up": tuple(up) != (0.0, 0.0, 1.0),
             "estimate-up": estimate_up,
         }
-        if any(given.values()):
-            options = ", ".join(f"--{name}" for name, set_ in given.items() if set_)
+        argv = COMMAND_LINE.get()
+        # On the command line an option given at its default is given all the same.
+        given = given_options(list(differs), argv) if argv is not None else {k for k, v in differs.items() if v}
+        if given:
+            options = ", ".join(f"--{name}" for name in differs if name in given)
             raise ValueError(
                 f"{options}: only for a new session; {path / SESSION_FILE} keeps this session's "
                 "settings, so drop them (or start a new session with `nerfaug train DATA --out NEW_RUN`)"

@@ -533,6 +533,17 @@ def train_session_with_new_session_options(tmp, bases):
 
 
 @case
+def train_session_with_new_session_options_at_their_defaults(tmp, bases):
+    """Given at their default values, such options are still given, and still refused."""
+    run = _session(tmp, bases)
+    return Case(
+        ["train", run, "--preset=cpu", "--seed", "0", "--no-estimate-up", "--steps", "1", "--device", "cpu"],
+        [run],
+        says=("--preset", "--seed", "--estimate-up", "session.json"),
+    )
+
+
+@case
 def train_over_a_session_that_lost_its_session_json(tmp, bases):
     """A tester's data loss: `train DATA --out RUN` over a damaged session rebuilt RUN/dataset,
     deleting the user's notes and the captured images in it."""
