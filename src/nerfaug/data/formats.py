@@ -106,8 +106,8 @@ def require_split(root: str | Path, split: str, purpose: str) -> DatasetSplit:
     if not fmt.has_splits:
         raise DatasetError(
             fmt.listing(root, split),
-            f"{purpose}: the {fmt.name} format keeps one listing for every split; write the {split} views "
-            f"in a format with splits ({', '.join(f.name for f in FORMATS.values() if f.has_splits)})",
+            f"{purpose}: the {fmt.name} format keeps one listing for every split; add the {split} views as "
+            + " or ".join(f"{f.listing(root, split).name} ({f.name} format)" for f in FORMATS.values() if f.has_splits),
         )
     raise DatasetError(fmt.listing(root, split), f"{purpose}: file not found")
 
