@@ -28,7 +28,7 @@ from nerfaug.cli_options import COMMAND_LINE, given_fields
 from nerfaug.experiment.config import PresetName
 from nerfaug.experiment.config import preset as make_preset
 from nerfaug.nerf.config import EnginePreset
-from nerfaug.selection.methods import SelectionConfig
+from nerfaug.selection.config import SelectionConfig
 
 Positional = tyro.conf.Positional
 # The defaults `--selection.*` options start from (read-only use: never mutated).

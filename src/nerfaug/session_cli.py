@@ -27,7 +27,7 @@ from nerfaug.cli_options import COMMAND_LINE, given_options
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset
-from nerfaug.selection.methods import SelectionConfig
+from nerfaug.selection.config import SelectionConfig
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
 Device = Literal["auto", "cpu", "cuda"]

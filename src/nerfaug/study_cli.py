@@ -18,8 +18,8 @@ import tyro
 
 from nerfaug.cli_options import COMMAND_LINE, given_fields
 from nerfaug.experiment import study as study_runs
-from nerfaug.experiment.config import SelectionConfig
 from nerfaug.experiment.study import StudyPreset
+from nerfaug.selection.config import SelectionConfig
 
 
 def method_records() -> dict[str, dict]:

@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
+from nerfaug.selection.config import SelectionConfig
+
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
 from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
     AUTHORS_VARIANTS,
@@ -17,7 +19,6 @@ from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
     STUDY_METHODS,
     TABLE_I,
     TABLE_II,
-    SelectionConfig,
 )
 
 if TYPE_CHECKING:
