@@ -315,8 +315,9 @@ def propose(
     Args:
         run: the session's run folder.
         n: views to propose.
-        method: the selection method (`nerfaug methods`); "ours" is the paper's (min-max normalised
-            entropy + coverage, rejection sampling). Which method to use: the study's results page
+        method: the selection method (`nerfaug methods`); "ours" is the paper's entropy + coverage
+            with each term min-max normalised, then rejection sampling ("ours-paper-sum": the raw
+            sum as the paper writes it). Which method to use: the study's results page
             (docs/results.md, "Which method to use") says, per engine, which methods beat uniform
             selection and by how much; where none does, uniform is as good a choice.
         out: the poses JSON to write.
