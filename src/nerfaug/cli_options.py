@@ -28,27 +28,22 @@ def given_fields(options, prefix: str, argv: Sequence[str] | None) -> dict:
     if argv is None:
         defaults = type(options)()
         return {name: getattr(options, name) for name in names if getattr(options, name) != getattr(defaults, name)}
-    given = set()
-    for word in argv:
-        option, _, _ = word.partition("=")
-        if option.startswith(f"--{prefix}."):  # tyro takes FIELD with - or _ between its words
-            name = option.removeprefix(f"--{prefix}.").replace("-", "_")
-            given.add(name.removeprefix("no_") if name not in names else name)  # --PREFIX.no-FLAG
-    return {name: getattr(options, name) for name in names if name in given}
+    given = given_options([f"{prefix}.{name}" for name in names], argv)
+    return {name: getattr(options, name) for name in names if f"{prefix}.{name}" in given}
 
 
 def given_options(names: Sequence[str], argv: Sequence[str]) -> set[str]:
     """Which of the options `names` (written as on the command line, e.g. "estimate-up") `argv`
-    gives, whatever their value: `--name`, `--name=value`, `--name_with_underscores`, `--no-name`.
+    gives, whatever their value: `--name`, `--name=value`, `--name_with_underscores`, `--no-name`
+    (`--prefix.no-name` for a dotted name).
 
     Example:
         >>> sorted(given_options(["seed", "estimate-up", "up"], ["train", "run", "--seed=0", "--no-estimate-up"]))
         ['estimate-up', 'seed']
     """
-    wanted = {name.replace("_", "-"): name for name in names}
-    given = set()
-    for word in argv:
-        option = word.partition("=")[0].removeprefix("--").replace("_", "-")
-        if word.startswith("--") and (option in wanted or option.removeprefix("no-") in wanted):
-            given.add(wanted.get(option) or wanted[option.removeprefix("no-")])
-    return given
+    spellings = {}  # every way an option may be written (- or _ between words, negated) -> its name
+    for name in names:
+        base, dot, last = name.replace("_", "-").rpartition(".")
+        spellings[f"{base}{dot}{last}"] = spellings[f"{base}{dot}no-{last}"] = name
+    words = (word.partition("=")[0].removeprefix("--").replace("_", "-") for word in argv if word.startswith("--"))
+    return {spellings[word] for word in words if word in spellings}
