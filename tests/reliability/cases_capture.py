@@ -521,26 +521,23 @@ def render_proposals_poses_missing(tmp, bases):
     return case
 
 
+def _train_session_with(tmp, bases, options: list[str], says: tuple[str, ...]) -> Case:
+    """`nerfaug train RUN` on an existing session with `options` that only shape a new one."""
+    run = _session(tmp, bases)
+    return Case(["train", run, *options, "--steps", "1", "--device", "cpu"], [run], says=(*says, "session.json"))
+
+
 @case
 def train_session_with_new_session_options(tmp, bases):
     """Options that only shape a new session are refused, not silently ignored, on an existing one."""
-    run = _session(tmp, bases)
-    return Case(
-        ["train", run, "--preset", "paper", "--seed", "3", "--steps", "1", "--device", "cpu"],
-        [run],
-        says=("--preset", "--seed", "session.json"),
-    )
+    return _train_session_with(tmp, bases, ["--preset", "paper", "--seed", "3"], ("--preset", "--seed"))
 
 
 @case
 def train_session_with_new_session_options_at_their_defaults(tmp, bases):
     """Given at their default values, such options are still given, and still refused."""
-    run = _session(tmp, bases)
-    return Case(
-        ["train", run, "--preset=cpu", "--seed", "0", "--no-estimate-up", "--steps", "1", "--device", "cpu"],
-        [run],
-        says=("--preset", "--seed", "--estimate-up", "session.json"),
-    )
+    options = ["--preset=cpu", "--seed", "0", "--no-estimate-up"]
+    return _train_session_with(tmp, bases, options, ("--preset", "--seed", "--estimate-up"))
 
 
 @case
