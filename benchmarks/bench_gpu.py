@@ -16,7 +16,9 @@ Three modes:
 - `protocol` (on the GPU): the paper's comparison (ours, uniform, entropy, fisherrf) x
   `--trials`, one whole trial round at a time, stopping before `--budget-s` would be exceeded
   (a device call lasts at most 10 minutes): run the same command again to resume; finished runs
-  are never recomputed. Prints per-method medians and writes the report.
+  are never recomputed. `--workers N` runs N at once on the one GPU, each in its own process
+  (4 gave 1.7x the throughput on an H100; 8 ran out of its 80 GB: BENCHMARKS.md). Prints
+  per-method medians and writes the report.
 
 What was reduced to fit 64 MiB (default pack): lego at 400x400 instead of 800x800 (the paper's
 size; 706 views at 800 px would not fit as JPEG, and would take ~2 h of Cycles on 2 cores),
@@ -25,7 +27,7 @@ channel (the paper preset does not use random backgrounds), pool 500 and 200 tes
 
 Exact commands:
 
-    # here (CPU machine): about 25-40 min of Cycles for 400x400 on 2 cores
+    # here (CPU machine): about 20 min of Cycles for 400x400 on 2 cores
     .venv/bin/python benchmarks/bench_gpu.py pack --scene lego --resolution 400 --out data/gpu/lego.npz
     # GPU machine (device tool: carry ["data/gpu"]); its own python3 and torch, no install needed
     python3 benchmarks/bench_gpu.py trial --data data/gpu/lego.npz --device cuda --json $OUT/trial.json
@@ -426,19 +428,26 @@ def protocol(args) -> dict:
     if device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(device)
     round_seconds, outcome, done_rounds = None, None, 0
-    for k in range(1, args.trials + 1):
+    # A round is as many whole trials (every method) as --workers can run at once.
+    per_round = max(1, args.workers // len(args.methods))
+    while done_rounds < args.trials:
         elapsed = time.perf_counter() - start
         if round_seconds is not None and elapsed + round_seconds > args.budget_s:
             break
+        k = min(args.trials, done_rounds + per_round)
         config = experiment_config(args, folder, meta, args.methods, k)
-        outcome = run_sweep(config, args.out, workers=1, progress=args.progress, command=["bench_gpu.py", "protocol"])
+        outcome = run_sweep(
+            config, args.out, workers=args.workers, progress=args.progress, command=["bench_gpu.py", "protocol"]
+        )
         if outcome.failed:
             raise SystemExit(f"runs failed: {outcome.failed}")
         done_rounds = k
-        # The next round's cost: one run per method at the median time of the runs so far (also
-        # right after resuming, when this round only read finished runs), plus 10 %.
+        # The next round's cost: its runs in waves of --workers, each wave as long as the slowest
+        # method's median run so far (also right after resuming, when this round only read
+        # finished runs), plus 10 %.
         medians = [_median([r["timing"]["total"] for r in outcome.results if r["method"] == m]) for m in args.methods]
-        round_seconds = 1.1 * sum(m for m in medians if m is not None)
+        waves = math.ceil(min(per_round, args.trials - k) * len(args.methods) / args.workers)
+        round_seconds = 1.1 * max(1, waves) * max((m for m in medians if m is not None), default=0.0)
     results = outcome.results if outcome is not None else []
     per_method = {}
     for method in args.methods:
@@ -460,7 +469,9 @@ def protocol(args) -> dict:
         "trials_wanted": args.trials,
         "complete": complete,
         "wall_s": time.perf_counter() - start,
-        "peak_gpu_mib": peak_memory_mib(device),
+        "workers": args.workers,
+        # The runs' own processes when --workers > 1: this process then holds no model.
+        "peak_gpu_mib": peak_memory_mib(device) if args.workers == 1 else None,
         "methods": per_method,
     }
     print(
@@ -552,6 +563,12 @@ def parser() -> argparse.ArgumentParser:
         else:
             s.add_argument("--methods", nargs="+", default=list(MAIN_METHODS))
             s.add_argument("--trials", type=int, default=10)
+            s.add_argument(
+                "--workers",
+                type=int,
+                default=1,
+                help="runs at once, each its own process on the same device (a small NeRF leaves most of a GPU idle)",
+            )
             s.add_argument(
                 "--budget-s",
                 type=float,

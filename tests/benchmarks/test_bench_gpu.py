@@ -168,3 +168,17 @@ def test_protocol_runs_every_method_and_resumes_within_its_budget(bench, packed,
     again = bench.main([*common, "--trials", "3", "--budget-s", "0"])
     assert not again["complete"] and again["trials_done"] == 1
     assert "run the same command again" in capsys.readouterr().out
+
+
+def test_protocol_with_workers_runs_whole_trials_at_once_and_gives_the_same_numbers(bench, packed, tmp_path):
+    out, _ = packed
+    common = ["protocol", "--data", str(out), "--unpack-to", str(tmp_path / "data"), *TOY]
+    common += ["--methods", "ours", "uniform", "--trials", "2", "--no-report"]
+    alone = bench.main([*common, "--out", str(tmp_path / "alone")])
+    # 4 workers and 2 methods: both trials in one round, four runs in their own processes.
+    together = bench.main([*common, "--out", str(tmp_path / "together"), "--workers", "4"])
+    assert together["complete"] and together["workers"] == 4 and together["peak_gpu_mib"] is None
+    for method in ("ours", "uniform"):
+        assert together["methods"][method]["trials"] == 2
+        # On the CPU a run's numbers depend on its seed alone, not on the processes beside it.
+        assert together["methods"][method]["psnr"] == alone["methods"][method]["psnr"]
