@@ -14,7 +14,7 @@ Three modes:
   after a short warm-up of the process. Prints s/step, trial time, peak GPU memory and
   PSNR/SSIM/LPIPS; `--json` writes them.
 - `protocol` (on the GPU): the paper's comparison (ours, uniform, entropy, fisherrf) x
-  `--trials`, one whole trial round at a time, stopping before `--budget-s` would be exceeded
+  `--trials`, one run at a time, stopping before `--budget-s` would be exceeded
   (a device call lasts at most 10 minutes): run the same command again to resume; finished runs
   are never recomputed. `--workers N` runs N at once on the one GPU, each in its own process
   (4 gave 1.7x the throughput on an H100; 8 ran out of its 80 GB: BENCHMARKS.md). Prints
@@ -32,7 +32,11 @@ Exact commands:
     # GPU machine (device tool: carry ["data/gpu"]); its own python3 and torch, no install needed
     python3 benchmarks/bench_gpu.py trial --data data/gpu/lego.npz --device cuda --json $OUT/trial.json
     python3 benchmarks/bench_gpu.py protocol --data data/gpu/lego.npz --device cuda --trials 10 \\
-        --budget-s 540 --out results/gpu-lego --json $OUT/protocol.json     # repeat until done
+        --budget-s 540 --out results/gpu-lego --json $OUT/protocol.json \\
+        --archive $OUT/protocol.tar.gz --resume-from data/gpu/protocol.tar.gz     # repeat until done
+
+    Each call starts a bare machine: copy the archive that came back to data/gpu/protocol.tar.gz
+    here before the next call (the first call has none: leave --resume-from out).
 
 On the CPU at toy size (what tests/benchmarks/test_bench_gpu.py runs):
 
@@ -416,48 +420,67 @@ def _print_trial(f: dict) -> None:
 
 
 def protocol(args) -> dict:
-    """The paper's comparison, a trial round at a time within --budget-s; resumable."""
+    """The paper's comparison, a run at a time (a round of runs with --workers) within --budget-s;
+    resumable."""
     from nerfaug.device import configure_process, peak_memory_mib, resolve_device
+    from nerfaug.experiment.store import finished_runs
     from nerfaug.experiment.sweep import run_sweep
 
     device = resolve_device(args.device)
     args.device = device.type
     configure_process(threads=args.threads)
     folder, meta = unpack(args.data, args.unpack_to)
+    if args.resume_from is not None:
+        restore_runs(args.resume_from, args.out)
     start = time.perf_counter()
     if device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(device)
-    round_seconds, outcome, done_rounds = None, None, 0
-    # A round is as many whole trials (every method) as --workers can run at once.
+    # The unit of work: one run with one worker (a paper-scale run alone nearly fills a device
+    # call, so a whole round of methods would not fit); with more, as many whole trials (every
+    # method) as the workers can run at once.
     per_round = max(1, args.workers // len(args.methods))
-    while done_rounds < args.trials:
-        elapsed = time.perf_counter() - start
-        if round_seconds is not None and elapsed + round_seconds > args.budget_s:
-            break
-        k = min(args.trials, done_rounds + per_round)
-        config = experiment_config(args, folder, meta, args.methods, k)
+    units = []
+    for k in range(per_round, args.trials + per_round, per_round):
+        k = min(k, args.trials)
+        units += [(k, (m,)) for m in args.methods] if args.workers == 1 else [(k, tuple(args.methods))]
+    results: dict[tuple[str, int], dict] = {}
+    stopped = False
+    for k, methods in units:
+        # Runs already finished (resumed, or restored from --resume-from) cost nothing to read back.
+        finished = {(r["method"], r["trial"]) for r in finished_runs(args.out)}
+        todo = [(m, t) for m in methods for t in range(k) if (m, t) not in finished]
+        # The unit's cost: its runs in waves of --workers, each wave as long as the slowest median
+        # run so far of its methods (of any method, for a method not yet run), plus 10 %.
+        medians = {
+            m: _median([r["timing"]["total"] for r in results.values() if r["method"] == m]) for m in args.methods
+        }
+        known = [medians[m] for m in methods if medians[m] is not None] or [
+            v for v in medians.values() if v is not None
+        ]
+        if todo and known:
+            unit_seconds = 1.1 * math.ceil(len(todo) / args.workers) * max(known)
+            if time.perf_counter() - start + unit_seconds > args.budget_s:
+                stopped = True
+                break
+        config = experiment_config(args, folder, meta, methods, k)
         outcome = run_sweep(
             config, args.out, workers=args.workers, progress=args.progress, command=["bench_gpu.py", "protocol"]
         )
         if outcome.failed:
             raise SystemExit(f"runs failed: {outcome.failed}")
-        done_rounds = k
-        # The next round's cost: its runs in waves of --workers, each wave as long as the slowest
-        # method's median run so far (also right after resuming, when this round only read
-        # finished runs), plus 10 %.
-        medians = [_median([r["timing"]["total"] for r in outcome.results if r["method"] == m]) for m in args.methods]
-        waves = math.ceil(min(per_round, args.trials - k) * len(args.methods) / args.workers)
-        round_seconds = 1.1 * max(1, waves) * max((m for m in medians if m is not None), default=0.0)
-    results = outcome.results if outcome is not None else []
+        results.update({(r["method"], r["trial"]): r for r in outcome.results if r["method"] in methods})
     per_method = {}
     for method in args.methods:
-        rows = [r for r in results if r["method"] == method]
+        rows = [r for (m, _), r in sorted(results.items()) if m == method]
         per_method[method] = {
             "trials": len(rows),
             **{m: _median([r["metrics"].get(m) for r in rows]) for m in ("psnr", "ssim", "lpips")},
             "run_s": _median([r["timing"]["total"] for r in rows]),
         }
-    complete = done_rounds == args.trials
+    # Whole trials: those that every method has finished.
+    done_rounds = min((row["trials"] for row in per_method.values()), default=0)
+    results = list(results.values())
+    complete = done_rounds == args.trials and not stopped
     summary = {
         "mode": "protocol",
         **environment(device),
@@ -486,6 +509,9 @@ def protocol(args) -> dict:
         )
     if not complete:
         print(f"  stopped within --budget-s {args.budget_s:.0f}: run the same command again to go on")
+    if args.archive is not None and results:
+        summary["archive"] = str(archive_runs(args.out, args.archive))
+        print(f"  finished runs archived in {summary['archive']}: pass it to --resume-from on the next machine")
     summary["report"] = None
     if args.report and results:
         from nerfaug.cli import paper_tables
@@ -498,6 +524,42 @@ def protocol(args) -> dict:
             summary["report_error"] = f"{type(error).__name__}: {error}"
             print(f"  report failed: {summary['report_error']}", file=sys.stderr)
     return summary
+
+
+ARCHIVE_SKIP = ("datasets", "renders", "view_uncertainty")
+"""What a protocol archive leaves out: the dataset cache (rebuilt from the pack) and the pictures."""
+
+
+def archive_runs(out: Path, archive: Path) -> Path:
+    """Write the JSON files of a protocol's results folder (sweep.json, each run's result, metrics,
+    selection, history, config, the folders' markers) into one .tar.gz: what a resumed protocol needs to skip the
+    finished runs, small enough to come back from a device call that starts a bare machine."""
+    import tarfile
+
+    archive.parent.mkdir(parents=True, exist_ok=True)
+    tmp = archive.with_name(archive.name + ".tmp")
+    with tarfile.open(tmp, "w:gz") as tar:
+        for path in sorted(out.rglob("*")):
+            # .nerfaug: the JSON marker that says nerfaug made the folder (nerfaug.owned).
+            wanted = path.is_file() and (path.suffix == ".json" or path.name == ".nerfaug")
+            if wanted and not set(path.relative_to(out).parts) & set(ARCHIVE_SKIP):
+                tar.add(path, arcname=str(path.relative_to(out)))
+    os.replace(tmp, archive)
+    return archive
+
+
+def restore_runs(archive: Path, out: Path) -> None:
+    """Unpack an `archive_runs` file into `out` when `out` holds no sweep yet (a bare machine);
+    a folder that already has one is left as it is (it is at least as new)."""
+    import tarfile
+
+    if not archive.is_file():
+        raise SystemExit(f"{archive}: archive not found (--resume-from takes what --archive wrote)")
+    if (out / "sweep.json").exists():
+        print(f"{out}: already a results folder; {archive} not unpacked")
+        return
+    with tarfile.open(archive, "r:gz") as tar:
+        tar.extractall(out, filter="data")  # "data": no absolute paths, links or files outside `out`
 
 
 def _median(values):
@@ -576,6 +638,16 @@ def parser() -> argparse.ArgumentParser:
                 help="start no trial round that would end after this many seconds",
             )
             s.add_argument("--no-report", dest="report", action="store_false")
+            s.add_argument(
+                "--archive",
+                type=Path,
+                help="also write the finished runs' JSON files into this .tar.gz (e.g. under $OUT)",
+            )
+            s.add_argument(
+                "--resume-from",
+                type=Path,
+                help="an --archive file to start from when --out holds no results yet (a bare machine)",
+            )
     return p
 
 

@@ -6,6 +6,7 @@ import json
 import math
 import os
 import sys
+import tarfile
 from pathlib import Path
 
 import pytest
@@ -164,9 +165,10 @@ def test_protocol_runs_every_method_and_resumes_within_its_budget(bench, packed,
     assert first["complete"] and first["trials_done"] == 2
     assert {m: r["trials"] for m, r in first["methods"].items()} == {"ours": 2, "uniform": 2}
     assert all(math.isfinite(r["psnr"]) and r["run_s"] > 0 for r in first["methods"].values())
-    # A budget that fits no further round: the finished runs are read back, none is started.
+    # A budget that fits no further run: the finished runs are read back, none is started.
     again = bench.main([*common, "--trials", "3", "--budget-s", "0"])
-    assert not again["complete"] and again["trials_done"] == 1
+    assert not again["complete"] and again["trials_done"] == 2
+    assert {m: r["run_s"] for m, r in again["methods"].items()} == {m: r["run_s"] for m, r in first["methods"].items()}
     assert "run the same command again" in capsys.readouterr().out
 
 
@@ -182,3 +184,36 @@ def test_protocol_with_workers_runs_whole_trials_at_once_and_gives_the_same_numb
         assert together["methods"][method]["trials"] == 2
         # On the CPU a run's numbers depend on its seed alone, not on the processes beside it.
         assert together["methods"][method]["psnr"] == alone["methods"][method]["psnr"]
+
+
+def test_protocol_resumes_on_a_bare_machine_from_its_archive(bench, packed, tmp_path, capsys):
+    out, _ = packed
+    common = ["protocol", "--data", str(out), "--unpack-to", str(tmp_path / "data"), *TOY]
+    common += ["--methods", "ours", "uniform", "--no-report"]
+    archive = tmp_path / "OUT" / "protocol.tar.gz"
+    first = bench.main([*common, "--trials", "1", "--out", str(tmp_path / "machine1"), "--archive", str(archive)])
+    assert first["archive"] == str(archive) and archive.is_file()
+    names = tarfile.open(archive).getnames()
+    assert "sweep.json" in names and not any("datasets" in n or n.endswith(".png") for n in names)
+    # A bare machine: a new results folder, the archive carried in; a budget of 0 starts no round,
+    # so the trial in the summary can only come from the archive.
+    again = bench.main(
+        [
+            *common,
+            "--trials",
+            "2",
+            "--out",
+            str(tmp_path / "machine2"),
+            "--resume-from",
+            str(archive),
+            "--budget-s",
+            "0",
+        ]
+    )
+    assert again["trials_done"] == 1 and not again["complete"]
+    # The same seconds: read back, not run again (a rerun would give the same PSNR on the CPU).
+    for method in ("ours", "uniform"):
+        assert again["methods"][method]["run_s"] == first["methods"][method]["run_s"]
+    assert "redoing" not in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="archive not found"):
+        bench.main([*common, "--out", str(tmp_path / "machine3"), "--resume-from", str(tmp_path / "none.tar.gz")])
