@@ -296,9 +296,13 @@ def propose(
     n: int = 6,
     method: str = "ours",
     out: Path = Path("poses.json"),
-    candidates: Path | None = None,
+    candidates: Annotated[
+        Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: the hemisphere)")
+    ] = None,
     n_candidates: int = 500,
-    seed: int | None = None,
+    seed: Annotated[
+        int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the session's, per proposal)")
+    ] = None,
     device: Device = "auto",
     selection: SelectionConfig = DEFAULT_SELECTION,
     constraints: Annotated[ViewConstraints, tyro.conf.OmitArgPrefixes] = DEFAULT_CONSTRAINTS,
@@ -324,8 +328,8 @@ def propose(
         candidates: a transforms JSON of reachable poses (e.g. a robot's workspace) to choose
             from instead of the hemisphere.
         n_candidates: hemisphere candidates to score.
-        seed: seed this proposal explicitly (default: from the session seed and the proposal number,
-            so the same session state always proposes the same views).
+        seed: seed this proposal explicitly; by default it comes from the session seed and the
+            proposal number, so the same session state always proposes the same views.
         device: where candidates are scored: auto (cuda when available, else cpu), cpu, cuda.
         selection: options of the selection method (recorded with the proposal in session.json);
             a method's own settings (e.g. ours-authors') apply over them.
