@@ -532,8 +532,9 @@ ARCHIVE_SKIP = ("datasets", "renders", "view_uncertainty")
 
 def archive_runs(out: Path, archive: Path) -> Path:
     """Write the JSON files of a protocol's results folder (sweep.json, each run's result, metrics,
-    selection, history, config, the folders' markers) into one .tar.gz: what a resumed protocol needs to skip the
-    finished runs, small enough to come back from a device call that starts a bare machine."""
+    selection, history, config, the folders' markers) into one .tar.gz: what a resumed protocol
+    needs to skip the finished runs, small enough to come back from a device call that starts a
+    bare machine."""
     import tarfile
 
     archive.parent.mkdir(parents=True, exist_ok=True)
@@ -635,7 +636,7 @@ def parser() -> argparse.ArgumentParser:
                 "--budget-s",
                 type=float,
                 default=540.0,
-                help="start no trial round that would end after this many seconds",
+                help="start no run (with --workers: no round of runs) that would end after this many seconds",
             )
             s.add_argument("--no-report", dest="report", action="store_false")
             s.add_argument(
