@@ -444,10 +444,10 @@ def protocol(args) -> dict:
         k = min(k, args.trials)
         units += [(k, (m,)) for m in args.methods] if args.workers == 1 else [(k, tuple(args.methods))]
     results: dict[tuple[str, int], dict] = {}
+    # Runs already finished (resumed, or restored from --resume-from) cost nothing to read back.
+    finished = {(r["method"], r["trial"]) for r in finished_runs(args.out)}
     stopped = False
     for k, methods in units:
-        # Runs already finished (resumed, or restored from --resume-from) cost nothing to read back.
-        finished = {(r["method"], r["trial"]) for r in finished_runs(args.out)}
         todo = [(m, t) for m in methods for t in range(k) if (m, t) not in finished]
         # The unit's cost: its runs in waves of --workers, each wave as long as the slowest median
         # run so far of its methods (of any method, for a method not yet run), plus 10 %.
@@ -469,6 +469,7 @@ def protocol(args) -> dict:
         if outcome.failed:
             raise SystemExit(f"runs failed: {outcome.failed}")
         results.update({(r["method"], r["trial"]): r for r in outcome.results if r["method"] in methods})
+        finished |= results.keys()
     per_method = {}
     for method in args.methods:
         rows = [r for (m, _), r in sorted(results.items()) if m == method]
@@ -526,10 +527,6 @@ def protocol(args) -> dict:
     return summary
 
 
-ARCHIVE_SKIP = ("datasets", "renders", "view_uncertainty")
-"""What a protocol archive leaves out: the dataset cache (rebuilt from the pack) and the pictures."""
-
-
 def archive_runs(out: Path, archive: Path) -> Path:
     """Write the JSON files of a protocol's results folder (sweep.json, each run's result, metrics,
     selection, history, config, the folders' markers) into one .tar.gz: what a resumed protocol
@@ -537,13 +534,17 @@ def archive_runs(out: Path, archive: Path) -> Path:
     bare machine."""
     import tarfile
 
+    from nerfaug.experiment.runfolder import FILES
+    from nerfaug.owned import MARKER
+
+    # Left out: the dataset cache (rebuilt from the pack) and the pictures.
+    skip = {"datasets", FILES.renders, FILES.view_uncertainty}
     archive.parent.mkdir(parents=True, exist_ok=True)
     tmp = archive.with_name(archive.name + ".tmp")
     with tarfile.open(tmp, "w:gz") as tar:
         for path in sorted(out.rglob("*")):
-            # .nerfaug: the JSON marker that says nerfaug made the folder (nerfaug.owned).
-            wanted = path.is_file() and (path.suffix == ".json" or path.name == ".nerfaug")
-            if wanted and not set(path.relative_to(out).parts) & set(ARCHIVE_SKIP):
+            wanted = path.is_file() and (path.suffix == ".json" or path.name == MARKER)
+            if wanted and not set(path.relative_to(out).parts) & skip:
                 tar.add(path, arcname=str(path.relative_to(out)))
     os.replace(tmp, archive)
     return archive
