@@ -48,6 +48,41 @@ def test_study_help_lists_selection_options_and_no_none_defaults(capsys, monkeyp
     assert "(default: None)" not in options and "{None}" not in options
 
 
+def every_command(capsys, monkeypatch) -> dict[str, str]:
+    """Each command's help, found by walking the `{a,b,...}` subcommand lists from the top."""
+    helps, todo = {}, [[]]
+    while todo:
+        argv = todo.pop()
+        text = help_text(argv, capsys, monkeypatch)
+        helps[" ".join(argv)] = text
+        usage = re.search(r"usage: nerfaug[\w -]* \[-h\] \{([^}]*)\}", text)  # a command's subcommands
+        if usage is not None:
+            todo += [[*argv, command] for command in usage.group(1).split(",")]
+    return helps
+
+
+def test_no_command_help_shows_none_for_a_default(capsys, monkeypatch):
+    helps = every_command(capsys, monkeypatch)
+    assert {"", "scene", "scene render", "propose", "train", "serve", "eval", "uncertainty"} <= set(helps)
+    for command, text in helps.items():
+        assert "(default: None)" not in text and "{None}" not in text, command
+    propose = helps["propose"]
+    assert "--selection.metric M11 M12 M13 M21 M22 M23 M31 M32 M33" in propose
+    assert "(default: the identity)" in propose and "(default: the largest score)" in propose
+    assert "--elevation LOW HIGH" in propose and "(default: any)" in propose
+    assert "(default: the NERFAUG_TOKEN environment variable, if set)" in helps["serve"]
+
+
+def test_the_metric_is_nine_numbers_row_by_row_on_the_command_line():
+    import tyro
+
+    from nerfaug.selection.config import SelectionConfig
+
+    given = tyro.cli(SelectionConfig, args=["--metric", "2", "0.5", "0", "0.5", "1", "0", "0", "0", "3"])
+    assert given.metric == [[2.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 3.0]]
+    assert tyro.cli(SelectionConfig, args=[]).metric is None
+
+
 def test_option_help_is_one_line_in_a_wide_terminal(capsys, monkeypatch):
     text = help_text(["run"], capsys, monkeypatch)
     body = [line.strip("│ ").rstrip() for line in text.splitlines() if line.startswith("│")]

@@ -14,6 +14,8 @@ from typing import Annotated, Literal
 
 import tyro
 
+from nerfaug.cli_options import none_means
+
 TOKEN_ENV = "NERFAUG_TOKEN"
 UNCERTAINTY_KIND = "uncertainty-images"  # the marker of a folder `nerfaug uncertainty` wrote
 
@@ -32,7 +34,7 @@ def serve(
     root: Path = Path("sessions"),
     host: str = "127.0.0.1",
     port: int = 8000,
-    token: str | None = None,
+    token: Annotated[str | None, none_means(f"the {TOKEN_ENV} environment variable, if set", "TOKEN")] = None,
     device: Literal["auto", "cpu", "cuda"] = "auto",
     checkpoint_every: float = 60.0,
     threads: int = 1,
@@ -49,8 +51,8 @@ def serve(
         root: the folder holding the sessions (and datasets sessions may start from).
         host: the address to listen on; only this machine (127.0.0.1) unless a token is set.
         port: the port to listen on.
-        token: a secret every request must send as `Authorization: Bearer TOKEN` (default: the
-            NERFAUG_TOKEN environment variable); needed to listen beyond this machine.
+        token: a secret every request must send as `Authorization: Bearer TOKEN`; needed to
+            listen beyond this machine.
         device: where the NeRFs train: auto (cuda when available, else cpu), cpu, cuda.
         checkpoint_every: save a training session after this many seconds (and when a job ends).
         threads: torch threads for training.
@@ -94,7 +96,7 @@ def uncertainty(
     run: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")],
     poses: Path,
     out: Path,
-    width: int | None = None,
+    width: Annotated[int | None, none_means("the training resolution", "INT")] = None,
     fisher: bool = True,
     fisher_width: int = 16,
     device: Literal["auto", "cpu", "cuda"] = "auto",
@@ -108,7 +110,7 @@ def uncertainty(
         poses: a transforms JSON of world-frame poses (e.g. what `nerfaug propose` wrote); files are
             named after its frames' file_path.
         out: the folder to write (new, empty, or one this command wrote before).
-        width: pixels across of the render, depth and entropy; default: the training resolution.
+        width: pixels across of the render, depth and entropy.
         fisher: also compute FisherRF's per-pixel score (three backward passes per pixel).
         fisher_width: pixels across of the FisherRF image.
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.

@@ -23,7 +23,7 @@ import tyro
 from nerfaug import serve_cli
 from nerfaug.capture.constraints import ViewConstraints
 from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
-from nerfaug.cli_options import COMMAND_LINE, given_options
+from nerfaug.cli_options import COMMAND_LINE, given_options, none_means
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset
@@ -207,14 +207,18 @@ def _create(data: Path, out: Path, split: str | None, **options):
 
 def train(
     path: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="DATA|RUN")],
-    out: Path | None = None,
+    out: Annotated[
+        Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(required when PATH is a dataset)")
+    ] = None,
     steps: int = 1000,
     preset: EnginePreset = "cpu",
     seed: int = 0,
-    split: str | None = None,
+    split: Annotated[
+        str | None, none_means('"initial" for a dataset `nerfaug scene render` wrote, else "train"', "STR")
+    ] = None,
     downscale: int = 1,
-    centre: tuple[float, float, float] | None = None,
-    radius: float | None = None,
+    centre: Annotated[tuple[float, float, float] | None, none_means("the point the cameras look at", "X Y Z")] = None,
+    radius: Annotated[float | None, none_means("the cameras' mean distance to the centre", "FLOAT")] = None,
     up: tuple[float, float, float] = (0.0, 0.0, 1.0),
     estimate_up: bool = False,
     device: Device = "auto",
@@ -229,15 +233,15 @@ def train(
     Args:
         path: a Blender (transforms_{split}.json) or nerfstudio (transforms.json) dataset folder,
             or an existing run folder.
-        out: the run folder to create (needed when PATH is a dataset).
+        out: the run folder to create.
         steps: training steps to run now.
         preset: NeRF engine preset (new sessions only).
         seed: seeds the model, its training and every proposal (new sessions only).
-        split: the Blender split holding the captured views; default: "initial" for a dataset
-            `nerfaug scene render` wrote (its train split is the candidate pool), else "train".
+        split: the Blender split holding the captured views (a dataset `nerfaug scene render`
+            wrote keeps its candidate pool in "train").
         downscale: train on images shrunk by this integer factor.
-        centre: the hemisphere's centre, world space; default: the point the cameras look at.
-        radius: the hemisphere's radius; default: the cameras' mean distance to the centre.
+        centre: the hemisphere's centre, world space.
+        radius: the hemisphere's radius.
         up: the hemisphere's pole direction, world space (the world is z-up by default).
         estimate_up: take the pole from the cameras' mean up axis instead of --up.
         device: where the NeRF trains: auto (cuda when this machine has a GPU, else cpu), cpu, cuda.
@@ -465,7 +469,7 @@ def evaluate(
     run: RunFolder,
     data: Path,
     split: str = "test",
-    out: Path | None = None,
+    out: Annotated[Path | None, none_means("print only", "PATH")] = None,
     lpips: bool = True,
     device: Device = "auto",
 ) -> None:

@@ -168,6 +168,28 @@ def test_counts_and_scales_out_of_range_are_refused_by_name(name, value):
         SelectionConfig(**{name: value})
 
 
+@pytest.mark.parametrize(
+    "metric, problem",
+    [
+        ([[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]], "3x3"),  # one row of nine
+        ([[1.0, 0.0], [0.0, 1.0]], "3x3"),
+        ([[1.0, 0.0, 0.0], [0.0, 1.0]], "3x3"),  # ragged
+        ([[1.0, 0.0, 0.0], [0.0, float("nan"), 0.0], [0.0, 0.0, 1.0]], "finite"),
+        ([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], "symmetric"),
+        ([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]], "positive definite"),
+        ([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]], "positive definite"),  # eigenvalues 3, -1, 1
+    ],
+)
+def test_a_metric_that_is_not_spd_3x3_is_refused_by_name(metric, problem):
+    with pytest.raises(ValueError, match=f"SelectionConfig.metric=.*{problem}"):
+        SelectionConfig(metric=metric)
+
+
+def test_an_spd_metric_is_accepted():
+    metric = [[2.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 3.0]]
+    assert SelectionConfig(metric=metric).metric == metric
+
+
 def test_selection_round_trips_through_json(scene):
     _, train, candidates = scene
     selection = select_views("distance", None, train, candidates, 3, torch.Generator().manual_seed(0))

@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import Annotated
 
 import torch
 from torch import Tensor
 
 from nerfaug.capture.frame import Hemisphere
+from nerfaug.cli_options import none_means
 
 
 def angle_range_mask(values: Tensor, low: float, high: float) -> Tensor:
@@ -106,9 +108,9 @@ class ViewConstraints:
             the hemisphere's centre and a half-angle in degrees (0, 180).
     """
 
-    elevation: tuple[float, float] | None = None
-    azimuth: tuple[float, float] | None = None
-    radius: tuple[float, float] | None = None
+    elevation: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
+    azimuth: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
+    radius: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
     keep_out: tuple[tuple[float, float, float, float], ...] = field(default_factory=tuple)
 
     def check(self) -> ViewConstraints:

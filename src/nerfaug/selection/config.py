@@ -10,7 +10,12 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields, replace
 from types import MappingProxyType
+from typing import Annotated
 
+import numpy as np
+from tyro.constructors import PrimitiveConstructorSpec
+
+from nerfaug.cli_options import none_means
 from nerfaug.uncertainty.combined import NORMALISATIONS
 from nerfaug.uncertainty.entropy import ENTROPY_MODES
 from nerfaug.uncertainty.fisher import (
@@ -30,6 +35,22 @@ MAX_DRAWS = 1_000_000
 # The rotations the coverage term compares (`estimators.distance_rotations`).
 DISTANCE_ROTATIONS = ("pose", "azimuth")
 
+
+def _metric_from_words(words: list[str]) -> list[list[float]]:
+    values = [float(word) for word in words]
+    return [values[0:3], values[3:6], values[6:9]]
+
+
+# `--selection.metric` takes the 3x3 matrix as nine numbers, row by row; tyro's own parse of
+# nested lists cannot split them into rows.
+METRIC_ON_THE_COMMAND_LINE = PrimitiveConstructorSpec(
+    nargs=9,
+    metavar="M11 M12 M13 M21 M22 M23 M31 M32 M33",
+    instance_from_str=_metric_from_words,
+    is_instance=lambda value: value is None or isinstance(value, list),
+    str_from_instance=lambda value: ["None"] if value is None else [str(v) for row in value for v in row],
+)
+
 # What the authors' code (Agaggar/nerfstudio-low-data) does where the paper is silent, as
 # `SelectionConfig` settings; `SelectionConfig.authors_variant()` applies them. See the
 # SelectionConfig docstring for what the project cannot copy exactly.
@@ -43,6 +64,22 @@ AUTHORS_SETTINGS = MappingProxyType(
         "scoring_crop": 0.5,  # ... of which only the central 400x400 of 800x800 is used
     }
 )
+
+
+def _metric_problem(metric) -> str | None:
+    """What keeps `metric` from being the coverage term's M (a symmetric positive-definite 3x3
+    matrix of finite numbers), or None."""
+    try:
+        matrix = np.array(metric, dtype=float)
+    except (TypeError, ValueError):
+        return "a 3x3 matrix of numbers"
+    if matrix.shape != (3, 3) or not np.isfinite(matrix).all():
+        return "a 3x3 matrix of finite numbers"
+    if not np.allclose(matrix, matrix.T):
+        return "symmetric"
+    if np.linalg.eigvalsh(matrix).min() <= 0:
+        return "positive definite"
+    return None
 
 
 @dataclass
@@ -71,7 +108,8 @@ class SelectionConfig:
         normalisation: `combined_uncertainty` normalisation: "minmax" (default), "none", "authors".
         entropy_weight: a in U = a H + b D (the entropy term's weight).
         distance_weight: b in U = a H + b D (the coverage term's weight).
-        metric: the SPD 3x3 matrix M of the coverage term as nested lists; None for identity.
+        metric: the SPD 3x3 matrix M of the coverage term as nested lists (on the command line
+            nine numbers, row by row); None for the identity.
         scale_m: the rejection sampler's M; None for the largest score.
         sampler: "paper" or "authors" (the code's in-order loop, accept if w > 15 nu).
         authors_threshold: the 15 of the authors' sampler.
@@ -122,8 +160,12 @@ class SelectionConfig:
     normalisation: str = "minmax"
     entropy_weight: float = 1.0
     distance_weight: float = 1.0
-    metric: list[list[float]] | None = None
-    scale_m: float | None = None
+    metric: Annotated[
+        list[list[float]] | None,
+        METRIC_ON_THE_COMMAND_LINE,
+        none_means("the identity", "M11 M12 M13 M21 M22 M23 M31 M32 M33"),
+    ] = None
+    scale_m: Annotated[float | None, none_means("the largest score", "FLOAT")] = None
     sampler: str = "paper"
     authors_threshold: float = AUTHORS_THRESHOLD
     max_draws: int = MAX_DRAWS
@@ -136,15 +178,15 @@ class SelectionConfig:
     fisher_lambda: float = FISHER_LAMBDA
     fisher_cache_floats: int = CACHE_FLOATS
     chunk: int = 4096
-    background: tuple[float, float, float] | None = None
-    scoring_fov: float | None = None
+    background: Annotated[tuple[float, float, float] | None, none_means("the model's", "R G B")] = None
+    scoring_fov: Annotated[float | None, none_means("the candidates' own", "DEGREES")] = None
     scoring_crop: float = 1.0
-    min_polar: float | None = None
-    entropy_max_polar: float | None = None
+    min_polar: Annotated[float | None, none_means("no limit", "RADIANS")] = None
+    entropy_max_polar: Annotated[float | None, none_means("no limit", "RADIANS")] = None
     distance_rotations: str = "pose"
     temperature: float = 1.0
-    sharpness: float | None = None
-    batch_entropy_sigma: float | None = None
+    sharpness: Annotated[float | None, none_means("unset: `temperature` applies", "FLOAT")] = None
+    batch_entropy_sigma: Annotated[float | None, none_means("no discount", "RADIANS")] = None
 
     def __post_init__(self) -> None:
         for name, value, valid in [
@@ -184,6 +226,8 @@ class SelectionConfig:
         ]:
             if not ok:
                 raise ValueError(f"SelectionConfig.{name}={getattr(self, name)!r} must be {rule}")
+        if self.metric is not None and (problem := _metric_problem(self.metric)):
+            raise ValueError(f"SelectionConfig.metric={self.metric!r} must be {problem}")
 
     def authors_variant(self) -> SelectionConfig:
         """This config with the authors' code's settings (`AUTHORS_SETTINGS`): entropy,
