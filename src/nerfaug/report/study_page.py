@@ -117,6 +117,7 @@ def _which_method(study: Study) -> list[Block]:
                 ", ".join(worse) or "none",
             ]
         )
+        per_scene = _per_scene_better(cells)
         if better:
             top = max(better, key=lambda m: regime[m]["difference"])
             lines.append(
@@ -127,11 +128,19 @@ def _which_method(study: Study) -> list[Block]:
             )
         else:
             lines.append(
-                f"engine {engine} (background {background(study, engine)}): no method beats uniform with p x "
-                f"{entry['n_comparisons']} < {ALPHA:g}; the largest mean gain is {best}'s, "
+                f"engine {engine} (background {background(study, engine)}): no method beats uniform across its scenes "
+                f"(one value per seed, p x "
+                f"{entry['n_comparisons']} < {ALPHA:g}); the largest mean gain is {best}'s, "
                 f"{entry['difference']:+.2f} dB "
-                f"({entry['wins']} of {entry['n_seeds']} seeds). Uniform selection is as good a choice here."
+                f"({entry['wins']} of {entry['n_seeds']} seeds)."
             )
+            lines[-1] += (
+                " Uniform selection is as good a choice here."
+                if not per_scene
+                else " Across the scenes, none is a surer choice than uniform."
+            )
+        if per_scene:
+            lines[-1] += f" Per scene (the primary test), better than uniform: {per_scene}."
         if worse:
             lines[-1] += (
                 " Worse than uniform: " + ", ".join(f"{m} ({regime[m]['difference']:+.2f} dB)" for m in worse) + "."
@@ -163,6 +172,17 @@ def _which_method(study: Study) -> list[Block]:
         [note],
     )
     return [Heading("Which method to use"), Bullets(lines), table]
+
+
+def _per_scene_better(cells) -> str:
+    """The methods the per-cell test finds better than uniform, with their scenes (complete cells
+    only), e.g. "furthest (chair), ours-batch-sharp (chair, lego)"; "" when none."""
+    scenes: dict[str, list[str]] = {}
+    for cell in cells:
+        if cell.complete:
+            for method in cell.significant(True):
+                scenes.setdefault(method, []).append(cell.scene)
+    return ", ".join(f"{m} ({', '.join(s)})" for m, s in sorted(scenes.items()))
 
 
 def _methods_section(study: Study) -> list[Block]:
