@@ -8,17 +8,8 @@ from collections.abc import Sequence
 from contextvars import ContextVar
 from dataclasses import fields
 
-import tyro
-
 COMMAND_LINE: ContextVar[tuple[str, ...] | None] = ContextVar("command_line", default=None)
 """The arguments `nerfaug.cli.main` is parsing (None outside it), for `given_fields`."""
-
-
-def none_means(meaning: str, metavar: str):
-    """`--help` for an option whose default is None: what None does, e.g. "(default: the
-    identity)", and the metavar without "{None}|". For use in `Annotated[T | None, ...]`; tyro
-    alone prints "(default: None)", which hides what the tool will do."""
-    return tyro.conf.arg(metavar=metavar, help_behavior_hint=f"(default: {meaning})")
 
 
 def given_fields(options, prefix: str, argv: Sequence[str] | None) -> dict:

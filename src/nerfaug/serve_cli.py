@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.cli_options import none_means
+from nerfaug.cli_hints import none_means
 
 TOKEN_ENV = "NERFAUG_TOKEN"
 UNCERTAINTY_KIND = "uncertainty-images"  # the marker of a folder `nerfaug uncertainty` wrote

@@ -23,7 +23,8 @@ import tyro
 from nerfaug import serve_cli
 from nerfaug.capture.constraints import ViewConstraints
 from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
-from nerfaug.cli_options import COMMAND_LINE, given_options, none_means
+from nerfaug.cli_hints import none_means
+from nerfaug.cli_options import COMMAND_LINE, given_options
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.nerf.config import EnginePreset

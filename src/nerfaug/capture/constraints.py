@@ -22,7 +22,7 @@ import torch
 from torch import Tensor
 
 from nerfaug.capture.frame import Hemisphere
-from nerfaug.cli_options import none_means
+from nerfaug.cli_hints import none_means
 
 
 def angle_range_mask(values: Tensor, low: float, high: float) -> Tensor:

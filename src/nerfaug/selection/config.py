@@ -15,7 +15,7 @@ from typing import Annotated
 import numpy as np
 from tyro.constructors import PrimitiveConstructorSpec
 
-from nerfaug.cli_options import none_means
+from nerfaug.cli_hints import none_means
 from nerfaug.uncertainty.combined import NORMALISATIONS
 from nerfaug.uncertainty.entropy import ENTROPY_MODES
 from nerfaug.uncertainty.fisher import (
