@@ -69,24 +69,36 @@ def test_the_readmes_command_rederives_the_page_without_run_folders(tmp_path):
     assert without_provenance(again).split() == without_provenance(generated).split()
 
 
-def test_propose_help_states_what_the_committed_study_found_per_engine():
-    """`nerfaug propose --help` names, per engine whose three scenes are complete, the method the
-    across-scene test finds better than uniform (or says none did), and claims nothing of the
-    engines not yet complete."""
+def readme_findings() -> str:
+    """The README's paragraph on what the committed study found."""
+    readme = (ROOT / "README.md").read_text()
+    (paragraph,) = [p for p in readme.split("\n\n") if p.startswith("What the committed study found")]
+    return paragraph
+
+
+@pytest.mark.parametrize("where", ["propose --help", "README"])
+def test_the_user_facing_texts_state_what_the_committed_study_found_per_engine(where):
+    """`nerfaug propose --help` and the README name, per engine whose three scenes are complete,
+    the method the across-scene test finds better than uniform (or say none did), and claim
+    nothing of the engines not yet complete."""
     from nerfaug import session_cli
     from nerfaug.report.study import collect_study
     from nerfaug.report.study_table import read_table
 
     study = collect_study(read_table(TABLE))
-    help_text = " ".join(session_cli.propose.__doc__.split())
+    text = session_cli.propose.__doc__ if where == "propose --help" else readme_findings()
+    text = " ".join(text.split())
     for engine in ("cpu", "nerfacto-cpu", "nerfacto-cpu-last-sample", "paper"):
         cells = [c for c in study.cells if c.engine == engine]
         regime = study.regimes.get(engine, {})
         if len(cells) < 3 or not all(c.complete for c in cells):
-            assert f"on the {engine} engine" not in help_text, engine
+            assert f"on the {engine} engine" not in text, engine
             continue
         better = sorted((e["difference"], m) for m, e in regime.items() if e["significant"] and e["better"])
         if better:
-            assert f"on the {engine} engine, {better[-1][1]} beat uniform" in help_text, engine
+            assert f"on the {engine} engine, {better[-1][1]} beat uniform" in text, engine
         else:
-            assert re.search(f"on the {re.escape(engine)} engine[^;]* no method did", help_text), engine
+            assert re.search(f"on the {re.escape(engine)} engine[^;]* no method did", text), engine
+    if "entropy was worse than uniform on every engine measured" in text:
+        for engine, regime in study.regimes.items():
+            assert regime["entropy"]["significant"] and not regime["entropy"]["better"], engine
