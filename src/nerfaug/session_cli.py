@@ -328,9 +328,10 @@ def propose(
             with each term min-max normalised, then rejection sampling ("ours-paper-sum": the raw
             sum as the paper writes it). Which method to use, by the study (docs/results.md, "Which
             method to use"): on the nerfacto-cpu engine, ours-batch-sharp beat uniform across the
-            scenes, by under 1 dB; on the nerfacto-cpu-last-sample engine (nerfacto's "last_sample"
-            background) no method did, and uniform is as good a choice; the other engines are not
-            measured yet.
+            scenes, by under 1 dB; on the cpu engine (the default) and on the
+            nerfacto-cpu-last-sample engine (nerfacto's "last_sample" background) no method did,
+            and uniform is as good a choice there; spatial entropy was worse than uniform on every
+            engine measured. The paper engine (GPU) is not measured yet.
         out: the poses JSON to write.
         candidates: a transforms JSON of reachable poses (e.g. a robot's workspace) to choose
             from instead of the hemisphere.
