@@ -1,4 +1,6 @@
 import json
+import shutil
+import subprocess
 
 import pytest
 
@@ -116,3 +118,38 @@ def test_dataset_content_digest_covers_the_images_runs_read_and_nothing_else(tmp
     image = next((tmp_path / "test").glob("*.png"))
     image.write_bytes(image.read_bytes() + b"\0")  # same cameras, other image bytes
     assert dataset_content_digest(tmp_path, ("train", "test")) != digest
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_checkout_version_calls_the_code_dirty_only_when_the_package_changed(tmp_path):
+    """A changed results table beside the package leaves the version clean; a changed or new
+    file in the package makes it "-dirty"; a folder outside any checkout has no version."""
+    from nerfaug.experiment.store import checkout_version
+
+    def git(*args):
+        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+
+    package, table = tmp_path / "src" / "pkg", tmp_path / "docs" / "table.json"
+    package.mkdir(parents=True)
+    table.parent.mkdir()
+    (package / "code.py").write_text("x = 1\n")
+    table.write_text("{}\n")
+    git("init", "-q")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "first")
+    commit = subprocess.run(
+        ["git", "-C", str(tmp_path), "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
+    assert checkout_version(package) == commit
+    table.write_text('{"runs": []}\n')  # what a study sitting changes
+    assert checkout_version(package) == commit
+    (package / "new.py").write_text("y = 2\n")  # untracked code counts
+    assert checkout_version(package) == f"{commit}-dirty"
+    (package / "new.py").unlink()
+    (package / "code.py").write_text("x = 2\n")
+    assert checkout_version(package) == f"{commit}-dirty"
+    outside = tmp_path.parent / f"{tmp_path.name}-outside"
+    outside.mkdir()
+    in_a_checkout = subprocess.run(["git", "-C", str(outside), "rev-parse"], capture_output=True).returncode == 0
+    if not in_a_checkout:  # the temporary folders of an ordinary machine
+        assert checkout_version(outside) is None

@@ -86,33 +86,43 @@ def run_fingerprint(sweep_fingerprint: str, method_definition: dict | None) -> s
     return fingerprint({"sweep": sweep_fingerprint, "method": method_definition})
 
 
+def _git(folder: Path, *args: str) -> str:
+    return subprocess.run(
+        ["git", "-C", str(folder), *args], capture_output=True, text=True, timeout=10, check=True
+    ).stdout.strip()
+
+
+def checkout_version(package: Path) -> str | None:
+    """The commit of the git checkout holding the folder `package` ("1c94345..."), with "-dirty"
+    when a file under `package` differs from that commit (untracked files included, ignored ones
+    not); None when `package` is not in a git checkout or git is missing.
+
+    Only `package` counts, not the whole checkout: `git describe --dirty` would call the code dirty
+    when a results table or a note beside it changed, which says nothing of the code.
+    """
+    try:
+        top = Path(_git(package, "rev-parse", "--show-toplevel")).resolve()
+        if not package.resolve().is_relative_to(top):
+            return None
+        commit = _git(package, "describe", "--always", "--abbrev=12")
+        changed = _git(package, "status", "--porcelain", "--", ".")
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return None
+    if not commit:
+        return None
+    return f"{commit}-dirty" if changed else commit
+
+
 @functools.lru_cache(maxsize=1)
 def code_version() -> str:
-    """The version of the code that computes results: `git describe --always --dirty` of the
-    checkout the package runs from (e.g. "1c94345" or "1c94345-dirty"), or "nerfaug <version>"
-    when it does not run from a git checkout."""
+    """The version of the code that computes results: the commit of the checkout the package runs
+    from, "-dirty" when the package's own files differ from it (e.g. "1c94345" or "1c94345-dirty";
+    `checkout_version`), or "nerfaug <version>" when it does not run from a git checkout."""
     from importlib import metadata
 
-    package = Path(__file__).resolve().parents[1]
-    try:
-        found = subprocess.run(
-            ["git", "-C", str(package), "describe", "--always", "--dirty", "--abbrev=12"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        top = subprocess.run(
-            ["git", "-C", str(package), "rev-parse", "--show-toplevel"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        if found and package.is_relative_to(Path(top).resolve()):
-            return found
-    except (OSError, subprocess.SubprocessError, ValueError):
-        pass
+    found = checkout_version(Path(__file__).resolve().parents[1])
+    if found:
+        return found
     try:
         return f"nerfaug {metadata.version('nerfaug')}"
     except metadata.PackageNotFoundError:
