@@ -127,7 +127,8 @@ def test_checkout_version_calls_the_code_dirty_only_when_the_package_changed(tmp
     from nerfaug.experiment.store import checkout_version
 
     def git(*args):
-        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+        done = subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True, text=True)
+        return done.stdout.strip()
 
     package, table = tmp_path / "src" / "pkg", tmp_path / "docs" / "table.json"
     package.mkdir(parents=True)
@@ -137,9 +138,7 @@ def test_checkout_version_calls_the_code_dirty_only_when_the_package_changed(tmp
     git("init", "-q")
     git("add", ".")
     git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "first")
-    commit = subprocess.run(
-        ["git", "-C", str(tmp_path), "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
+    commit = git("rev-parse", "--short=12", "HEAD")
     assert checkout_version(package) == commit
     table.write_text('{"runs": []}\n')  # what a study sitting changes
     assert checkout_version(package) == commit

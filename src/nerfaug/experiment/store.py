@@ -107,9 +107,7 @@ def checkout_version(package: Path) -> str | None:
         commit = _git(package, "describe", "--always", "--abbrev=12")
         changed = _git(package, "status", "--porcelain", "--", ".")
     except (OSError, subprocess.SubprocessError, ValueError):
-        return None
-    if not commit:
-        return None
+        return None  # also a checkout without a commit: describe fails there
     return f"{commit}-dirty" if changed else commit
 
 
