@@ -6,8 +6,9 @@ import re
 
 import pytest
 
-from nerfaug.cli import main, preset_default, reflow
+from nerfaug.cli import main, reflow
 from nerfaug.experiment.store import fingerprint
+from nerfaug.run_cli import preset_default
 
 
 def help_text(argv: list[str], capsys, monkeypatch) -> str:
@@ -31,14 +32,19 @@ def test_a_presets_default_groups_the_presets_that_agree():
     assert preset_default("trials") == "(default: the preset's: quick, ablation: 5; paper: 10; tiny: 2)"
 
 
-def test_top_level_usage_lists_every_command(capsys, monkeypatch):
+def test_top_level_help_lists_every_command(capsys, monkeypatch):
     from nerfaug import session_cli
+    from nerfaug.cli import COMMANDS
 
     text = help_text([], capsys, monkeypatch)
     usage = re.search(r"usage: nerfaug \[-h\] \{([^}]*)\}", text)
     assert usage is not None, text
     listed = set(usage.group(1).split(","))
-    assert {"scene", "run", "report", "methods", "study", *session_cli.COMMANDS} <= listed
+    assert {"scene", "run", "report", "methods", "study", "serve", "uncertainty", *session_cli.COMMANDS} <= listed
+    assert listed == set(COMMANDS)
+    # The examples above the usage line show every command too (as `nerfaug NAME ...`).
+    shown = {line.split()[1] for line in text.split("usage:")[0].splitlines() if line.startswith("nerfaug ")}
+    assert shown == set(COMMANDS), set(COMMANDS) ^ shown
 
 
 def test_study_help_lists_selection_options_and_no_none_defaults(capsys, monkeypatch):
