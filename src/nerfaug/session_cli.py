@@ -12,6 +12,7 @@ are in `nerfaug.train_cli`.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -133,8 +134,8 @@ def propose(
         f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path} (angles in "
         f"radians), map {path.with_suffix('.png')}"
     )
-    for name, a, p in zip(proposal.names, proposal.azimuth.tolist(), proposal.polar.tolist()):
-        print(f"  {name}: azimuth {a * 57.29578:6.1f} deg, polar {p * 57.29578:5.1f} deg")
+    for name, a, e in zip(proposal.names, proposal.azimuth.tolist(), proposal.elevation.tolist()):
+        print(f"  {name}: azimuth {math.degrees(a):6.1f} deg, elevation {math.degrees(e):5.1f} deg")
 
 
 def export(

@@ -158,7 +158,7 @@ def test_the_whole_capture_loop(server, root):
     frames = proposal.json()["frames"]
     assert len(frames) == 2
     for frame in frames:
-        assert 20 - 1e-3 <= 90 - np.degrees(frame["polar"]) <= 70 + 1e-3
+        assert 20 - 1e-3 <= np.degrees(frame["elevation"]) <= 70 + 1e-3
         assert -1e-3 <= np.degrees(frame["azimuth"]) <= 180 + 1e-3
 
     names = [Path(frame["file_path"]).stem for frame in frames]
