@@ -149,3 +149,36 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
     assert sharper != default and planned[2].config.selection.sharpness == 0.5
     assert planned[2].command[-2:] == ["--selection.sharpness", "0.5"]
     assert not any(word.startswith("--selection") for word in planned[1].command)
+
+
+# The code's words and the project's history, which belong in docs (docs/methods.md), not in --help.
+INTERNAL = (
+    "ray_entropy",
+    "combined_uncertainty",
+    "H_train",
+    "H_cand",
+    "Rademacher",
+    "the 15 of",
+    "BENCHMARKS.md",
+    "benchmarks/",
+    "nerfaug.selection",
+    "nerfaug.uncertainty",
+    "Spearman",
+    "(default: )",
+)
+
+
+def test_every_help_speaks_the_users_words_and_each_option_name_means_one_thing(capsys, monkeypatch):
+    helps = every_command(capsys, monkeypatch)
+    for command, text in helps.items():
+        for word in INTERNAL:
+            assert word not in text, (command, word)
+    # --engine is a NeRF engine preset wherever it appears, with the same names.
+    engines = {c: re.search(r"--engine \{([^}]*)\}", t) for c, t in helps.items() if "--engine " in t}
+    assert {"run", "train"} <= set(engines)
+    assert len({m.group(1) for m in engines.values()}) == 1
+    # --preset is an experiment's protocol (run, study), never an engine preset.
+    assert "--preset" not in helps["train"]
+    assert "quick" in re.search(r"--preset \{([^}]*)\}", helps["run"]).group(1)
+    # The angle convention of every output: elevation.
+    assert "elevation" in helps["propose"] and "azimuth, polar" not in helps["propose"]

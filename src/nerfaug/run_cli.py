@@ -81,7 +81,7 @@ def run(
 
     Args:
         out: results folder.
-        preset: the protocol the other options change: quick (lego at 100x100 on the CPU, minutes),
+        preset: the experiment's protocol, which the other options change: quick (lego at 100x100 on the CPU, minutes),
             paper (Sec. IV: three scenes, 10 trials, 10k steps), ablation (Tables I and II), tiny
             (seconds; a smoke test).
         scenes: built-in scene names or dataset folders.
@@ -90,7 +90,7 @@ def run(
         methods: selection methods (see `nerfaug methods`); the first is compared with the others.
         trials: trials per (scene, method); trial k uses seed + k.
         steps: training steps per run.
-        engine: NeRF engine preset.
+        engine: the NeRF engine preset (the names `nerfaug train --engine` takes).
         resolution: image size of built-in scenes (or the width user data is downscaled to).
         seed: base seed.
         backend: local (this machine) or ray (one task per run; --address joins a cluster).

@@ -75,22 +75,18 @@ def propose(
     """Propose the next views to capture and write their poses as a Blender-style JSON.
 
     The JSON ({camera_angle_x, w, h, fl_x, fl_y, cx, cy, frames: [{file_path, transform_matrix,
-    azimuth, polar, score}]}) holds world-frame OpenGL camera-to-world poses, ready for a robot or
-    Blender, with azimuth and polar in radians (printed here in degrees); the hemisphere map of
+    azimuth, elevation, score}]}) holds world-frame OpenGL camera-to-world poses, ready for a robot
+    or Blender, with azimuth and elevation in radians (printed here in degrees); the hemisphere map of
     every candidate's score is written beside it (same name, .png). Name each captured image after
     its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`.
 
     Args:
         run: the session's run folder.
         n: views to propose.
-        method: the selection method (`nerfaug methods`); "ours" is the paper's entropy + coverage
-            with each term min-max normalised, then rejection sampling ("ours-paper-sum": the raw
-            sum as the paper writes it). Which method to use, by the study (docs/results.md, "Which
-            method to use"): on the nerfacto-cpu engine, ours-batch-sharp beat uniform across the
-            scenes, by under 1 dB; on the cpu engine (the default) and on the
-            nerfacto-cpu-last-sample engine (nerfacto's "last_sample" background) no method did,
-            and uniform is as good a choice there; spatial entropy was worse than uniform on every
-            engine measured. The paper engine (GPU) is not measured yet.
+        method: the selection method (`nerfaug methods` lists them); "ours" is the paper's: how
+            unsure the NeRF is about a view plus how far it is from the views trained on, then
+            random draws in proportion to that score. Which method to use on which engine, as
+            measured: docs/methods.md.
         out: the poses JSON to write.
         candidates: a transforms JSON of reachable poses (e.g. a robot's workspace) to choose
             from instead of the hemisphere.

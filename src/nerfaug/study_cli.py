@@ -98,8 +98,8 @@ def study(
         workers: concurrent runs.
         force: discard existing runs and redo them.
         device: auto (cuda when there is a GPU), cpu or cuda.
-        preset: study (the paper's protocol at 100x100) or tiny (a smoke test: seconds per run, after
-            the built-in scenes are rendered).
+        preset: the study's protocol: study (the paper's at 100x100) or tiny (a smoke test: seconds
+            per run, after the built-in scenes are rendered).
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
         table: the per-run table to record runs in and summarise; runs it records with their
