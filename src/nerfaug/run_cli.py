@@ -133,6 +133,7 @@ def run(
     if workers is None:
         # One run per core on a CPU; on a GPU one run at a time (each holds its own CUDA context).
         workers = 1 if config.device == "cuda" else max(1, (os.cpu_count() or 1) // config.threads_per_run)
+    print(run_size_line(config, out, workers), flush=True)
     try:
         outcome = run_sweep(
             config,
@@ -161,3 +162,34 @@ def run(
         for key, why in outcome.failed.items():
             print(f"  {key}: {why}", file=sys.stderr)
         raise SystemExit(1)
+
+
+def run_size_line(config, out: Path, workers: int) -> str:
+    """How many runs `config` makes, how big, and about how long on this device (`nerfaug.run_size`)."""
+    from nerfaug.experiment.store import finished_runs
+    from nerfaug.run_size import per_cell, size_line
+    from nerfaug.scenes.builtin import BUILTIN_SCENES
+
+    total = len(config.scenes) * len(config.methods) * config.trials
+    finished = min(len(finished_runs(out)), total) if Path(out).is_dir() else 0
+    shape = " x ".join(
+        (
+            per_cell(len(config.scenes), "scene"),
+            per_cell(len(config.methods), "method"),
+            per_cell(config.trials, "trial"),
+        )
+    )
+    builtin = sum(scene in BUILTIN_SCENES for scene in config.scenes)
+    views = config.pool + config.n_test + config.n_initial
+    return size_line(
+        "nerfaug run",
+        {config.engine: total - finished},
+        finished,
+        shape,
+        config.resolution,
+        config.steps,
+        config.n_test,
+        config.device,
+        workers,
+        render=(builtin, views),
+    )
