@@ -182,3 +182,21 @@ def test_every_help_speaks_the_users_words_and_each_option_name_means_one_thing(
     assert "quick" in re.search(r"--preset \{([^}]*)\}", helps["run"]).group(1)
     # The angle convention of every output: elevation.
     assert "elevation" in helps["propose"] and "azimuth, polar" not in helps["propose"]
+
+
+@pytest.mark.parametrize("command", ["train", "add", "serve", "uncertainty"])
+def test_a_commands_help_loads_no_torch(command):
+    """`nerfaug train --help` (and the other light commands') parse their options before anything
+    heavy is imported: torch alone takes seconds to import (BENCHMARKS.md, "`--help` start-up")."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys\nfrom nerfaug.cli import main\n"
+        f"try:\n    main([{command!r}, '--help'])\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('torch', 'numpy', 'fastapi', 'matplotlib') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert f"usage: nerfaug {command}" in done.stdout
+    assert done.stdout.strip().splitlines()[-1] == "[]"
