@@ -226,3 +226,19 @@ def test_eval_scores_renders_of_the_nerf_itself_as_near_perfect(tmp_path, capsys
     # Random images at the same poses score far worse; eval's own JSON may be overwritten.
     main(["eval", str(run), "--data", str(own), "--split", "noise", "--out", str(out), "--device", "cpu"])
     assert json.loads(out.read_text())["mean"]["psnr"] < 20.0
+
+
+def test_an_estimated_pole_is_one_setting_of_the_session(tmp_path, capsys):
+    data, run = dataset(tmp_path / "data"), tmp_path / "run"
+    train_new(data, run, "--estimate-up")
+    capsys.readouterr()
+    argv = ["train", str(data), "--out", str(run), "--engine", "test", "--steps", "2", "--device", "cpu"]
+    with pytest.raises(SystemExit):
+        main(argv)  # the same command without --estimate-up: one difference, named once
+    error = capsys.readouterr().err
+    assert "--estimate-up off (the session's: on)" in error and "--up" not in error
+    main([*argv, "--estimate-up"])  # the same command: at step 2 already
+    assert "already at step 2" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["train", str(run), "--up", "0", "0", "1", "--steps", "3", "--device", "cpu"])
+    assert "--up 0 0 1 (the session's: estimated)" in capsys.readouterr().err

@@ -233,11 +233,7 @@ def _setting_differences(state, asked: dict, data: Path | None) -> list[str]:
             if bool(v) == bool(estimated.get("up", False))
             else f"{'on' if v else 'off'} (the session's: {'on' if estimated.get('up') else 'off'})"
         ),
-        "up": lambda v: (
-            None
-            if estimated.get("up", False) or _close(_unit(v), h.up)
-            else f"{words(tuple(v))} (the session's: {words(h.up)})"
-        ),
+        "up": lambda v: _up_difference(tuple(v), asked, h.up, bool(estimated.get("up", False)), words),
     }
     for name in SESSION_OPTIONS:
         if name in asked:
@@ -245,6 +241,16 @@ def _setting_differences(state, asked: dict, data: Path | None) -> list[str]:
             if problem is not None:
                 found.append(f"--{name} {problem}")
     return found
+
+
+def _up_difference(up: tuple, asked: dict, ours: tuple, estimated: bool, words) -> str | None:
+    """How --up differs from the session's pole, or None: an estimated pole is compared through
+    --estimate-up when that is asked too (one difference, not two)."""
+    if asked.get("estimate-up") or (estimated and "estimate-up" in asked):
+        return None
+    if not estimated and _close(_unit(up), ours):
+        return None
+    return f"{words(up)} (the session's: {'estimated' if estimated else words(ours)})"
 
 
 def train(
@@ -357,9 +363,15 @@ def train(
             "these, give a new --out"
         )
     if state.step >= steps:
-        from nerfaug.capture import CaptureSession
+        from nerfaug.capture import CaptureSession, integrity
+        from nerfaug.capture.state import CHECKPOINT_FILE, SessionError
 
-        CaptureSession.open(run, load_model=False)  # checks the captures all the same: nothing silent
+        # The captures and the checkpoint are checked all the same: a damaged session is never
+        # reported as done.
+        session = CaptureSession.open(run, load_model=False)
+        if not (run / CHECKPOINT_FILE).is_file():
+            raise SessionError(f"{run / CHECKPOINT_FILE}: checkpoint not found; the run folder is incomplete")
+        integrity.check_checkpoint(run / CHECKPOINT_FILE, session.state.integrity)
         print(
             f"{run}: already at step {state.step} (--steps {steps}); nothing to do. Give a larger --steps to "
             "train further"
