@@ -7,7 +7,7 @@ import torch
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views
 from nerfaug.experiment.config import ExperimentConfig, preset
-from nerfaug.experiment.protocol import initial_view_indices
+from nerfaug.experiment.scene_views import initial_in_half, layout_halves
 from nerfaug.hemisphere import angles_from_pose, in_azimuth_window, sample_uniform_poses
 
 
@@ -20,12 +20,15 @@ def test_paper_field_learning_rate_for_chair_and_materials():
 
 def test_initial_views_of_a_user_dataset_lie_on_one_half():
     poses = sample_uniform_poses(300, torch.Generator().manual_seed(0))
-    pool = Views(Cameras.from_fov(poses, 0.69, 8, 8), torch.zeros(300, 8, 8, 3), [str(i) for i in range(300)])
-    chosen = initial_view_indices(pool, 6)
+    half = layout_halves(angles_from_pose(poses)[0], 1)[0]
+    chosen = initial_in_half(poses, 6, half, list(range(300)))
     assert len(set(chosen)) == 6
     azimuth, _, _ = angles_from_pose(poses[chosen])
-    assert in_azimuth_window(azimuth, math.pi / 2 - 0.3, math.pi + 0.6).all()
-    assert chosen == initial_view_indices(pool, 6)  # the same views for every trial
+    assert in_azimuth_window(azimuth, math.pi / 2, math.pi).all()
+    assert chosen == initial_in_half(poses, 6, half, list(range(300)))  # the same views for every trial
+    outside = [i for i in range(300) if not bool(half.contains(angles_from_pose(poses[i : i + 1])[0])[0])]
+    with pytest.raises(ValueError, match="only 2 views lie in the half"):
+        initial_in_half(poses, 6, half, chosen[:2] + outside)
 
 
 def test_presets_are_consistent():

@@ -13,7 +13,7 @@ from nerfaug.report.document import to_markdown
 from nerfaug.report.study import collect_study
 from nerfaug.report.study_hypotheses import h1, h2, h3
 from nerfaug.report.study_page import study_blocks
-from nerfaug.report.study_table import RunRow, make_table, read_table, rounded_poses, write_table
+from nerfaug.report.study_table import RunRow, make_table, read_table, rounded_poses, table_rows, write_table
 from nerfaug.statistics import seed_level_comparison
 
 ENGINE = "nerfacto-cpu-last-sample"
@@ -67,7 +67,7 @@ def synthetic_table(offsets: dict[str, float | dict[str, float]]) -> dict:
         "trials": 10,
         "engine_settings": {ENGINE: {"background_mode": "last_sample"}},
     }
-    return make_table(plan, rows, {scene: initial for scene in SCENES})
+    return make_table(plan, rows, {scene: {"initial_poses": initial} for scene in SCENES})
 
 
 def test_paired_tests_regimes_and_verdicts_on_a_constructed_study(tmp_path):
@@ -174,3 +174,26 @@ def test_the_regime_test_uses_complete_cells_only():
     regime = study.regimes[ENGINE]["ours"]
     assert (regime["n_cells"], regime["n_seeds"]) == (2, 10)
     assert not next(c for c in study.cells if c.scene == "chair").complete
+
+
+def test_runs_of_several_layouts_keep_each_layouts_initial_views_and_their_coverage(tmp_path):
+    from nerfaug.report.study import coverage_of
+    from nerfaug.report.study_table import initial_poses_by_layout
+
+    seen_west, seen_east = poses_at([170, 180, 190]), poses_at([350, 0, 10])
+    chosen = poses_at([0, 5, 10])  # east: the unseen side of layout 0, the seen side of layout 1
+    rows = [
+        RunRow(ENGINE, "mic", "uniform", k, k, 20.0, 0.8, 0.2, "ok", [0, 1, 2], chosen, "v", "f", k) for k in (0, 1)
+    ]
+    scenes = {"mic": {"initial_poses": seen_west, "layouts": {"1": seen_east}, "test_views": ["./test/r_0"]}}
+    table = make_table({"engines": [ENGINE], "scenes": ["mic"], "methods": ["uniform"], "trials": 2}, rows, scenes)
+    assert "layout" not in table["runs"][0] and table["runs"][1]["layout"] == 1  # layout 0 stays implicit
+    back = read_table(write_table(tmp_path / "t.json", table))
+    assert [r.layout for r in table_rows(back)] == [0, 1]
+    assert back["scenes"]["mic"]["test_views"] == ["./test/r_0"]
+    coverage = coverage_of(table_rows(back), initial_poses_by_layout(back["scenes"]["mic"]))
+    assert coverage[0]["unseen_share"] == 1.0 and coverage[1]["unseen_share"] == 0.0
+    back["runs"][1]["layout"] = 2
+    (tmp_path / "bad.json").write_text(json.dumps(back))
+    with pytest.raises(ReportError, match="runs\\[1\\].scene: 'mic' has no initial views of layout 2"):
+        read_table(tmp_path / "bad.json")

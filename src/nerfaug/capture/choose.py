@@ -13,12 +13,12 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.capture.constraints import ViewConstraints, constrained_indices
-from nerfaug.capture.frame import ENGINE_RADIUS
 from nerfaug.capture.images import as_array
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.requests import RequestError
 from nerfaug.capture.state import ProposalRecord, now
+from nerfaug.data.frame import ENGINE_RADIUS
 from nerfaug.data.frames import check_pose
 from nerfaug.selection.candidates import with_poses
 

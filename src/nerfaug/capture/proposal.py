@@ -12,8 +12,8 @@ from torch import Tensor
 
 import nerfaug
 from nerfaug.cameras import Cameras
-from nerfaug.capture.frame import Hemisphere
 from nerfaug.data import DatasetError
+from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import check_pose
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
 

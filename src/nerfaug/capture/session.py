@@ -14,7 +14,7 @@ A session lives in a run folder:
       proposals/            proposal_000.json (poses + every candidate's score), proposal_000.png (map)
 
 Poses given to and returned by a session are in the dataset's world frame; the NeRF is trained in
-the engine frame of the session's hemisphere (`nerfaug.capture.frame`).
+the engine frame of the session's hemisphere (`nerfaug.data.frame`).
 """
 
 from __future__ import annotations
@@ -31,7 +31,6 @@ from nerfaug.cameras import Cameras
 from nerfaug.capture import add, choose, export, integrity
 from nerfaug.capture.dataset import duplicate_frames, engine_views
 from nerfaug.capture.evaluate import evaluate_model, load_held_out
-from nerfaug.capture.frame import Hemisphere, estimate_hemisphere
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
 from nerfaug.capture.requests import check_steps
@@ -57,6 +56,7 @@ from nerfaug.capture.state import (
 from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
 from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format, plainest_format
+from nerfaug.data.frame import Hemisphere, estimate_hemisphere
 from nerfaug.data.views import Views
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
