@@ -64,6 +64,7 @@ def study(
         ),
     ] = None,
     resolution: int = 100,
+    layouts: int = 1,
     steps: Annotated[
         int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's: study: 2000; tiny: 60)")
     ] = None,
@@ -93,7 +94,9 @@ def study(
         scenes: built-in scene names or dataset folders.
         methods: selection methods (`nerfaug methods`).
         trials: trials per (scene, method, engine).
-        resolution: image size of the built-in scenes.
+        resolution: image size of the built-in scenes (and the width dataset folders are shrunk to).
+        layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
+            views come from turned by 1/LAYOUTS of the way round each time.
         steps: training steps per run.
         workers: concurrent runs.
         force: discard existing runs and redo them.
@@ -118,10 +121,12 @@ def study(
     failed = {}
     if not summary_only:
         command = study_runs.study_command(
-            out, engines, scenes, methods, trials, resolution, steps, device, preset, table
+            out, engines, scenes, methods, trials, resolution, steps, device, preset, table, layouts
         )
         command += selection.flags()
-        plan = study_runs.make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command)
+        plan = study_runs.make_plan(
+            out, engines, scenes, methods, trials, resolution, steps, device, preset, command, layouts=layouts
+        )
         given = given_fields(selection, "selection", COMMAND_LINE.get())
         plan.config = plan.config.replace(selection=replace(plan.config.selection, **given))
         for engine, why in plan.left_out.items():

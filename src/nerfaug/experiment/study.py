@@ -243,7 +243,17 @@ def with_design(record: dict, out: Path) -> dict:
 
 
 def study_command(
-    out: Path, engines, scenes, methods, trials, resolution: int, steps, device: str, preset_name: str, table=None
+    out: Path,
+    engines,
+    scenes,
+    methods,
+    trials,
+    resolution: int,
+    steps,
+    device: str,
+    preset_name: str,
+    table=None,
+    layouts: int = 1,
 ) -> list[str]:
     """The command line that plans this study again (the options that decide what runs)."""
     command = ["nerfaug", "study", "--out", str(out)]
@@ -258,6 +268,7 @@ def study_command(
         ("--steps", steps),
         ("--device", device),
         ("--preset", preset_name),
+        ("--layouts", layouts if layouts != 1 else None),
     ):
         if value is not None:
             command += [flag, str(value)]
@@ -276,6 +287,7 @@ def make_plan(
     preset_name: StudyPreset = "study",
     command: list[str] | None = None,
     progress: bool = True,
+    layouts: int = 1,
 ) -> StudyPlan:
     """The plan from the command's options (None: the default), with the datasets prepared."""
     from nerfaug.device import resolve_device
@@ -306,6 +318,7 @@ def make_plan(
         trials=trials,
         resolution=resolution,
         device=device_type,
+        layouts=layouts,
         **({"steps": steps} if steps is not None else {}),
     )
     scenes = tuple(scenes) if scenes else BUILTIN_SCENES
