@@ -101,7 +101,7 @@ def scene_render(
     samples: int = 16,
     seed: int = 0,
 ) -> None:
-    """Render a built-in scene (lego, chair, materials) or a .blend file as a Blender-format dataset.
+    """Render a built-in scene (lego, chair, materials, cow) or a .blend file as a Blender-format dataset.
 
     Writes transforms_train.json (the candidate pool, uniform on the hemisphere),
     transforms_initial.json (fixed views on one half), transforms_test.json and transforms_val.json.
@@ -321,7 +321,7 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def scene() -> None:
-    """Built-in scenes: `nerfaug scene render SCENE --out DIR` renders lego, chair, materials or a
+    """Built-in scenes: `nerfaug scene render SCENE --out DIR` renders lego, chair, materials, cow or a
     .blend file as a Blender-format dataset (`nerfaug scene render --help`)."""
     _dispatch(["scene", "--help"])
 

@@ -19,6 +19,7 @@ import tyro
 from nerfaug.cli_options import COMMAND_LINE, given_fields
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.study import StudyPreset
+from nerfaug.scenes.builtin import BUILTIN_SCENES
 from nerfaug.selection.config import SelectionConfig
 
 
@@ -49,7 +50,7 @@ def study(
     ] = None,
     scenes: Annotated[
         tuple[str, ...] | None,
-        tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint="(default: lego chair materials)"),
+        tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(BUILTIN_SCENES)})"),
     ] = None,
     methods: Annotated[
         tuple[str, ...] | None,
