@@ -102,7 +102,7 @@ def scene_render(
     samples: int = 16,
     seed: int = 0,
 ) -> None:
-    """Render a built-in scene (lego, chair, materials) or a .blend file as a Blender-format dataset.
+    """Render a built-in scene (lego, chair, materials, cow) or a .blend file as a Blender-format dataset.
 
     Writes transforms_train.json (the candidate pool, uniform on the hemisphere),
     transforms_initial.json (fixed views on one half), transforms_test.json and transforms_val.json.
@@ -348,9 +348,10 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def scene() -> None:
-    """Scenes: `nerfaug scene render SCENE --out DIR` renders a built-in scene or a .blend file as a
-    Blender-format dataset; `nerfaug scene prepare SOURCE --out DIR` readies a downloaded dataset
-    (NeRF-synthetic, LLFF, DTU) for experiments (`--help` of each)."""
+    """Scenes: `nerfaug scene render SCENE --out DIR` renders a built-in scene (lego, chair,
+    materials, cow) or a .blend file as a Blender-format dataset; `nerfaug scene prepare SOURCE
+    --out DIR` readies a downloaded dataset (NeRF-synthetic, LLFF, DTU) for experiments (`--help`
+    of each)."""
     _dispatch(["scene", "--help"])
 
 

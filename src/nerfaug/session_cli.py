@@ -529,7 +529,7 @@ def render_proposals(
     Args:
         run: the session's run folder (for the camera's intrinsics and image size).
         poses: the poses JSON `nerfaug propose` wrote.
-        scene: a built-in scene (lego, chair, materials) or a .blend file.
+        scene: a built-in scene (lego, chair, materials, cow) or a .blend file.
         out: folder to write the renders to.
         samples: Cycles samples per pixel.
         seed: Cycles noise seed.

@@ -49,7 +49,9 @@ def study(
     ] = None,
     scenes: Annotated[
         tuple[str, ...] | None,
-        tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint="(default: lego chair materials)"),
+        tyro.conf.arg(
+            metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(study_runs.PROCEDURAL_SCENES)})"
+        ),
     ] = None,
     methods: Annotated[
         tuple[str, ...] | None,

@@ -188,6 +188,11 @@ def merge_records(previous: dict, record: dict) -> dict:
     return merged
 
 
+PROCEDURAL_SCENES = ("lego", "chair", "materials")
+"""The study's default scenes: the procedural stand-ins of the paper's three (the cow, a real
+mesh, and real captures are given by name or folder, as the real-scene study does)."""
+
+
 def run_study(
     plan: StudyPlan, workers: int = 1, force: bool = False, progress: bool = True, table: dict | None = None
 ) -> dict[str, dict]:
@@ -226,11 +231,9 @@ def with_design(record: dict, out: Path) -> dict:
     cells a full study runs on its device (the default engines x the built-in scenes), so cells not
     run yet are named; and "engine_settings" of each engine run, from its sweep.json's fingerprint
     (the settings its runs were made with)."""
-    from nerfaug.scenes import BUILTIN_SCENES
-
     device = record.get("config", {}).get("device", "cpu")
     engines, _ = default_engines("cuda" if device == "cuda" else "cpu")
-    record = {**record, "design": record.get("design") or {"engines": engines, "scenes": list(BUILTIN_SCENES)}}
+    record = {**record, "design": record.get("design") or {"engines": engines, "scenes": list(PROCEDURAL_SCENES)}}
     settings = dict(record.get("engine_settings", {}))
     for engine in record.get("engines", []):
         try:
@@ -291,7 +294,6 @@ def make_plan(
 ) -> StudyPlan:
     """The plan from the command's options (None: the default), with the datasets prepared."""
     from nerfaug.device import resolve_device
-    from nerfaug.scenes import BUILTIN_SCENES
 
     try:
         device_type = resolve_device(device).type
@@ -321,7 +323,7 @@ def make_plan(
         layouts=layouts,
         **({"steps": steps} if steps is not None else {}),
     )
-    scenes = tuple(scenes) if scenes else BUILTIN_SCENES
+    scenes = tuple(scenes) if scenes else PROCEDURAL_SCENES
     # Every setting checked before any dataset is rendered (a bad --trials costs nothing).
     from nerfaug.experiment.sweep import check_config
 
@@ -335,6 +337,7 @@ def make_plan(
 
 __all__ = [
     "DEFAULT_TRIALS",
+    "PROCEDURAL_SCENES",
     "STUDY_FILE",
     "TABLE_FILE",
     "StudyPlan",
