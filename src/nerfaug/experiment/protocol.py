@@ -11,7 +11,7 @@ from pathlib import Path
 
 import torch
 
-from nerfaug.data import Views, has_split, load_dataset, require_split
+from nerfaug.data import Views, find_split, has_split, load_dataset, require_split
 from nerfaug.data.frame import Hemisphere
 from nerfaug.device import describe_device
 from nerfaug.experiment.config import ExperimentConfig
@@ -99,7 +99,8 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
     folder = scene_dataset_dir(root, scene, config)
     if scene_folder(scene) is not None:
         load_dataset(folder, "train", lazy=True)  # fail early, with the dataset's own error
-        require_split(folder, "test", "a test split is needed for evaluation")
+        if not is_captured_set(folder):  # a captured set's test views are kept apart by direction
+            require_split(folder, "test", "a test split is needed for evaluation")
         return folder
     from nerfaug.scenes import BUILTIN_SCENES
 
@@ -149,6 +150,11 @@ def dataset_cache_dir(root: Path) -> Path:
     return Path(root) / "datasets" / "cache"
 
 
+def is_captured_set(folder: Path) -> bool:
+    """Whether `folder` is a captured set: one listing of every view (LLFF, IDR, nerfstudio), no splits."""
+    return not find_split(folder, "train").format.has_splits
+
+
 def load_scene_data(
     folder: Path, config: ExperimentConfig, cache_dir: Path | None = None, layout: int = 0
 ) -> SceneData:
@@ -170,7 +176,7 @@ def load_scene_data(
         load = functools.partial(
             load_split_cached, folder, downscale=downscale, cache_dir=cache_dir, digest=folder_digest(folder)
         )
-    if not has_split(folder, "test"):
+    if is_captured_set(folder):
         return captured_scene_data(load(split="train"), config, layout)
     pool = load(split="train")
     test = load(split="test")

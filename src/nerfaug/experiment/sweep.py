@@ -170,7 +170,7 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
         )
     size = {"path": str(Path(folder).resolve()), "digest": dataset_digest(folder), "width": ran}
     size["height"] = height // (width // ran)
-    if not has_split(folder, "test"):
+    if not train_split.format.has_splits:  # a captured set: its test views are kept apart by direction
         return size | _check_captured_set(train_split, train, config)
     test_split = require_split(folder, "test", "a test split is needed for evaluation")
     test = test_split.load(lazy=True)
