@@ -361,6 +361,7 @@ class CaptureSession:
         config=None,
         map: bool = True,
         constraints=None,
+        min_separation: float = 0.0,
     ) -> Proposal:
         """Choose `n` views to capture next.
 
@@ -382,6 +383,9 @@ class CaptureSession:
             map: draw the hemisphere map to `run/proposals/proposal_NNN.png`.
             constraints: a `ViewConstraints` (or its `to_dict()`): elevation, azimuth and radius
                 ranges and keep-out cones the candidates must satisfy (recorded with the proposal).
+            min_separation: degrees; > 0 keeps every two proposed views at least this far apart
+                about the hemisphere's centre (recorded with the proposal). 0, the default,
+                proposes exactly what the method chooses.
 
         Returns:
             Proposal (world-frame poses, names, angles, every candidate's score, map path). The
@@ -391,9 +395,13 @@ class CaptureSession:
         Raises:
             TooFewCandidates (a ValueError): the constraints leave fewer candidates than `n`.
         """
-        request = choose.ProposalRequest(n, method, candidates, n_candidates, seed, config, map, constraints)
+        request = choose.ProposalRequest(
+            n, method, candidates, n_candidates, seed, config, map, constraints, min_separation
+        )
         folder = self.run_dir / PROPOSALS_DIR
-        proposal, record = choose.propose(request, self.session_model(), len(self.state.proposals), folder, generator)
+        number = len(self.state.proposals)
+        shown = bool(self.trainer is not None and self.trainer.progress)  # as the session was opened
+        proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown)
         self.state.proposals.append(record)
         return proposal
 
