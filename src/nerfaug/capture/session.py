@@ -20,7 +20,7 @@ the engine frame of the session's hemisphere (`nerfaug.capture.frame`).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import torch
@@ -337,10 +337,15 @@ class CaptureSession:
 
     # -- the loop --
 
-    def train(self, steps: int) -> dict:
-        """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"})."""
+    def train(self, steps: int, callback: Callable[[dict], None] | None = None) -> dict:
+        """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"}).
+
+        A session made or opened with `progress=True` shows a progress bar (lines where stderr is
+        not a terminal); `callback`, when given, is called every 10 steps and at the last with
+        that step's history entry, e.g. `session.train(500, callback=print)`.
+        """
         self.require_model()
-        self.trainer.train(self.trainer.step + check_steps(steps))
+        self.trainer.train(self.trainer.step + check_steps(steps), callback=callback)
         return self.trainer.history[-1] if self.trainer.history else {"step": self.trainer.step}
 
     def candidate_cameras(
@@ -464,11 +469,18 @@ class CaptureSession:
         return self.session_model().render(poses, width)
 
     def uncertainty_maps(
-        self, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16
+        self,
+        poses,
+        width: int | None = None,
+        fisher: bool = True,
+        fisher_width: int = 16,
+        progress: bool = False,
+        names: Sequence[str] | None = None,
     ) -> list[ViewMaps]:
         """The render, depth, ray entropy and FisherRF images of world-frame `poses` (n, 4, 4);
-        see `nerfaug.capture.uncertainty_images.view_maps`."""
-        return view_maps(self.session_model(), poses, width, fisher, fisher_width)
+        see `nerfaug.capture.uncertainty_images.view_maps` (`progress` shows each view's images
+        as they are done, named by `names`)."""
+        return view_maps(self.session_model(), poses, width, fisher, fisher_width, progress, names)
 
     def held_out(self, data: str | Path, split: str = "test", max_views: int | None = None) -> Views:
         """`split` of the dataset folder `data` (same scene and world frame) at the training
