@@ -484,6 +484,7 @@ def evaluate(
     out: Annotated[Path | None, none_means("print only", "PATH")] = None,
     lpips: bool = True,
     device: Device = "auto",
+    threads: int = THREADS,
 ) -> None:
     """Score the session's NeRF on held-out views: PSNR, SSIM and LPIPS of its renders against
     a dataset split, at the session's training resolution (as nerfstudio's ns-eval).
@@ -495,12 +496,14 @@ def evaluate(
         out: write the metrics, mean and per view, to this JSON file.
         lpips: compute LPIPS (when its weights are installed; otherwise reported as n/a).
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
+        threads: torch threads for rendering and scoring.
     """
     from nerfaug import __version__
     from nerfaug.jsonio import atomic_write_json
 
     if out is not None:
         _check_eval_out(out, data)
+    _configure(threads)
     session = _open(run, device)
     views = session.held_out(data, split)
     result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
