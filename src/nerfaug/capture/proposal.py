@@ -44,6 +44,8 @@ class Proposal:
         seed: the seed of the generator used (None when the caller passed a generator).
         camera_angle_x: horizontal field of view of the cameras, radians.
         hemisphere: the session's hemisphere.
+        min_separation: the least angle, degrees about the hemisphere's centre, between two of
+            its views; 0 when not asked for.
     """
 
     number: int
@@ -61,6 +63,7 @@ class Proposal:
     seed: int | None
     camera_angle_x: float
     hemisphere: Hemisphere
+    min_separation: float = 0.0
 
     def __len__(self) -> int:
         return self.poses.shape[0]
@@ -90,6 +93,8 @@ class Proposal:
             "nerfaug": nerfaug.__version__,
             "map": None if self.map_path is None else str(self.map_path),
         }
+        if self.min_separation > 0:
+            info["min_separation"] = self.min_separation
         if include_candidates:
             info["candidates"] = {
                 "transform_matrix": c.camera_to_world.tolist(),
