@@ -172,8 +172,11 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     record = study_runs.with_design(json.loads(path.read_text()), Path(out))
     if previous is not None:
         record = study_runs.merge_records(previous["plan"], record)
-    rows, initial = rows_from_folders(Path(out), record["engines"])
-    recorded = make_table(record, rows, initial, previous, method_records())
+    rows, scenes = rows_from_folders(Path(out), record["engines"])
+    for scene, folder in record.get("datasets", {}).items():
+        if scene in scenes and (source := study_runs.prepared_source(Path(folder))) is not None:
+            scenes[scene]["source"] = source
+    recorded = make_table(record, rows, scenes, previous, method_records())
     write_table(table_path, recorded)
     return recorded
 

@@ -197,3 +197,41 @@ def test_runs_of_several_layouts_keep_each_layouts_initial_views_and_their_cover
     (tmp_path / "bad.json").write_text(json.dumps(back))
     with pytest.raises(ReportError, match="runs\\[1\\].scene: 'mic' has no initial views of layout 2"):
         read_table(tmp_path / "bad.json")
+
+
+def real_table(offsets: dict, engine: str = "nerfacto-cpu") -> dict:
+    """10 seeds x the four planned real scenes on one engine: every method uniform + its offset +
+    a small seed-dependent term of the offset's sign (offset 0: alternating signs)."""
+    from nerfaug.report.study_hypotheses import REAL_SCENES
+
+    rng, rows = np.random.default_rng(1), []
+    near = poses_at([10, 20, 30])
+    for scene in REAL_SCENES:
+        for seed in SEEDS:
+            base = 18.0 + rng.normal(0, 2)
+            for method, offset in {"uniform": 0.0, **offsets}.items():
+                sign = (-1) ** seed if offset == 0 else np.sign(offset)
+                psnr = base + offset + (0.0 if method == "uniform" else 0.01 * (seed + 1) * sign)
+                rows.append(RunRow(engine, scene, method, seed, seed, psnr, 0.8, 0.2, "ok", [0, 1, 2], near, "v", "f"))
+    plan = {"engines": [engine], "scenes": list(REAL_SCENES), "methods": ["uniform", *offsets], "trials": 10}
+    initial = rounded_poses(half_hemisphere_poses(6).numpy())
+    return make_table(plan, rows, {scene: {"initial_poses": initial} for scene in REAL_SCENES})
+
+
+def test_the_real_scene_hypotheses_are_judged_from_the_table_as_planned():
+    from nerfaug.report.study_hypotheses import REAL_HYPOTHESES, hypotheses_of, r1, r2, r3, r4
+
+    offsets = {"ours-batch-sharp": 1.0, "ours": 0.5, "entropy-sampling": 0.0, "fisherrf-sampling": -1.0}
+    study = collect_study(real_table(offsets))
+    assert hypotheses_of(study) is REAL_HYPOTHESES
+    assert r1(study)[0] == "supported" and r3(study)[0] == "supported"
+    # ours > entropy-sampling holds by +0.5 on every seed, but entropy-sampling - fisherrf-sampling
+    # is +1 on every seed too: the ranking holds on nerfacto-cpu (the other engine is not run).
+    assert r2(study)[0] == "holds" and "nerfacto-cpu: holds" in r2(study)[1]
+    assert r4(study)[0] == "open" and "not run yet" in r4(study)[1]  # the held-back scene
+    reversed_ranking = collect_study(real_table({"ours": -1.0, "entropy-sampling": 0.0, "fisherrf-sampling": 1.0}))
+    assert r2(reversed_ranking)[0] == "contradicted"
+    flat = collect_study(real_table({"ours-batch-sharp": 0.0, "ours": 0.0}))
+    assert r1(flat)[0] == "open"  # one engine of two complete: not yet decided
+    assert r3(flat)[0] == "not supported"  # nerfacto-cpu complete, no gain
+    assert hypotheses_of(collect_study(synthetic_table({"ours": 1.0}))) is not REAL_HYPOTHESES
