@@ -4,11 +4,15 @@ built-in scene (or, with `--capture pool`, they are looked up among pre-rendered
 fast and needs no Blender after the dataset exists).
 
     python examples/active_capture.py                        # lego at 100x100, 2 rounds of 6 views
-    python examples/active_capture.py --data path/to/blender_dataset --split train --capture pool
-    python examples/active_capture.py --preset test --steps-per-round 20 --n-candidates 20   # seconds
+    python examples/active_capture.py --data path/to/blender_dataset --split train --capture pool \
+        --run results/my-capture --export results/my-capture-export
+    python examples/active_capture.py --preset test --steps-per-round 20 --n-candidates 20 \
+        --run results/quick-capture --export results/quick-capture-export                # seconds
 
 Every step is one call on a `CaptureSession`; the run folder can be reopened at any point with
 `CaptureSession.open(run)` or driven from the shell (`nerfaug propose RUN`, `nerfaug add RUN`).
+Run again with the same options, it goes on with the session in `--run`; with other settings
+(dataset, split, preset, seed) it refuses, naming them: each setting has its own run folder.
 """
 
 from __future__ import annotations
@@ -18,11 +22,50 @@ from typing import Literal
 
 import tyro
 
+from nerfaug.capture.state import SESSION_FILE, SessionState
 from nerfaug.session import CaptureSession
 
 
+def dataset(data: Path | None, scene: str, resolution: int, pool: int) -> Path:
+    """The dataset to start from: `data` as given (it must exist), or by default the built-in
+    scene in data/SCENE-RESOLUTION: used as it is when there, else rendered there as `nerfaug
+    scene render SCENE --out data/SCENE-RESOLUTION --res RESOLUTION` renders it (the README's
+    commands use the same folder)."""
+    if data is not None:
+        if not data.is_dir():
+            raise SystemExit(f"--data {data}: no such folder; give a Blender dataset, or leave --data out")
+        return data
+    data = Path(f"data/{scene}-{resolution}")
+    if data.is_dir():
+        print(f"using the dataset already in {data} (--data: another one)")
+        return data
+    from nerfaug.scenes import render_scene_dataset
+
+    return render_scene_dataset(scene, data, resolution=resolution, pool=pool)
+
+
+def open_or_create(run: Path, data: Path, preset: str, seed: int, split: str) -> CaptureSession:
+    """A new session in `run`, or the one already there when it was made with these settings;
+    refused, naming what differs, when it was not."""
+    if not (run / SESSION_FILE).exists():
+        return CaptureSession.create(data, run, preset=preset, seed=seed, split=split, progress=True)
+    state = SessionState.read(run)
+    wanted = {"--data": str(data.resolve()), "--split": split, "--preset": preset, "--seed": seed}
+    source = state.source
+    found = {"--data": source.data_dir, "--split": source.split, "--preset": state.preset, "--seed": state.seed}
+    differ = [f"{name} {found[name]} (asked: {wanted[name]})" for name in wanted if found[name] != wanted[name]]
+    if differ:
+        raise SystemExit(
+            f"{run} holds a session made with {', '.join(differ)}; give another --run (and --export) "
+            "for these settings, or the session's own"
+        )
+    session = CaptureSession.open(run, progress=True)
+    print(f"going on with the session in {run} (same settings): step {session.step}, {len(session.cameras)} views")
+    return session
+
+
 def main(
-    data: Path = Path("data/lego-100"),
+    data: Path | None = None,
     scene: str = "lego",
     split: str = "initial",
     run: Path = Path("results/active-capture"),
@@ -35,12 +78,13 @@ def main(
     preset: Literal["cpu", "paper", "test"] = "cpu",
     seed: int = 0,
     resolution: int = 100,
-    pool: int = 200,
+    pool: int = 300,
 ) -> None:
     """Run `rounds` of train -> propose -> capture -> add, then export for nerfstudio.
 
     Args:
-        data: a Blender-format dataset; rendered from `scene` first if it does not exist.
+        data: a Blender-format dataset folder; by default data/SCENE-RESOLUTION, the built-in
+            `scene` rendered there when absent.
         scene: the built-in scene (lego, chair, materials) the simulated robot captures.
         split: the dataset split with the views captured so far ("initial": 6 views on one half).
         run: the run folder (model, grown dataset, proposals, maps).
@@ -53,18 +97,10 @@ def main(
         n_candidates: hemisphere candidates scored per proposal (with `--capture blender`).
         preset: NeRF engine preset.
         seed: seeds the model, its training and every proposal.
-        resolution, pool: image size and candidate pool of `data` when it is rendered here.
+        resolution, pool: image size and candidate pool of the dataset when it is rendered here.
     """
-    if not data.exists():
-        from nerfaug.scenes import render_scene_dataset
-
-        render_scene_dataset(scene, data, resolution=resolution, pool=pool, test=20, initial=6)
-
-    session = (
-        CaptureSession.open(run)
-        if (run / "session.json").exists()
-        else CaptureSession.create(data, run, preset=preset, seed=seed, split=split, progress=True)
-    )
+    data = dataset(data, scene, resolution, pool)
+    session = open_or_create(run, data, preset, seed, split)
     print(f"{len(session.trainer.train_views)} views; hemisphere {session.hemisphere}")
 
     if capture == "pool":

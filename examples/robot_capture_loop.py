@@ -11,7 +11,9 @@ proposed poses (`BlenderOracle`), as a real robot's camera would take them.
 
 Without `--url` it starts `nerfaug serve --root ROOT` on a free port of 127.0.0.1 and stops it at
 the end. The held-out views are copied into ROOT (the service scores datasets inside its root
-only), so with `--url`, ROOT must be that service's root on this machine.
+only), so with `--url`, ROOT must be that service's root on this machine. Run again, it goes on
+with the session SESSION in ROOT when that was made with the same --preset and --seed, and
+refuses, naming them, when it was not.
 """
 
 from __future__ import annotations
@@ -118,13 +120,14 @@ class Options:
     """the service's token, when it has one."""
     session: str = "robot"
     """the session's id (an existing session of that id is resumed)."""
-    data: Path = Path("data/lego-100")
-    """a Blender dataset of SCENE (initial split: the first captures; test: the held-out views), rendered if absent."""
+    data: Path | None = None
+    """a Blender dataset of SCENE (initial split: the first captures; test: the held-out views); default:
+    data/SCENE-RESOLUTION, rendered there when absent (as `nerfaug scene render SCENE --out data/SCENE-RESOLUTION`)."""
     scene: str = "lego"
     """the built-in scene the robot's camera sees (lego, chair, materials)."""
     resolution: int = 100
     """image size of DATA when it is rendered here."""
-    pool: int = 200
+    pool: int = 300
     """candidate pool of DATA when it is rendered here."""
     rounds: int = 2
     """propose-capture-add-train rounds."""
@@ -156,14 +159,47 @@ class Options:
     """a JSON file with the test PSNR, SSIM and LPIPS after each round."""
 
 
+def dataset(o: Options) -> Path:
+    """DATA as given (it must exist), or data/SCENE-RESOLUTION: used as it is when there, else
+    SCENE rendered there."""
+    if o.data is not None:
+        if not o.data.is_dir():
+            raise SystemExit(f"--data {o.data}: no such folder; give a Blender dataset, or leave --data out")
+        return o.data
+    data = Path(f"data/{o.scene}-{o.resolution}")
+    if data.is_dir():
+        print(f"using the dataset already in {data} (--data: another one)")
+        return data
+    from nerfaug.scenes import render_scene_dataset
+
+    return render_scene_dataset(o.scene, data, resolution=o.resolution, pool=o.pool)
+
+
+def check_existing_session(o: Options) -> None:
+    """Refuse to go on with a session in ROOT made with another preset or seed (naming them)."""
+    from nerfaug.capture.state import SESSION_FILE, SessionState
+
+    folder = o.root / o.session
+    if not (folder / SESSION_FILE).exists():
+        return
+    state = SessionState.read(folder)
+    differ = [
+        f"--{name} {found} (asked: {wanted})"
+        for name, found, wanted in (("preset", state.preset, o.preset), ("seed", state.seed, o.seed))
+        if found != wanted
+    ]
+    if differ:
+        raise SystemExit(
+            f"session {o.session!r} in {o.root} was made with {', '.join(differ)}; give another --session "
+            "(or --root) for these settings, or the session's own"
+        )
+    print(f"going on with session {o.session!r} in {o.root} (same preset and seed): step {state.step}")
+
+
 def main(o: Options) -> list[dict]:
     """Run the loop; returns the metrics after each round (round 0: the first captures only)."""
-    if not o.data.exists():
-        from nerfaug.scenes import render_scene_dataset
-
-        render_scene_dataset(
-            o.scene, o.data, resolution=o.resolution, pool=o.pool, test=20, initial=6, samples=o.samples
-        )
+    o.data = dataset(o)
+    check_existing_session(o)
     # The held-out views inside the service root, where the service may read them.
     held_out = f"held-out-{o.data.name}"
     if not (o.root / held_out / "transforms_test.json").is_file():

@@ -1,13 +1,15 @@
-"""The README's command blocks and the examples run as written, from a fresh folder, and end with
-exit 0: the capture walk-through (shell), the Python snippet, and every script in examples/.
+"""The README's command blocks and the examples run as written, from a fresh folder, in the order
+the README gives them, and end with exit 0: the Usage block, the capture walk-through (shell), the
+Python block, then every script in examples/. No block rewrites a file an earlier one wrote (each
+writes into its own folders), and the examples refuse to go on with a session of other settings.
 
 They run at a small size. How each is made small, so that what runs is still what a user types:
-- shell: each line is run as written with options appended (`SMALL`); the option given last wins,
-  so `--n 6 ... --n 2` proposes 2 views. Lines that are comments are skipped.
-- Python: a few literals are replaced (`PYTHON_SMALL`: engine preset, steps, views, candidates);
-  each replacement must apply, so a changed snippet fails here until this list follows it.
+- shell: each line is run as written with options appended (`SMALL`, `USAGE_SMALL`); the option
+  given last wins, so `--n 6 ... --n 2` proposes 2 views. Lines that are comments are skipped.
+- Python: a few literals are replaced (`PYTHON_SMALL`: engine preset, size of the render, steps,
+  views, candidates); each replacement must apply, so a changed block fails here until this list
+  follows it.
 - examples: their own small-size options (`--preset test`, fewer steps, views and candidates).
-The dataset every block starts from is rendered first with the README's own command, shrunk.
 """
 
 import json
@@ -32,16 +34,22 @@ SMALL = {
     "render-proposals": ["--samples", "4"],
     "add": ["--steps", "10", "--device", "cpu"],
     "eval": ["--device", "cpu"],
+    "uncertainty": ["--width", "8", "--fisher-width", "3", "--device", "cpu"],
     "export": [],
 }
-# (literal in the README's Python snippet, its small replacement)
+# (literal in the README's Python block, its small replacement). Its render is the walk-through's
+# `scene render` at the walk-through's small size, so it finds that dataset rendered already.
 PYTHON_SMALL = [
     ('preset="cpu"', 'preset="test"'),
+    (
+        'render_scene_dataset("lego", "data/lego-100", resolution=100)',
+        'render_scene_dataset("lego", "data/lego-100", resolution=32, pool=12, test=4, samples=4)',
+    ),
+    ('BlenderOracle("lego", 100, 100)', 'BlenderOracle("lego", 32, 32, samples=4)'),
     ("session.train(500)", "session.train(10)"),
     ('session.propose(6, method="ours")', 'session.propose(2, method="ours", n_candidates=20)'),
 ]
-# The snippet's dataset, as its comment says to render it, with a small pool and test split.
-LEGO_100 = ["scene", "render", "lego", "--out", "data/lego-100", "--res", "100", "--pool", "12", "--test", "4"]
+EXAMPLE_SMALL = ["--preset", "test", "--steps-per-round", "10", "--views-per-round", "2", "--n-candidates", "20"]
 
 pytestmark = pytest.mark.slow
 
@@ -77,48 +85,19 @@ def shell_lines(block: str) -> list[list[str]]:
     return commands
 
 
-def test_the_capture_walk_through_runs_as_written(tmp_path):
-    commands = shell_lines(block_with("bash", "nerfaug train "))
-    assert {argv[1] for argv in commands} <= set(SMALL), "a new subcommand needs its small-size options in SMALL"
-    for argv in commands:
-        assert argv[0] == "nerfaug", argv
-        done = nerfaug([*argv[1:], *SMALL[argv[1]]], tmp_path)
-        assert done.returncode == 0, f"{shlex.join(argv)}: exit {done.returncode}\n{done.stderr[-3000:]}"
-        if argv[1] == "train":
-            assert done.stdout.startswith("training on 6 views: the initial views"), done.stdout
-    assert (tmp_path / "lego-grown" / "transforms.json").is_file()
+def files(folder: Path) -> dict[str, tuple[int, int]]:
+    """Every file under `folder`: relative path -> (modification time in ns, size)."""
+    return {
+        str(path.relative_to(folder)): (path.stat().st_mtime_ns, path.stat().st_size)
+        for path in folder.rglob("*")
+        if path.is_file()
+    }
 
 
-def test_the_example_then_the_python_snippet_run_in_one_folder(tmp_path):
-    """Both as a newcomer runs them, one after the other: their output folders must not collide."""
-    rendered = nerfaug([*LEGO_100, "--samples", "4"], tmp_path)
-    assert rendered.returncode == 0, rendered.stderr
-    small = ["--preset", "test", "--steps-per-round", "10", "--views-per-round", "2", "--n-candidates", "20"]
-    for example in EXAMPLES:
-        done = run([sys.executable, str(example), *small], tmp_path)
-        assert done.returncode == 0, f"{example.name}: exit {done.returncode}\n{done.stderr[-3000:]}"
-    assert (tmp_path / "results" / "active-capture-export" / "transforms.json").is_file()
-    # The robot's loop over HTTP: the first captures, then two rounds of two views, each scored.
-    rounds = json.loads((tmp_path / "results" / "robot-capture-loop.json").read_text())["rounds"]
-    assert [(r["round"], r["views"], r["step"]) for r in rounds] == [(0, 6, 10), (1, 8, 20), (2, 10, 30)]
-    assert all(0 < r["psnr"] < 60 and r["test_views"] == 4 for r in rounds)
-
-    snippet = block_with("python", "CaptureSession.create")
-    for literal, small_literal in PYTHON_SMALL:
-        assert literal in snippet, f"README's Python snippet no longer holds {literal!r}: update PYTHON_SMALL"
-        snippet = snippet.replace(literal, small_literal)
-    (tmp_path / "snippet.py").write_text(snippet)
-    done = run([sys.executable, "snippet.py"], tmp_path)
-    assert done.returncode == 0, f"README's Python snippet: exit {done.returncode}\n{done.stderr[-3000:]}"
-    assert (tmp_path / "results" / "lego-grown" / "transforms.json").is_file()
-
-
-def test_the_example_with_pool_capture_runs(tmp_path):
-    argv = ["--data", "data/lego", "--capture", "pool", "--resolution", "32", "--pool", "12", "--preset", "test"]
-    small = ["--steps-per-round", "10", "--views-per-round", "2"]
-    done = run([sys.executable, str(ROOT / "examples" / "active_capture.py"), *argv, *small], tmp_path)
-    assert done.returncode == 0, done.stderr[-3000:]
-    assert (tmp_path / "results" / "active-capture-export" / "transforms.json").is_file()
+def assert_untouched(earlier: dict[str, tuple[int, int]], folder: Path, block: str) -> None:
+    now = files(folder)
+    changed = sorted(path for path, stamp in earlier.items() if now.get(path) != stamp)
+    assert not changed, f"{block} rewrote or removed files an earlier block wrote: {changed[:8]}"
 
 
 # Options appended to each line of the README's Usage block (the last of a repeated option wins):
@@ -136,7 +115,7 @@ USAGE_SMALL = {
 USAGE_DATA = ("path/to/nerf_synthetic/lego", "data/lego")
 
 
-def test_the_usage_block_runs_as_written(tmp_path):
+def run_the_usage_block(folder: Path) -> None:
     """Every line of the Usage block but those ending in `...` (option examples to combine with
     the lines above) and the venv's activation; the paper preset at one scene."""
     block = block_with("bash", "nerfaug run --preset quick")
@@ -145,8 +124,88 @@ def test_the_usage_block_runs_as_written(tmp_path):
     for argv in commands:
         argv = [USAGE_DATA[1] if a == USAGE_DATA[0] else a for a in argv]
         small = USAGE_SMALL[argv[1]] + (["--scenes", "lego"] if "paper" in argv else [])
-        done = nerfaug([*argv[1:], *small], tmp_path)
+        done = nerfaug([*argv[1:], *small], folder)
         assert done.returncode == 0, f"{shlex.join(argv)}: exit {done.returncode}\n{done.stderr[-3000:]}"
-    assert (tmp_path / "results" / "quick" / "report.md").is_file()
-    assert (tmp_path / "results" / "mylego" / "report.md").is_file()
-    assert (tmp_path / "results" / "study" / "study.md").is_file()
+    assert (folder / "results" / "quick" / "report.md").is_file()
+    assert (folder / "results" / "mylego" / "report.md").is_file()
+    assert (folder / "results" / "study" / "study.md").is_file()
+
+
+def run_the_capture_walk_through(folder: Path) -> None:
+    commands = shell_lines(block_with("bash", "nerfaug train "))
+    assert {argv[1] for argv in commands} <= set(SMALL), "a new subcommand needs its small-size options in SMALL"
+    for argv in commands:
+        assert argv[0] == "nerfaug", argv
+        done = nerfaug([*argv[1:], *SMALL[argv[1]]], folder)
+        assert done.returncode == 0, f"{shlex.join(argv)}: exit {done.returncode}\n{done.stderr[-3000:]}"
+        if argv[1] == "train":
+            assert done.stdout.startswith("training on 6 views: the initial views"), done.stdout
+        if argv[1] == "uncertainty":
+            assert "uncertainty images: " in done.stderr  # its progress
+    assert (folder / "lego-grown" / "transforms.json").is_file()
+    poses = json.loads((folder / "poses2.json").read_text())
+    assert poses["nerfaug"]["min_separation"] == 20.0
+    assert (folder / "uncertainty" / "capture_001_00.png").is_file()
+
+
+def run_the_python_block(folder: Path) -> None:
+    block = block_with("python", "CaptureSession.create")
+    for literal, small_literal in PYTHON_SMALL:
+        assert literal in block, f"README's Python block no longer holds {literal!r}: update PYTHON_SMALL"
+        block = block.replace(literal, small_literal)
+    (folder / "python-block.py").write_text(block)
+    done = run([sys.executable, "python-block.py"], folder)
+    assert done.returncode == 0, f"README's Python block: exit {done.returncode}\n{done.stderr[-3000:]}"
+    assert "already rendered with these arguments" in done.stderr  # the walk-through's dataset, reused
+    assert "training: 10/10" in done.stderr  # the session shows its training
+    assert (folder / "results" / "lego-grown" / "transforms.json").is_file()
+
+
+def run_the_examples(folder: Path) -> None:
+    for example in EXAMPLES:
+        done = run([sys.executable, str(example), *EXAMPLE_SMALL], folder)
+        assert done.returncode == 0, f"{example.name}: exit {done.returncode}\n{done.stderr[-3000:]}"
+        assert "using the dataset already in data/lego-100" in done.stdout
+    assert (folder / "results" / "active-capture-export" / "transforms.json").is_file()
+    # The robot's loop over HTTP: the first captures, then two rounds of two views, each scored.
+    rounds = json.loads((folder / "results" / "robot-capture-loop.json").read_text())["rounds"]
+    assert [(r["round"], r["views"], r["step"]) for r in rounds] == [(0, 6, 10), (1, 8, 20), (2, 10, 30)]
+    assert all(0 < r["psnr"] < 60 and r["test_views"] == 4 for r in rounds)
+
+
+def test_the_readme_and_the_examples_run_in_order_in_one_folder(tmp_path):
+    written: dict[str, tuple[int, int]] = {}
+    for name, block in (
+        ("the Usage block", run_the_usage_block),
+        ("the capture walk-through", run_the_capture_walk_through),
+        ("the Python block", run_the_python_block),
+        ("the examples", run_the_examples),
+    ):
+        block(tmp_path)
+        assert_untouched(written, tmp_path, name)
+        written = files(tmp_path)
+    # The Usage block's dataset is still its own (the capture blocks once re-rendered it smaller).
+    assert len(json.loads((tmp_path / "data" / "lego" / "transforms_test.json").read_text())["frames"]) == 20
+
+    # Run again with other settings, each example refuses, naming them, and changes nothing.
+    active = ROOT / "examples" / "active_capture.py"
+    done = run([sys.executable, str(active), *EXAMPLE_SMALL, "--seed", "1"], tmp_path)
+    assert done.returncode == 1
+    assert "results/active-capture holds a session made with --seed 0 (asked: 1)" in done.stderr
+    done = run([sys.executable, str(active), *EXAMPLE_SMALL, "--data", "path/to/blender_dataset"], tmp_path)
+    assert done.returncode == 1 and "--data path/to/blender_dataset: no such folder" in done.stderr
+    assert not (tmp_path / "path").exists()
+    robot = ROOT / "examples" / "robot_capture_loop.py"
+    done = run([sys.executable, str(robot), *EXAMPLE_SMALL[2:], "--preset", "cpu"], tmp_path)
+    assert done.returncode == 1 and "was made with --preset test (asked: cpu)" in done.stderr
+    assert_untouched(written, tmp_path, "the refused examples")
+
+
+def test_the_example_with_pool_capture_runs(tmp_path):
+    rendered = nerfaug(["scene", "render", "lego", "--out", "data/lego", *SMALL["scene"]], tmp_path)
+    assert rendered.returncode == 0, rendered.stderr
+    argv = ["--data", "data/lego", "--capture", "pool", "--preset", "test"]
+    small = ["--steps-per-round", "10", "--views-per-round", "2"]
+    done = run([sys.executable, str(ROOT / "examples" / "active_capture.py"), *argv, *small], tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (tmp_path / "results" / "active-capture-export" / "transforms.json").is_file()

@@ -16,6 +16,9 @@ WRITTEN = [
     "poses.png",
     "poses2.json",
     "captures/capture_000_00.png",
+    "uncertainty/capture_001_00.png",  # `nerfaug uncertainty runs/lego --out uncertainty/`
+    "poses-robot.json",  # the service's block
+    "captures-robot/capture_000_00.png",
     "sessions/lego/session.json",  # `nerfaug serve --root sessions`
 ]
 
@@ -29,7 +32,8 @@ def test_what_the_readme_writes_is_ignored(path):
 
 def test_the_readme_still_writes_those_paths():
     readme = (ROOT / "README.md").read_text()
-    for word in ("--out runs/lego", "--out poses.json", "--out captures/", "--out lego-grown"):
+    words = ("--out runs/lego", "--out poses.json", "--out captures/", "--out uncertainty/", "--out lego-grown")
+    for word in (*words, "-o poses-robot.json", "--out captures-robot/"):
         assert word in readme
 
 

@@ -1,18 +1,26 @@
 """Tests for nerfaug.scenes: built-in scenes, user .blend files, datasets and their cache."""
 
+import fnmatch
 import importlib.util
+import json
 import math
+import os
+import shutil
 import subprocess
 import sys
 import textwrap
+import tomllib
+from pathlib import Path
 
+import imageio.v3 as iio
 import pytest
 import torch
 
+import nerfaug
 from nerfaug.cameras import Cameras
 from nerfaug.data import load_dataset
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, angles_from_pose, in_azimuth_window, pose_from_angles
-from nerfaug.scenes import BUILTIN_SCENES, render
+from nerfaug.scenes import BUILTIN_SCENES, builtin, render
 from nerfaug.scenes.render import (
     BlenderNotAvailable,
     RenderError,
@@ -205,3 +213,99 @@ def test_dataset_refuses_to_replace_a_foreign_folder(tmp_path):
     with pytest.raises(FileExistsError, match="scene.json"):
         render_scene_dataset("lego", tmp_path, resolution=8, pool=1, test=1, initial=1)
     assert (tmp_path / "mine.txt").read_text() == "precious"
+
+
+# ---- the cow: a built-in scene built from files shipped with the package -------------------------
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_cow_files_are_real_packaged_and_carry_their_licence():
+    folder = builtin.ASSETS / "cow"
+    obj, mtl, texture = (folder / name for name in builtin.BUILTIN_ASSETS["cow"])
+    # Real files, not Git LFS pointers: a triangle mesh with UVs, a material naming the texture.
+    lines = obj.read_text().splitlines()
+    assert "mtllib cow.mtl" in lines and sum(line.startswith("f ") for line in lines) == 5856
+    assert sum(line.startswith("vt ") for line in lines) > 0
+    assert "map_Kd cow_texture.png" in mtl.read_text()
+    assert iio.imread(texture).shape == (1024, 1024, 3)
+    note = (folder / "README.md").read_text()
+    assert "public domain" in note and "Keenan Crane" in note and "kmcrane/Projects/ModelRepository" in note
+    # A non-editable install ships them: pyproject's package data covers every file of the folder.
+    patterns = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["nerfaug"]
+    package = Path(nerfaug.__file__).parent
+    for path in folder.iterdir():
+        assert any(fnmatch.fnmatch(path.relative_to(package).as_posix(), p) for p in patterns), path
+
+
+def test_manifest_holds_the_digest_of_the_cow_files(tmp_path, monkeypatch):
+    def manifest(scene):
+        return render.dataset_manifest({"builtin": scene}, 32, 5, 4, 2, 2, 2, 0)
+
+    assert "assets_sha256" not in manifest("lego")["scene"]
+    before = manifest("cow")
+    assert len(before["scene"]["assets_sha256"]) == 64 and before == manifest("cow")
+    shutil.copytree(builtin.ASSETS, tmp_path / "assets")
+    monkeypatch.setattr(builtin, "ASSETS", tmp_path / "assets")
+    assert manifest("cow") == before
+    (tmp_path / "assets" / "cow" / "README.md").write_text("a note does not change the pixels")
+    assert manifest("cow") == before
+    texture = tmp_path / "assets" / "cow" / "cow_texture.png"
+    texture.write_bytes(texture.read_bytes() + b"\0")  # any edit of a file the cow is built from
+    assert manifest("cow")["scene"]["assets_sha256"] != before["scene"]["assets_sha256"]
+    assert manifest("cow")["scene_code_sha256"] == before["scene_code_sha256"]
+    texture.unlink()
+    with pytest.raises(FileNotFoundError, match="cow_texture.png"):
+        manifest("cow")
+
+
+COW_REPORT = """
+import json
+import bpy
+from nerfaug.scenes import builders
+builders.load_scene({"builtin": "cow"})
+bpy.context.view_layer.update()
+(cow,) = (o for o in bpy.context.scene.objects if o.type == "MESH")
+points = [cow.matrix_world @ v.co for v in cow.data.vertices]
+top = sorted(points, key=lambda p: -p.z)[:20]  # the horns, on the head
+link = cow.active_material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links[0]
+print("COW", json.dumps({
+    "low": [min(p[k] for p in points) for k in range(3)],
+    "high": [max(p[k] for p in points) for k in range(3)],
+    "horns_x": sum(p.x for p in top) / len(top),
+    "smooth": all(face.use_smooth for face in cow.data.polygons),
+    "base_colour_from": link.from_node.type,
+    "texture": [link.from_node.image.filepath, *link.from_node.image.size],
+}))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+@blender
+def test_cow_is_textured_z_up_and_fits_the_box():
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(Path(nerfaug.__file__).parents[1]), env.get("PYTHONPATH")) if p)
+    done = subprocess.run([sys.executable, "-c", COW_REPORT], check=True, capture_output=True, text=True, env=env)
+    cow = json.loads(done.stdout.split("COW ", 1)[1])
+    low, high = torch.tensor(cow["low"]), torch.tensor(cow["high"])
+    assert torch.allclose(low + high, torch.zeros(3), atol=1e-4)  # centred
+    assert abs((high - low).max().item() / 2 - 1.1) < 1e-4  # largest half-side 1.1: inside [-1.1, 1.1]^3
+    length, width, height = (high - low).tolist()
+    assert width < 0.65 * min(length, height), (length, width, height)  # z up, seen side-on from +-y
+    assert cow["horns_x"] > 0.3  # the head towards +x
+    assert cow["smooth"] and cow["base_colour_from"] == "TEX_IMAGE"
+    assert cow["texture"][0].endswith("cow_texture.png") and cow["texture"][1:] == [1024, 1024]
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+@blender
+def test_cow_renders_its_spots():
+    """Mostly white with dark spots: with the texture unplugged (a flat white cow, measured once)
+    the darkest 5% of its opaque pixels are still brighter than 0.6; textured, below 0.4."""
+    views = render_views("cow", POSES, 40, 40, samples=4, progress=False)
+    for image, alpha in zip(views.images, views.alphas):
+        luminance = image[alpha > 0.99].mean(-1)
+        dark, median = torch.quantile(luminance, torch.tensor([0.05, 0.5])).tolist()
+        assert dark < 0.5 and median > 0.55, (dark, median)

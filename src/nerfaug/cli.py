@@ -1,6 +1,7 @@
 """The `nerfaug` command: scenes, experiments, reports, and the active-capture loop.
 
 nerfaug scene render lego --out data/lego      render a built-in scene as a Blender dataset
+nerfaug scene prepare DOWNLOAD --out data/mic  ready a downloaded dataset (NeRF-synthetic, LLFF, DTU)
 nerfaug run --preset quick --out results/quick  the paper's experiment, then its report
 nerfaug report results/quick                    (re)write report.md and report.html
 nerfaug study --out results/study               which method wins where, on which engine
@@ -84,7 +85,7 @@ def scene_render(
     samples: int = 16,
     seed: int = 0,
 ) -> None:
-    """Render a built-in scene (lego, chair, materials) or a .blend file as a Blender-format dataset.
+    """Render a built-in scene (lego, chair, materials, cow) or a .blend file as a Blender-format dataset.
 
     Writes transforms_train.json (the candidate pool, uniform on the hemisphere),
     transforms_initial.json (fixed views on one half), transforms_test.json and transforms_val.json.
@@ -106,6 +107,32 @@ def scene_render(
         scene, out, resolution=res, pool=pool, test=test, initial=initial, samples=samples, seed=seed, progress=True
     )
     print(f"dataset written to {path}")
+
+
+def scene_prepare(
+    source: Annotated[Path, Positional, tyro.conf.arg(metavar="SOURCE")],
+    out: Path,
+    width: int = 100,
+) -> None:
+    """Prepare a downloaded dataset for `nerfaug run` and `nerfaug study`: a copy with images
+    WIDTH px across and masks merged into their alpha.
+
+    SOURCE may be a NeRF-synthetic folder (transforms_{train,val,test}.json), an LLFF capture
+    (poses_bounds.npy, images/, optional masks/), a DTU scan in the IDR/NeuS layout
+    (cameras_sphere.npz, image/ or images/, mask/) or a nerfstudio folder. A capture without a
+    test split is written as one transforms.json; the experiments keep test views apart from it,
+    spread over all directions. prepared.json records the source's digest. Running it again with
+    the same source and width does nothing.
+
+    Args:
+        source: the downloaded dataset folder (it is only read).
+        out: the folder to write (new or empty).
+        width: image width in pixels (any size up to the source's; area-averaged).
+    """
+    from nerfaug.data.prepare import prepare_dataset
+
+    path = prepare_dataset(source, out, width)
+    print(f"dataset prepared in {path}")
 
 
 def paper_tables():
@@ -223,8 +250,10 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def scene() -> None:
-    """Built-in scenes: `nerfaug scene render SCENE --out DIR` renders lego, chair, materials or a
-    .blend file as a Blender-format dataset (`nerfaug scene render --help`)."""
+    """Scenes: `nerfaug scene render SCENE --out DIR` renders a built-in scene (lego, chair,
+    materials, cow) or a .blend file as a Blender-format dataset; `nerfaug scene prepare SOURCE
+    --out DIR` readies a downloaded dataset (NeRF-synthetic, LLFF, DTU) for experiments (`--help`
+    of each)."""
     _dispatch(["scene", "--help"])
 
 
@@ -241,8 +270,11 @@ def command(name: str):
 
 def _dispatch(argv: list[str]) -> None:
     if argv[:1] == ["scene"]:
-        scene_render.__doc__ = reflow(scene_render.__doc__)
-        tyro.extras.subcommand_cli_from_dict({"render": scene_render}, args=argv[1:], prog="nerfaug scene")
+        for subcommand in (scene_render, scene_prepare):
+            subcommand.__doc__ = reflow(subcommand.__doc__)
+        tyro.extras.subcommand_cli_from_dict(
+            {"render": scene_render, "prepare": scene_prepare}, args=argv[1:], prog="nerfaug scene"
+        )
         return
     parsing = COMMAND_LINE.set(tuple(argv))
     try:

@@ -101,8 +101,10 @@ def half_hemisphere_poses(
     polar_range=(math.radians(20), math.radians(80)),
     radius: float = BLENDER_RADIUS,
     centre=(0.0, 0.0, 0.0),
+    azimuth_width: float = math.pi,
 ) -> Tensor:
-    """`n` fixed poses spread over one half of the hemisphere (azimuth in [start, start + pi)).
+    """`n` fixed poses spread over one half of the hemisphere (azimuth in [start, start + width),
+    width pi unless given: a captured set that covers a narrower wedge has narrower halves).
 
     Spread by a golden-angle spiral over the half, so the same `n` always gives the same views
     and they cover the half evenly. Shape (n, 4, 4).
@@ -111,7 +113,7 @@ def half_hemisphere_poses(
     frac = k / n
     cos_hi, cos_lo = math.cos(polar_range[0]), math.cos(polar_range[1])
     polar = np.arccos(cos_hi - frac * (cos_hi - cos_lo))
-    azimuth = azimuth_start + math.pi * np.mod(k * 0.6180339887498949, 1.0)
+    azimuth = azimuth_start + azimuth_width * np.mod(k * 0.6180339887498949, 1.0)
     return pose_from_angles(torch.from_numpy(azimuth), torch.from_numpy(polar), radius, centre)
 
 

@@ -113,11 +113,15 @@ def uncertainty(
     width: Annotated[int | None, none_means("the training resolution", "INT")] = None,
     fisher: bool = True,
     fisher_width: int = 16,
+    shared_scale: bool = True,
     device: Literal["auto", "cpu", "cuda"] = "auto",
+    threads: int = 1,
 ) -> None:
     """Uncertainty images of any views of a session: for each pose of a poses JSON, what the NeRF
     renders, its depth, the ray entropy and FisherRF's per-pixel score, as NAME.png (panels with
-    colour bars) and NAME_rgb.npy, NAME_depth.npy, NAME_entropy.npy, NAME_fisher.npy, NAME_pose.npy.
+    colour bars) and NAME_rgb.npy, NAME_depth.npy, NAME_opacity.npy, NAME_entropy.npy,
+    NAME_fisher.npy, NAME_pose.npy. In the figures, depth is drawn only where the rays are mostly
+    opaque (grey: background), and FisherRF's log scale spans the top four decades.
 
     Args:
         run: the session's run folder.
@@ -127,29 +131,38 @@ def uncertainty(
         width: pixels across of the render, depth and entropy.
         fisher: also compute FisherRF's per-pixel score (three backward passes per pixel).
         fisher_width: pixels across of the FisherRF image.
+        shared_scale: draw every view's figure on the same colour scales, so views compare by
+            eye (--no-shared-scale: each figure spans its own values).
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
+        threads: torch threads (one is the fastest on a machine that runs other work).
     """
     from nerfaug import owned
     from nerfaug.capture import CaptureSession, read_poses
-    from nerfaug.capture.uncertainty_images import write_maps
-    from nerfaug.device import resolve_device
+    from nerfaug.capture.uncertainty_images import colour_scales, write_maps
+    from nerfaug.device import configure_process, resolve_device
     from nerfaug.errors import FolderRefused
 
     if width is not None and width < 1:
         raise ValueError(f"--width {width}: must be >= 1")
     if fisher_width < 1:
         raise ValueError(f"--fisher-width {fisher_width}: must be >= 1")
+    if threads < 1:
+        raise ValueError(f"--threads {threads}: must be >= 1")
     if not owned.is_empty(out) and not owned.marked(out, UNCERTAINTY_KIND):
         raise FolderRefused(f"{out}: not empty and not written by `nerfaug uncertainty`; choose a new folder for --out")
     if owned.overlaps(out, run):
         raise FolderRefused(f"{out}: lies inside or holds the session {run}; choose a folder outside it")
     matrices, names = read_poses(poses)
+    configure_process(threads=threads)
     session = CaptureSession.open(run, device=str(resolve_device(device)))
-    maps = session.uncertainty_maps(matrices, width, fisher, fisher_width)
+    maps = session.uncertainty_maps(matrices, width, fisher, fisher_width, progress=True, names=names)
     owned.mark(out, UNCERTAINTY_KIND)
+    scales = colour_scales(maps) if shared_scale else None
     for name, view in zip(names, maps):
-        write_maps(view, out, name)
+        write_maps(view, out, name, scales)
         print(f"{name}: mean entropy {view.entropy.mean():.3f} bits -> {out / (name + '.png')}")
+    if scales is not None and len(maps) > 1:
+        print(f"the {len(maps)} figures share their colour scales (--no-shared-scale: each its own)")
 
 
 COMMANDS: dict = {"serve": serve, "uncertainty": uncertainty}

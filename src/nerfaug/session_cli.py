@@ -24,7 +24,7 @@ from nerfaug.capture.state import SessionState
 from nerfaug.cli_hints import none_means
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.selection.config import SelectionConfig
-from nerfaug.train_cli import Device, RunFolder, _as_options, _open, add, train
+from nerfaug.train_cli import THREADS, Device, RunFolder, _as_options, _configure, _open, add, train
 
 FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
 # The defaults `--selection.*` options start from (read-only use: never mutated).
@@ -70,7 +70,9 @@ def propose(
     device: Device = "auto",
     selection: SelectionConfig = DEFAULT_SELECTION,
     constraints: Annotated[ViewConstraints, tyro.conf.OmitArgPrefixes] = DEFAULT_CONSTRAINTS,
+    min_separation: float = 0.0,
     force: bool = False,
+    threads: int = THREADS,
 ) -> None:
     """Propose the next views to capture and write their poses as a Blender-style JSON.
 
@@ -98,7 +100,10 @@ def propose(
             a method's own settings (e.g. ours-authors') apply over them.
         constraints: where views may lie (--elevation, --azimuth, --radius, --keep-out), applied
             to the hemisphere's candidates or to --candidates.
+        min_separation: keep every two proposed views at least this many degrees apart, seen
+            from the hemisphere's centre (0: off, the method's own choice).
         force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
+        threads: torch threads for scoring the candidates.
     """
     from nerfaug.capture.choose import ProposalRequest
 
@@ -110,10 +115,12 @@ def propose(
         seed=seed,
         config=selection,
         constraints=constraints,
+        min_separation=min_separation,
     )
     with _as_options():
         request = request.checked()  # before the session is opened: a refused call loads nothing
     _check_poses_out(out, force)
+    _configure(threads)
     session = _open(run, device)
     proposal = session.propose(
         request.n,
@@ -123,6 +130,7 @@ def propose(
         seed=request.seed,
         config=request.config,
         constraints=request.constraints,
+        min_separation=request.min_separation,
     )
     path = proposal.write(out)
     session.save()
@@ -191,6 +199,7 @@ def evaluate(
     out: Annotated[Path | None, none_means("print only", "PATH")] = None,
     lpips: bool = True,
     device: Device = "auto",
+    threads: int = THREADS,
 ) -> None:
     """Score the session's NeRF on held-out views: PSNR, SSIM and LPIPS of its renders against
     a dataset split, at the session's training resolution (as nerfstudio's ns-eval).
@@ -202,12 +211,14 @@ def evaluate(
         out: write the metrics, mean and per view, to this JSON file.
         lpips: compute LPIPS (when its weights are installed; otherwise reported as n/a).
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
+        threads: torch threads for rendering and scoring.
     """
     from nerfaug import __version__
     from nerfaug.jsonio import atomic_write_json
 
     if out is not None:
         _check_eval_out(out, data)
+    _configure(threads)
     session = _open(run, device)
     views = session.held_out(data, split)
     result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
@@ -244,7 +255,7 @@ def render_proposals(
     Args:
         run: the session's run folder (for the camera's intrinsics and image size).
         poses: the poses JSON `nerfaug propose` wrote.
-        scene: a built-in scene (lego, chair, materials) or a .blend file.
+        scene: a built-in scene (lego, chair, materials, cow) or a .blend file.
         out: folder to write the renders to.
         samples: Cycles samples per pixel.
         seed: Cycles noise seed.

@@ -49,7 +49,9 @@ def study(
     ] = None,
     scenes: Annotated[
         tuple[str, ...] | None,
-        tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint="(default: lego chair materials)"),
+        tyro.conf.arg(
+            metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(study_runs.PROCEDURAL_SCENES)})"
+        ),
     ] = None,
     methods: Annotated[
         tuple[str, ...] | None,
@@ -64,6 +66,7 @@ def study(
         ),
     ] = None,
     resolution: int = 100,
+    layouts: int = 1,
     steps: Annotated[
         int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's: study: 2000; tiny: 60)")
     ] = None,
@@ -93,7 +96,9 @@ def study(
         scenes: built-in scene names or dataset folders.
         methods: selection methods (`nerfaug methods`).
         trials: trials per (scene, method, engine).
-        resolution: image size of the built-in scenes.
+        resolution: image size of the built-in scenes (and the width dataset folders are shrunk to).
+        layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
+            views come from turned by 1/LAYOUTS of the way round each time.
         steps: training steps per run.
         workers: concurrent runs.
         force: discard existing runs and redo them.
@@ -118,10 +123,12 @@ def study(
     failed = {}
     if not summary_only:
         command = study_runs.study_command(
-            out, engines, scenes, methods, trials, resolution, steps, device, preset, table
+            out, engines, scenes, methods, trials, resolution, steps, device, preset, table, layouts
         )
         command += selection.flags()
-        plan = study_runs.make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command)
+        plan = study_runs.make_plan(
+            out, engines, scenes, methods, trials, resolution, steps, device, preset, command, layouts=layouts
+        )
         given = given_fields(selection, "selection", COMMAND_LINE.get())
         plan.config = plan.config.replace(selection=replace(plan.config.selection, **given))
         for engine, why in plan.left_out.items():
@@ -196,8 +203,11 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     record = study_runs.with_design(json.loads(path.read_text()), Path(out))
     if previous is not None:
         record = study_runs.merge_records(previous["plan"], record)
-    rows, initial = rows_from_folders(Path(out), record["engines"])
-    recorded = make_table(record, rows, initial, previous, method_records())
+    rows, scenes = rows_from_folders(Path(out), record["engines"])
+    for scene, folder in record.get("datasets", {}).items():
+        if scene in scenes and (source := study_runs.prepared_source(Path(folder))) is not None:
+            scenes[scene]["source"] = source
+    recorded = make_table(record, rows, scenes, previous, method_records())
     write_table(table_path, recorded)
     return recorded
 

@@ -64,7 +64,7 @@ def _configure(threads: int) -> None:
     from nerfaug.device import configure_process
 
     if threads < 1:
-        raise ValueError(f"--threads {threads}: must be >= 1 (torch threads for training)")
+        raise ValueError(f"--threads {threads}: must be >= 1 (torch threads)")
     configure_process(threads=threads)
 
 

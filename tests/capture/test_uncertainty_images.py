@@ -71,3 +71,76 @@ def test_a_users_folder_is_refused(run, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"nerfaug: {mine}: not empty") and "\n" not in err
     assert sorted(p.name for p in mine.iterdir()) == ["notes.txt"]
+
+
+def fake_view(depth: float, fisher_high: float, seed: int = 0):
+    """A 4x4 view: the left half background (opacity 0, depth noise), the right half at `depth`."""
+    from nerfaug.capture.uncertainty_images import ViewMaps
+
+    rng = np.random.default_rng(seed)
+    opacity = np.zeros((4, 4), np.float32)
+    opacity[:, 2:] = 1.0
+    depths = np.where(opacity > 0, depth, rng.uniform(0, 100, (4, 4))).astype(np.float32)
+    fisher = np.full((4, 4), fisher_high * 1e-20, np.float32)
+    fisher[0, 0], fisher[1, 1] = fisher_high, fisher_high / 100
+    return ViewMaps(
+        pose=np.eye(4),
+        rgb=np.zeros((4, 4, 3), np.float32),
+        depth=depths,
+        opacity=opacity,
+        entropy=np.full((4, 4), depth / 10, np.float32),
+        fisher=fisher,
+        step=1,
+        azimuth=0.0,
+        elevation=30.0,
+    )
+
+
+def test_a_batch_shares_its_colour_scales_and_background_and_faint_fisher_are_left_out():
+    from nerfaug.capture.uncertainty_images import FISHER_DECADES, colour_scales
+
+    views = [fake_view(3.0, 10.0, 0), fake_view(5.0, 1000.0, 1)]
+    scales = colour_scales(views)
+    assert scales.depth == (3.0, 5.0)  # the background's noisy depths (up to 100) are not in the range
+    assert scales.entropy == pytest.approx(0.5)
+    assert scales.fisher == pytest.approx((1000.0 / 10**FISHER_DECADES, 1000.0))  # not down to 1e-17
+    own = colour_scales(views[:1])
+    assert own.depth == (3.0, 3.0) and own.fisher == pytest.approx((10.0 / 10**FISHER_DECADES, 10.0))
+
+
+def test_the_figures_draw_depth_only_where_rays_are_opaque_on_the_scales_given():
+    from nerfaug.capture.uncertainty_images import colour_scales, figure
+
+    views = [fake_view(3.0, 10.0, 0), fake_view(5.0, 1000.0, 1)]
+    shared = colour_scales(views)
+    limits = []
+    for view in views:
+        fig = figure(view, "v", shared)
+        depth, fisher = fig.axes[1].images[0], fig.axes[3].images[0]
+        assert (np.ma.getmaskarray(depth.get_array()) == (view.opacity < 0.5)).all()
+        limits.append((*depth.get_clim(), fisher.norm.vmin, fisher.norm.vmax, *fig.axes[2].images[0].get_clim()))
+    assert limits[0] == pytest.approx(limits[1]) == (3.0, 5.0, 0.1, 1000.0, 0.0, 0.5)  # a colour: one value
+    alone = figure(views[0], "v").axes[3].images[0].norm
+    assert (alone.vmin, alone.vmax) == pytest.approx((1e-3, 10.0))
+
+
+def test_the_command_shares_the_scale_unless_told_and_writes_the_opacity(run, tmp_path, capsys):
+    poses = poses_file(tmp_path / "poses.json", 3)
+    main(
+        ["uncertainty", str(run), "--poses", str(poses), "--out", str(tmp_path / "a"), "--width", "6"]
+        + ["--fisher-width", "3", "--device", "cpu", "--threads", "1"]
+    )
+    out, err = capsys.readouterr()
+    assert "the 3 figures share their colour scales" in out
+    assert "uncertainty images: 7/7" in err  # progress: the training diagonal, then 2 kinds per view
+    opacity = np.load(tmp_path / "a" / "look_0_opacity.npy")
+    assert opacity.shape == (6, 6) and ((opacity >= 0) & (opacity <= 1)).all()
+    main(
+        ["uncertainty", str(run), "--poses", str(poses), "--out", str(tmp_path / "b"), "--width", "6"]
+        + ["--no-fisher", "--no-shared-scale", "--device", "cpu"]
+    )
+    assert "share their colour scales" not in capsys.readouterr().out
+    with pytest.raises(SystemExit) as done:
+        main(["uncertainty", str(run), "--poses", str(poses), "--out", str(tmp_path / "c"), "--threads", "0"])
+    assert done.value.code == 2
+    assert capsys.readouterr().err.strip() == "nerfaug: --threads 0: must be >= 1"

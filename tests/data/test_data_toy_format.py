@@ -120,7 +120,7 @@ def test_a_session_grows_and_exports_a_dataset_in_a_registered_format(toy, tmp_p
     assert torch.equal(exported.images, grown.images) and exported.cameras.cy.tolist() == [7.0] * 6
     assert len(load_dataset(listing.parent, "test")) == 2  # the source's held-out split came along
     assert len(load_dataset(session.export(tmp_path / "ns", "nerfstudio").parent)) == 6
-    with pytest.raises(ValueError, match="export with format='nerfstudio' or 'toy'"):
+    with pytest.raises(ValueError, match="export with format='nerfstudio' or 'idr' or 'toy'"):
         session.export(tmp_path / "bl", "blender")
 
 

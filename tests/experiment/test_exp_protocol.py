@@ -7,7 +7,7 @@ import torch
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views
 from nerfaug.experiment.config import ExperimentConfig, preset
-from nerfaug.experiment.protocol import initial_view_indices
+from nerfaug.experiment.scene_views import initial_in_half, layout_halves
 from nerfaug.hemisphere import angles_from_pose, in_azimuth_window, sample_uniform_poses
 
 
@@ -20,12 +20,15 @@ def test_paper_field_learning_rate_for_chair_and_materials():
 
 def test_initial_views_of_a_user_dataset_lie_on_one_half():
     poses = sample_uniform_poses(300, torch.Generator().manual_seed(0))
-    pool = Views(Cameras.from_fov(poses, 0.69, 8, 8), torch.zeros(300, 8, 8, 3), [str(i) for i in range(300)])
-    chosen = initial_view_indices(pool, 6)
+    half = layout_halves(angles_from_pose(poses)[0], 1)[0]
+    chosen = initial_in_half(poses, 6, half, list(range(300)))
     assert len(set(chosen)) == 6
     azimuth, _, _ = angles_from_pose(poses[chosen])
-    assert in_azimuth_window(azimuth, math.pi / 2 - 0.3, math.pi + 0.6).all()
-    assert chosen == initial_view_indices(pool, 6)  # the same views for every trial
+    assert in_azimuth_window(azimuth, math.pi / 2, math.pi).all()
+    assert chosen == initial_in_half(poses, 6, half, list(range(300)))  # the same views for every trial
+    outside = [i for i in range(300) if not bool(half.contains(angles_from_pose(poses[i : i + 1])[0])[0])]
+    with pytest.raises(ValueError, match="only 2 views lie in the half"):
+        initial_in_half(poses, 6, half, chosen[:2] + outside)
 
 
 def test_presets_are_consistent():
@@ -127,3 +130,44 @@ def test_view_uncertainty_of_older_runs_reads_as_absent(tmp_path):
     assert read_view_uncertainty(tmp_path) is None
     with pytest.raises(ValueError, match="unknown view arrays"):
         write_view_uncertainty(tmp_path, {"depth": np.zeros((4, 4))})
+
+
+def test_a_sweeps_run_trains_and_selects_on_its_own_thread_count(tmp_path, monkeypatch):
+    """A sweep runs many trials at once, one per core: each run's torch must keep to
+    `threads_per_run` (1 by default) whatever the process had, through training and selection."""
+    from nerfaug.data import write_blender_split
+    from nerfaug.experiment import protocol
+    from nerfaug.experiment.store import RunKey
+    from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X
+
+    assert ExperimentConfig().threads_per_run == 1
+    generator = torch.Generator().manual_seed(0)
+    for split, n in (("train", 8), ("test", 2), ("initial", 3)):
+        cameras = Cameras.from_fov(sample_uniform_poses(n, generator), BLENDER_CAMERA_ANGLE_X, 8, 8)
+        images = torch.rand(n, 8, 8, 3, generator=generator)
+        write_blender_split(tmp_path / "data", split, Views(cameras, images, [f"./{split}/r_{i}" for i in range(n)]))
+    import nerfaug.selection
+
+    seen = []
+    train = protocol.train_with_progress
+    original_select = nerfaug.selection.select_views
+
+    def counting_train(*args, **kwargs):
+        seen.append(("train", torch.get_num_threads()))
+        return train(*args, **kwargs)
+
+    def counting_select(*args, **kwargs):
+        seen.append(("select", torch.get_num_threads()))
+        return original_select(*args, **kwargs)
+
+    monkeypatch.setattr(protocol, "train_with_progress", counting_train)
+    monkeypatch.setattr(nerfaug.selection, "select_views", counting_select)
+    config = preset("tiny").replace(steps=12, add_at_step=6, n_test=2, n_new=2, view_uncertainty=False)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        protocol.run_trial(RunKey("scene", "uniform", 0), tmp_path / "data", config, tmp_path / "runs")
+    finally:
+        torch.set_num_threads(before)
+    assert {kind for kind, _ in seen} == {"train", "select"}
+    assert all(threads == 1 for _, threads in seen), seen

@@ -13,7 +13,7 @@ from nerfaug.report.document import to_markdown
 from nerfaug.report.study import collect_study
 from nerfaug.report.study_hypotheses import h1, h2, h3
 from nerfaug.report.study_page import study_blocks
-from nerfaug.report.study_table import RunRow, make_table, read_table, rounded_poses, write_table
+from nerfaug.report.study_table import RunRow, make_table, read_table, rounded_poses, table_rows, write_table
 from nerfaug.statistics import seed_level_comparison
 
 ENGINE = "nerfacto-cpu-last-sample"
@@ -67,7 +67,7 @@ def synthetic_table(offsets: dict[str, float | dict[str, float]]) -> dict:
         "trials": 10,
         "engine_settings": {ENGINE: {"background_mode": "last_sample"}},
     }
-    return make_table(plan, rows, {scene: initial for scene in SCENES})
+    return make_table(plan, rows, {scene: {"initial_poses": initial} for scene in SCENES})
 
 
 def test_paired_tests_regimes_and_verdicts_on_a_constructed_study(tmp_path):
@@ -174,3 +174,64 @@ def test_the_regime_test_uses_complete_cells_only():
     regime = study.regimes[ENGINE]["ours"]
     assert (regime["n_cells"], regime["n_seeds"]) == (2, 10)
     assert not next(c for c in study.cells if c.scene == "chair").complete
+
+
+def test_runs_of_several_layouts_keep_each_layouts_initial_views_and_their_coverage(tmp_path):
+    from nerfaug.report.study import coverage_of
+    from nerfaug.report.study_table import initial_poses_by_layout
+
+    seen_west, seen_east = poses_at([170, 180, 190]), poses_at([350, 0, 10])
+    chosen = poses_at([0, 5, 10])  # east: the unseen side of layout 0, the seen side of layout 1
+    rows = [
+        RunRow(ENGINE, "mic", "uniform", k, k, 20.0, 0.8, 0.2, "ok", [0, 1, 2], chosen, "v", "f", k) for k in (0, 1)
+    ]
+    scenes = {"mic": {"initial_poses": seen_west, "layouts": {"1": seen_east}, "test_views": ["./test/r_0"]}}
+    table = make_table({"engines": [ENGINE], "scenes": ["mic"], "methods": ["uniform"], "trials": 2}, rows, scenes)
+    assert "layout" not in table["runs"][0] and table["runs"][1]["layout"] == 1  # layout 0 stays implicit
+    back = read_table(write_table(tmp_path / "t.json", table))
+    assert [r.layout for r in table_rows(back)] == [0, 1]
+    assert back["scenes"]["mic"]["test_views"] == ["./test/r_0"]
+    coverage = coverage_of(table_rows(back), initial_poses_by_layout(back["scenes"]["mic"]))
+    assert coverage[0]["unseen_share"] == 1.0 and coverage[1]["unseen_share"] == 0.0
+    back["runs"][1]["layout"] = 2
+    (tmp_path / "bad.json").write_text(json.dumps(back))
+    with pytest.raises(ReportError, match="runs\\[1\\].scene: 'mic' has no initial views of layout 2"):
+        read_table(tmp_path / "bad.json")
+
+
+def real_table(offsets: dict, engine: str = "nerfacto-cpu") -> dict:
+    """10 seeds x the four planned real scenes on one engine: every method uniform + its offset +
+    a small seed-dependent term of the offset's sign (offset 0: alternating signs)."""
+    from nerfaug.report.study_hypotheses import REAL_SCENES
+
+    rng, rows = np.random.default_rng(1), []
+    near = poses_at([10, 20, 30])
+    for scene in REAL_SCENES:
+        for seed in SEEDS:
+            base = 18.0 + rng.normal(0, 2)
+            for method, offset in {"uniform": 0.0, **offsets}.items():
+                sign = (-1) ** seed if offset == 0 else np.sign(offset)
+                psnr = base + offset + (0.0 if method == "uniform" else 0.01 * (seed + 1) * sign)
+                rows.append(RunRow(engine, scene, method, seed, seed, psnr, 0.8, 0.2, "ok", [0, 1, 2], near, "v", "f"))
+    plan = {"engines": [engine], "scenes": list(REAL_SCENES), "methods": ["uniform", *offsets], "trials": 10}
+    initial = rounded_poses(half_hemisphere_poses(6).numpy())
+    return make_table(plan, rows, {scene: {"initial_poses": initial} for scene in REAL_SCENES})
+
+
+def test_the_real_scene_hypotheses_are_judged_from_the_table_as_planned():
+    from nerfaug.report.study_hypotheses import REAL_HYPOTHESES, hypotheses_of, r1, r2, r3, r4
+
+    offsets = {"ours-batch-sharp": 1.0, "ours": 0.5, "entropy-sampling": 0.0, "fisherrf-sampling": -1.0}
+    study = collect_study(real_table(offsets))
+    assert hypotheses_of(study) is REAL_HYPOTHESES
+    assert r1(study)[0] == "supported" and r3(study)[0] == "supported"
+    # ours > entropy-sampling holds by +0.5 on every seed, but entropy-sampling - fisherrf-sampling
+    # is +1 on every seed too: the ranking holds on nerfacto-cpu (the other engine is not run).
+    assert r2(study)[0] == "holds" and "nerfacto-cpu: holds" in r2(study)[1]
+    assert r4(study)[0] == "open" and "not run yet" in r4(study)[1]  # the held-back scene
+    reversed_ranking = collect_study(real_table({"ours": -1.0, "entropy-sampling": 0.0, "fisherrf-sampling": 1.0}))
+    assert r2(reversed_ranking)[0] == "contradicted"
+    flat = collect_study(real_table({"ours-batch-sharp": 0.0, "ours": 0.0}))
+    assert r1(flat)[0] == "open"  # one engine of two complete: not yet decided
+    assert r3(flat)[0] == "not supported"  # nerfacto-cpu complete, no gain
+    assert hypotheses_of(collect_study(synthetic_table({"ours": 1.0}))) is not REAL_HYPOTHESES

@@ -152,11 +152,15 @@ def test_the_whole_capture_loop(server, root):
     assert state["step"] == 10 and state["job"]["state"] == "done" and state["last_losses"]
 
     constraints = {"elevation": [20, 70], "azimuth": [0, 180], "keep_out": [[0, 1, 0.3, 20]]}
-    body = {"n": 2, "n_candidates": 60, "selection": FAST, "constraints": constraints}
+    body = {"n": 2, "n_candidates": 60, "selection": FAST, "constraints": constraints, "min_separation": 25}
     proposal = server.client.post("/sessions/loop/proposals", json=body)
     assert proposal.status_code == 200, proposal.text
     frames = proposal.json()["frames"]
-    assert len(frames) == 2
+    assert len(frames) == 2 and proposal.json()["nerfaug"]["min_separation"] == 25
+    first, second = (np.asarray(frame["transform_matrix"])[:3, 3] for frame in frames)
+    centre = np.asarray(CaptureSession.open(root / "loop", load_model=False).hemisphere.centre)
+    a, b = first - centre, second - centre
+    assert np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))) >= 25 - 1e-3
     for frame in frames:
         assert 20 - 1e-3 <= np.degrees(frame["elevation"]) <= 70 + 1e-3
         assert -1e-3 <= np.degrees(frame["azimuth"]) <= 180 + 1e-3
@@ -336,6 +340,11 @@ BAD_REQUESTS = {
     "steps not a number": (_json("POST", "/sessions/bad/train", {"steps": "many"}), 422, "steps:"),
     "zero views": (_json("POST", "/sessions/bad/proposals", {"n": 0}), 422, "n:"),
     "unknown method": (_json("POST", "/sessions/bad/proposals", {"method": "best"}), 422, "unknown selection method"),
+    "separation of 180 degrees": (
+        _json("POST", "/sessions/bad/proposals", {"min_separation": 180}),
+        422,
+        "min_separation: Input should be less than 180",
+    ),
     "reversed elevation": (
         _json("POST", "/sessions/bad/proposals", {"constraints": {"elevation": [60, 10]}}),
         422,

@@ -1,7 +1,7 @@
 """Active capture: a NeRF trained on the views you have proposes where to capture next, and grows
 its dataset with what you captured there.
 
-Rooms: `frame` (the hemisphere and the engine frame), `proposal` (proposed views, their JSON),
+Rooms (the hemisphere and the engine frame are `nerfaug.data.frame`'s): `proposal` (proposed views, their JSON),
 `images` (captured images from any source, checked), `dataset` (what a session reads of its
 dataset: the default split, frames as the trainer sees them, repeated poses; every read and write
 on disk goes through the dataset's format, `nerfaug.data.formats`), `state` (session.json, typed,
@@ -12,13 +12,6 @@ captured views), `export` (writing the dataset in any format), and, through `mod
 (`SessionModel`: the NeRF seen from the world frame), `evaluate` and `uncertainty_images`.
 """
 
-from nerfaug.capture.frame import (
-    ENGINE_RADIUS,
-    Hemisphere,
-    estimate_centre,
-    estimate_hemisphere,
-    estimate_up,
-)
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import (
@@ -29,6 +22,13 @@ from nerfaug.capture.state import (
     SESSION_FORMAT,
     SessionError,
     SessionState,
+)
+from nerfaug.data.frame import (
+    ENGINE_RADIUS,
+    Hemisphere,
+    estimate_centre,
+    estimate_hemisphere,
+    estimate_up,
 )
 
 __all__ = [

@@ -4,6 +4,7 @@ session's NeRF (`SessionModel`), and the proposal's record."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,13 +14,14 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.capture.constraints import ViewConstraints, constrained_indices
-from nerfaug.capture.frame import ENGINE_RADIUS
 from nerfaug.capture.images import as_array
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.requests import RequestError
 from nerfaug.capture.state import ProposalRecord, now
+from nerfaug.data.frame import ENGINE_RADIUS
 from nerfaug.data.frames import check_pose
+from nerfaug.progress import progress_bar
 from nerfaug.selection.candidates import with_poses
 
 if TYPE_CHECKING:
@@ -56,6 +58,7 @@ class ProposalRequest:
     config: SelectionConfig | dict | None = None
     map: bool = True
     constraints: ViewConstraints | dict | None = None
+    min_separation: float = 0.0
 
     def checked(self) -> ProposalRequest:
         """This request with `config` a `SelectionConfig` (or None) and `constraints` a checked
@@ -74,13 +77,17 @@ class ProposalRequest:
             raise RequestError("n_candidates", self.n_candidates, "must be >= 1")
         if self.seed is not None and int(self.seed) < 0:
             raise RequestError("seed", self.seed, "must be >= 0")
+        if not 0 <= float(self.min_separation) < 180:
+            raise RequestError("min_separation", self.min_separation, "must be in [0, 180) degrees")
         config = SelectionConfig.from_dict(self.config) if isinstance(self.config, dict) else self.config
         constraints = self.constraints
         if isinstance(constraints, dict):
             constraints = ViewConstraints.from_dict(constraints)
         elif constraints is not None:
             constraints = constraints.check()
-        return replace(self, n=int(self.n), config=config, constraints=constraints)
+        return replace(
+            self, n=int(self.n), config=config, constraints=constraints, min_separation=float(self.min_separation)
+        )
 
 
 def describe_candidates(candidates) -> str:
@@ -131,6 +138,7 @@ def propose(
     number: int,
     folder: Path,
     generator: torch.Generator | None = None,
+    progress: bool = False,
 ) -> tuple[Proposal, ProposalRecord]:
     """Choose `request.n` views to capture next, and write them (with every candidate's score)
     to `folder/proposal_NNN.json` (and the map beside it).
@@ -141,6 +149,7 @@ def propose(
         folder: where the proposal's files go (`run/proposals`).
         generator: random source for the candidates and the selector; None seeds one from the
             request's seed, else from the session seed and the proposal number (`proposal_seed`).
+        progress: show how many candidates are scored (a live bar, or lines in a pipe).
 
     Returns:
         The proposal, and its record for the session's history.
@@ -166,7 +175,20 @@ def propose(
     engine = hemisphere.cameras_to_engine(world)
     if (engine.width, engine.height) != (engine_train.width, engine_train.height):
         engine = engine.resized(engine_train.width, engine_train.height)
-    selection = select_views(method, model.model, engine_train, engine.to(model.device), n, generator, request.config)
+    with progress_bar(enabled=progress, transient=True) as bar:
+        task = bar.add_task(f"scoring candidates ({method})", total=len(engine))
+        selection = select_views(
+            method,
+            model.model,
+            engine_train,
+            engine.to(model.device),
+            n,
+            generator,
+            request.config,
+            min_separation=math.radians(request.min_separation),
+            progress=lambda done: bar.update(task, completed=done),
+        )
+        bar.update(task, completed=len(engine))
     chosen = selection.indices.long()
     poses = world.camera_to_world[chosen]
     azimuth, polar, _ = hemisphere.angles(poses)
@@ -199,6 +221,7 @@ def propose(
         seed=used_seed,
         camera_angle_x=float(world.camera_angle_x[0]),
         hemisphere=hemisphere,
+        min_separation=request.min_separation,
     )
     record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
     record = ProposalRecord(
@@ -215,9 +238,16 @@ def propose(
         polar=polar.tolist(),
         file=f"{folder.name}/{record_path.name}",
         created=now(),
-        extra={"selection": used_config.to_dict()} | constraints_record(request.constraints),
+        extra={"selection": used_config.to_dict()}
+        | constraints_record(request.constraints)
+        | separation_record(request.min_separation),
     )
     return proposal, record
+
+
+def separation_record(min_separation: float) -> dict:
+    """What a proposal's record keeps of its minimum separation (degrees): nothing when off."""
+    return {"min_separation": float(min_separation)} if min_separation > 0 else {}
 
 
 def constraints_record(constraints: ViewConstraints | None) -> dict:

@@ -21,8 +21,8 @@ from typing import Annotated
 import torch
 from torch import Tensor
 
-from nerfaug.capture.frame import Hemisphere
 from nerfaug.cli_hints import empty_means, none_means
+from nerfaug.data.frame import Hemisphere
 
 
 def angle_range_mask(values: Tensor, low: float, high: float) -> Tensor:

@@ -11,10 +11,10 @@ from pathlib import Path
 import torch
 
 from nerfaug.cameras import Cameras
-from nerfaug.capture.frame import Hemisphere
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import has_split
+from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import read_image
 from nerfaug.data.views import Views
 

@@ -12,7 +12,7 @@ import torch
 from torch import Tensor
 
 from nerfaug.cameras import Cameras
-from nerfaug.capture.frame import Hemisphere
+from nerfaug.data.frame import Hemisphere
 from nerfaug.selection.candidates import with_poses
 
 if TYPE_CHECKING:

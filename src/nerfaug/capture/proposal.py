@@ -13,8 +13,8 @@ from torch import Tensor
 
 import nerfaug
 from nerfaug.cameras import Cameras
-from nerfaug.capture.frame import Hemisphere
 from nerfaug.data import DatasetError
+from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import check_pose
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
 
@@ -46,6 +46,8 @@ class Proposal:
         seed: the seed of the generator used (None when the caller passed a generator).
         camera_angle_x: horizontal field of view of the cameras, radians.
         hemisphere: the session's hemisphere.
+        min_separation: the least angle, degrees about the hemisphere's centre, between two of
+            its views; 0 when not asked for.
     """
 
     number: int
@@ -63,6 +65,7 @@ class Proposal:
     seed: int | None
     camera_angle_x: float
     hemisphere: Hemisphere
+    min_separation: float = 0.0
 
     def __len__(self) -> int:
         return self.poses.shape[0]
@@ -98,6 +101,8 @@ class Proposal:
             "nerfaug": nerfaug.__version__,
             "map": None if self.map_path is None else str(self.map_path),
         }
+        if self.min_separation > 0:
+            info["min_separation"] = self.min_separation
         if include_candidates:
             info["candidates"] = {
                 "transform_matrix": c.camera_to_world.tolist(),

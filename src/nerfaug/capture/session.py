@@ -14,13 +14,13 @@ A session lives in a run folder:
       proposals/            proposal_000.json (poses + every candidate's score), proposal_000.png (map)
 
 Poses given to and returned by a session are in the dataset's world frame; the NeRF is trained in
-the engine frame of the session's hemisphere (`nerfaug.capture.frame`).
+the engine frame of the session's hemisphere (`nerfaug.data.frame`).
 """
 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import torch
@@ -31,7 +31,6 @@ from nerfaug.cameras import Cameras
 from nerfaug.capture import add, choose, export, integrity
 from nerfaug.capture.dataset import duplicate_frames, engine_views
 from nerfaug.capture.evaluate import evaluate_model, load_held_out
-from nerfaug.capture.frame import Hemisphere, estimate_hemisphere
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
 from nerfaug.capture.requests import check_steps
@@ -57,6 +56,7 @@ from nerfaug.capture.state import (
 from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
 from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format, plainest_format
+from nerfaug.data.frame import Hemisphere, estimate_hemisphere
 from nerfaug.data.views import Views
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
@@ -337,10 +337,15 @@ class CaptureSession:
 
     # -- the loop --
 
-    def train(self, steps: int) -> dict:
-        """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"})."""
+    def train(self, steps: int, callback: Callable[[dict], None] | None = None) -> dict:
+        """Train `steps` more steps. Returns the last history entry ({"step", "loss", "psnr"}).
+
+        A session made or opened with `progress=True` shows a progress bar (lines where stderr is
+        not a terminal); `callback`, when given, is called every 10 steps and at the last with
+        that step's history entry, e.g. `session.train(500, callback=print)`.
+        """
         self.require_model()
-        self.trainer.train(self.trainer.step + check_steps(steps))
+        self.trainer.train(self.trainer.step + check_steps(steps), callback=callback)
         return self.trainer.history[-1] if self.trainer.history else {"step": self.trainer.step}
 
     def candidate_cameras(
@@ -361,6 +366,7 @@ class CaptureSession:
         config=None,
         map: bool = True,
         constraints=None,
+        min_separation: float = 0.0,
     ) -> Proposal:
         """Choose `n` views to capture next.
 
@@ -382,6 +388,9 @@ class CaptureSession:
             map: draw the hemisphere map to `run/proposals/proposal_NNN.png`.
             constraints: a `ViewConstraints` (or its `to_dict()`): elevation, azimuth and radius
                 ranges and keep-out cones the candidates must satisfy (recorded with the proposal).
+            min_separation: degrees; > 0 keeps every two proposed views at least this far apart
+                about the hemisphere's centre (recorded with the proposal). 0, the default,
+                proposes exactly what the method chooses.
 
         Returns:
             Proposal (world-frame poses, names, angles, every candidate's score, map path). The
@@ -391,9 +400,13 @@ class CaptureSession:
         Raises:
             TooFewCandidates (a ValueError): the constraints leave fewer candidates than `n`.
         """
-        request = choose.ProposalRequest(n, method, candidates, n_candidates, seed, config, map, constraints)
+        request = choose.ProposalRequest(
+            n, method, candidates, n_candidates, seed, config, map, constraints, min_separation
+        )
         folder = self.run_dir / PROPOSALS_DIR
-        proposal, record = choose.propose(request, self.session_model(), len(self.state.proposals), folder, generator)
+        number = len(self.state.proposals)
+        shown = bool(self.trainer is not None and self.trainer.progress)  # as the session was opened
+        proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown)
         self.state.proposals.append(record)
         return proposal
 
@@ -456,11 +469,18 @@ class CaptureSession:
         return self.session_model().render(poses, width)
 
     def uncertainty_maps(
-        self, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16
+        self,
+        poses,
+        width: int | None = None,
+        fisher: bool = True,
+        fisher_width: int = 16,
+        progress: bool = False,
+        names: Sequence[str] | None = None,
     ) -> list[ViewMaps]:
         """The render, depth, ray entropy and FisherRF images of world-frame `poses` (n, 4, 4);
-        see `nerfaug.capture.uncertainty_images.view_maps`."""
-        return view_maps(self.session_model(), poses, width, fisher, fisher_width)
+        see `nerfaug.capture.uncertainty_images.view_maps` (`progress` shows each view's images
+        as they are done, named by `names`)."""
+        return view_maps(self.session_model(), poses, width, fisher, fisher_width, progress, names)
 
     def held_out(self, data: str | Path, split: str = "test", max_views: int | None = None) -> Views:
         """`split` of the dataset folder `data` (same scene and world frame) at the training

@@ -16,9 +16,9 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path, PurePosixPath
 
 import nerfaug
-from nerfaug.capture.frame import Hemisphere
 from nerfaug.data.format import Format
 from nerfaug.data.formats import FORMATS
+from nerfaug.data.frame import Hemisphere
 from nerfaug.errors import NerfaugError
 
 SESSION_FORMAT = 1

@@ -1,11 +1,16 @@
 """Uncertainty images of any view of a session: for world-frame poses, what the NeRF renders, its
 depth, the per-ray entropy and FisherRF's per-pixel score (`nerfaug.uncertainty.images`), as one
-PNG figure with colour bars and as arrays (.npy files, or one .npz)."""
+PNG figure with colour bars and as arrays (.npy files, or one .npz).
+
+Figures of several views compare by eye when they share their colour scales (`colour_scales` of
+the batch); the arrays are never rescaled or masked.
+"""
 
 from __future__ import annotations
 
 import io
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,9 +19,20 @@ import torch
 from torch import Tensor
 
 from nerfaug.capture.model import SessionModel
+from nerfaug.progress import progress_bar
 from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
 
-ARRAYS = ("rgb", "depth", "entropy", "fisher")
+ARRAYS = ("rgb", "depth", "opacity", "entropy", "fisher")
+# A ray less opaque than this shows mostly the background: its expected depth is an average over a
+# few faint samples anywhere along the ray (noise), so the depth panel draws it as background.
+BACKGROUND_OPACITY = 0.5
+# The FisherRF panel spans this many decades below the largest score. A score is a sum of squared
+# gradients: pixels whose rays cross empty space score 10^-15 or less of the brightest pixel, and
+# a log scale down to them (15-24 decades measured) leaves every pixel that matters in the top
+# fifth of the colour map. Four decades keep every pixel above 1/10^4 of the brightest distinct,
+# and draw the rest in the lowest colour, where they are worth nothing.
+FISHER_DECADES = 4
+BACKGROUND_GREY = (0.82, 0.82, 0.82, 1.0)
 
 
 @dataclass
@@ -27,6 +43,7 @@ class ViewMaps:
         pose: (4, 4) world-frame camera-to-world.
         rgb: (H, W, 3) float32 in [0, 1], the NeRF's render.
         depth: (H, W) float32, expected termination distance in world units.
+        opacity: (H, W) float32 in [0, 1], each ray's accumulated opacity (0: only background).
         entropy: (H, W) float32, ray entropy in bits.
         fisher: (h, w) float32, FisherRF's per-pixel score (rendered `fisher_width` across), or None.
         step: the training step of the model.
@@ -36,6 +53,7 @@ class ViewMaps:
     pose: np.ndarray
     rgb: np.ndarray
     depth: np.ndarray
+    opacity: np.ndarray
     entropy: np.ndarray
     fisher: np.ndarray | None
     step: int
@@ -59,7 +77,13 @@ def training_fisher(model: SessionModel, generator: torch.Generator | None = Non
 
 
 def view_maps(
-    model: SessionModel, poses, width: int | None = None, fisher: bool = True, fisher_width: int = 16
+    model: SessionModel,
+    poses,
+    width: int | None = None,
+    fisher: bool = True,
+    fisher_width: int = 16,
+    progress: bool = False,
+    names: Sequence[str] | None = None,
 ) -> list[ViewMaps]:
     """The images of world-frame `poses` seen by the session's NeRF.
 
@@ -69,6 +93,8 @@ def view_maps(
         width: pixels across of the render, depth and entropy; None: the training resolution.
         fisher: also compute FisherRF's per-pixel score (3 backward passes per pixel).
         fisher_width: pixels across of the FisherRF image.
+        progress: show a line (or a live bar) per view and kind of image.
+        names: the views' names, for the progress display.
 
     Returns:
         One `ViewMaps` per pose.
@@ -78,61 +104,117 @@ def view_maps(
     if int(fisher_width) < 1:
         raise ValueError(f"fisher_width {fisher_width}: must be >= 1 pixel")
     world = torch.as_tensor(poses, dtype=torch.float32).reshape(-1, 4, 4)
+    names = list(names) if names is not None else [f"view {i}" for i in range(len(world))]
     cameras = model.engine_cameras(world, width)
     background = model.background_tensor()
-    h_train = training_fisher(model) if fisher else None
     fisher_cameras = model.engine_cameras(world, fisher_width) if fisher else None
     azimuth, polar, _ = model.hemisphere.angles(world)
     maps = []
-    for i in range(len(world)):
-        images = view_images(model.model, cameras, i, background)
-        scores = None
+    # Units of work: FisherRF's training diagonal, then per view its render and its FisherRF image.
+    kinds = 2 if fisher else 1
+    with progress_bar(enabled=progress, fields="{kind}") as bar:
+        task = bar.add_task("uncertainty images", total=kinds * len(world) + int(fisher), every=1, kind="")
+        h_train = None
         if fisher:
-            scores = fisher_pixel_scores(model.model, fisher_cameras, h_train, i, background=background).numpy()
-        maps.append(
-            ViewMaps(
-                pose=world[i].double().numpy(),
-                rgb=images["rgb"].clamp(0, 1).numpy().astype(np.float32),
-                depth=(images["depth"] * model.hemisphere.scale).numpy().astype(np.float32),
-                entropy=images["entropy"].numpy().astype(np.float32),
-                fisher=None if scores is None else scores.astype(np.float32),
-                step=model.step,
-                azimuth=math.degrees(float(azimuth[i])),
-                elevation=90.0 - math.degrees(float(polar[i])),
+            bar.update(task, kind="FisherRF of the training views")
+            h_train = training_fisher(model)
+            bar.advance(task)
+        for i in range(len(world)):
+            bar.update(task, kind=f"{names[i]}: render, depth, entropy")
+            images = view_images(model.model, cameras, i, background)
+            bar.advance(task)
+            scores = None
+            if fisher:
+                bar.update(task, kind=f"{names[i]}: FisherRF")
+                scores = fisher_pixel_scores(model.model, fisher_cameras, h_train, i, background=background).numpy()
+                bar.advance(task)
+            maps.append(
+                ViewMaps(
+                    pose=world[i].double().numpy(),
+                    rgb=images["rgb"].clamp(0, 1).numpy().astype(np.float32),
+                    depth=(images["depth"] * model.hemisphere.scale).numpy().astype(np.float32),
+                    opacity=images["accumulation"].clamp(0, 1).numpy().astype(np.float32),
+                    entropy=images["entropy"].numpy().astype(np.float32),
+                    fisher=None if scores is None else scores.astype(np.float32),
+                    step=model.step,
+                    azimuth=math.degrees(float(azimuth[i])),
+                    elevation=90.0 - math.degrees(float(polar[i])),
+                )
             )
-        )
     return maps
 
 
-def figure(maps: ViewMaps, title: str = ""):
+@dataclass(frozen=True)
+class ColourScales:
+    """The values the colours of the depth, entropy and FisherRF panels span.
+
+    Attributes:
+        depth: (near, far) in world units over the foreground pixels; None when there are none.
+        entropy: the entropy at the top of its scale, bits (the bottom is 0).
+        fisher: (low, high) of FisherRF's log scale, at most `FISHER_DECADES` decades; None when
+            no pixel scores above 0.
+    """
+
+    depth: tuple[float, float] | None
+    entropy: float
+    fisher: tuple[float, float] | None
+
+
+def colour_scales(views: Sequence[ViewMaps]) -> ColourScales:
+    """One set of colour scales spanning every view in `views`: figures drawn with it compare by
+    eye (the same colour is the same value in each)."""
+    foreground = [v.depth[v.opacity >= BACKGROUND_OPACITY] for v in views]
+    foreground = np.concatenate([d[np.isfinite(d)] for d in foreground]) if views else np.zeros(0)
+    depth = (float(foreground.min()), float(foreground.max())) if foreground.size else None
+    entropy = max([float(np.nanmax(v.entropy)) for v in views if v.entropy.size] + [0.0])
+    positive = [v.fisher[v.fisher > 0] for v in views if v.fisher is not None]
+    positive = np.concatenate(positive) if positive else np.zeros(0)
+    fisher = None
+    if positive.size:
+        high = float(positive.max())
+        fisher = (max(float(positive.min()), high / 10.0**FISHER_DECADES), high)
+    return ColourScales(depth, entropy if entropy > 0 else 1.0, fisher)
+
+
+def figure(maps: ViewMaps, title: str = "", scales: ColourScales | None = None):
     """The render, depth, entropy and (when computed) FisherRF panels of one view, side by side,
-    each measured panel with its colour bar."""
+    each measured panel with its colour bar.
+
+    Args:
+        maps: the view's images.
+        title: shown before the view's step and angles.
+        scales: the panels' colour scales (`colour_scales` of a batch, to compare its figures);
+            None: this view's own.
+    """
     from matplotlib import colormaps
     from matplotlib.colors import LogNorm
 
     from nerfaug.plotting import new_figure
 
+    scales = scales if scales is not None else colour_scales([maps])
     panels = 4 if maps.fisher is not None else 3
     fig = new_figure(3.3 * panels, 3.2)
     axes = fig.subplots(1, panels)
     axes[0].imshow(maps.rgb, interpolation="nearest")
     axes[0].set_title("render")
-    image = axes[1].imshow(maps.depth, cmap="viridis_r", interpolation="nearest")
-    axes[1].set_title("depth (world units)")
+    # Background pixels (mostly transparent rays) are left out of the depth's colours, in grey.
+    depth = np.ma.masked_where(maps.opacity < BACKGROUND_OPACITY, maps.depth)
+    near, far = scales.depth if scales.depth is not None else (None, None)
+    colours = colormaps["viridis_r"].with_extremes(bad=BACKGROUND_GREY)
+    image = axes[1].imshow(depth, cmap=colours, interpolation="nearest", vmin=near, vmax=far)
+    axes[1].set_title("depth (world units; grey: background)", fontsize=9)
     fig.colorbar(image, ax=axes[1], fraction=0.046, pad=0.04)
-    image = axes[2].imshow(maps.entropy, cmap="magma", interpolation="nearest", vmin=0)
+    image = axes[2].imshow(maps.entropy, cmap="magma", interpolation="nearest", vmin=0, vmax=scales.entropy)
     axes[2].set_title("ray entropy (bits)")
     fig.colorbar(image, ax=axes[2], fraction=0.046, pad=0.04)
     if maps.fisher is not None:
-        positive = maps.fisher[maps.fisher > 0]
-        norm = None
-        if positive.size and positive.max() > positive.min():
-            norm = LogNorm(vmin=float(positive.min()), vmax=float(positive.max()))
-        shown = np.where(maps.fisher > 0, maps.fisher, np.nan) if norm is not None else maps.fisher
+        norm = None if scales.fisher is None else LogNorm(*scales.fisher, clip=True)
+        shown = maps.fisher if norm is None else np.where(maps.fisher > 0, maps.fisher, np.nan)
         # Pixels with no gain (rays that touch no parameter) are drawn in the scale's lowest colour.
         colours = colormaps["inferno"].with_extremes(bad=colormaps["inferno"](0.0))
         image = axes[3].imshow(shown, cmap=colours, norm=norm, interpolation="nearest")
-        axes[3].set_title("FisherRF score per pixel" + (" (log)" if norm is not None else ""))
+        decades = "" if norm is None else f" (log, {math.log10(scales.fisher[1] / scales.fisher[0]):.3g} decades)"
+        axes[3].set_title("FisherRF score per pixel" + decades, fontsize=9)
         fig.colorbar(image, ax=axes[3], fraction=0.046, pad=0.04)
     for ax in axes:
         ax.set_xticks([])
@@ -142,11 +224,11 @@ def figure(maps: ViewMaps, title: str = ""):
     return fig
 
 
-def figure_bytes(maps: ViewMaps, title: str = "") -> bytes:
+def figure_bytes(maps: ViewMaps, title: str = "", scales: ColourScales | None = None) -> bytes:
     """`figure` as PNG bytes."""
     from nerfaug.plotting import figure_png
 
-    return figure_png(figure(maps, title))
+    return figure_png(figure(maps, title, scales))
 
 
 def arrays(maps: ViewMaps) -> dict[str, np.ndarray]:
@@ -162,12 +244,13 @@ def npz_bytes(maps: ViewMaps) -> bytes:
     return buffer.getvalue()
 
 
-def write_maps(maps: ViewMaps, folder: Path, name: str) -> list[Path]:
-    """Write `name.png` (the figure) and `name_<array>.npy` into `folder`; returns the files."""
+def write_maps(maps: ViewMaps, folder: Path, name: str, scales: ColourScales | None = None) -> list[Path]:
+    """Write `name.png` (the figure, with `scales` or its own) and `name_<array>.npy` into
+    `folder`; returns the files."""
     from nerfaug.jsonio import atomic_write_bytes
     from nerfaug.plotting import save_figure
 
-    written = [save_figure(figure(maps, name), Path(folder) / f"{name}.png")]
+    written = [save_figure(figure(maps, name, scales), Path(folder) / f"{name}.png")]
     for key, value in arrays(maps).items():
         buffer = io.BytesIO()
         np.save(buffer, value)

@@ -3,8 +3,8 @@
 
 A format is one `Format` object with every operation on a folder in it (`nerfaug.data.format`).
 Adding a format is one module defining it plus one entry in `FORMATS` (or, for a format defined
-outside the package, `with register_format(MyFormat()):`). Nothing inside `nerfaug.data` imports
-this module, so the formats never import back the code that picks them.
+outside the package, `with register_format(MyFormat()):`). No format's module imports this one,
+so the formats never import back the code that picks them.
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ from pathlib import Path
 from nerfaug.data.blender import BlenderFormat
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import DatasetSplit, Format
+from nerfaug.data.idr import IdrFormat
+from nerfaug.data.llff import LlffFormat
 from nerfaug.data.nerfstudio import NerfstudioFormat
 from nerfaug.data.views import Views
 
@@ -24,6 +26,10 @@ FORMATS: dict[str, Format] = {
     # the plainest: a session keeps a dataset in it whenever it describes the cameras exactly.
     "blender": BlenderFormat(),
     "nerfstudio": NerfstudioFormat(),
+    # Captured sets: IDR before LLFF, since DTU copies often carry a poses_bounds.npy beside
+    # cameras_sphere.npz, whose cameras are the calibrated ones.
+    "idr": IdrFormat(),
+    "llff": LlffFormat(),
 }
 """Dataset formats by name, in the order they are detected."""
 

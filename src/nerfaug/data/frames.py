@@ -136,19 +136,50 @@ def _first_line(error: BaseException) -> str:
     return (text[0] if text else type(error).__name__)[:300]
 
 
+def read_mask(path: Path, json_path: Path, field: str) -> np.ndarray:
+    """A mask image (grey, RGB or RGBA; 8 or 16 bit) as a binary float32 (h, w) array: 1 where
+    its first channel is above half. Thresholded at full resolution so that JPEG noise around 0
+    and 255 does not become a faint haze; downscaling then averages the edges into a soft alpha."""
+    try:
+        array = np.asarray(iio.imread(path))
+    except Exception as error:  # noqa: BLE001 -- imageio's plugins raise many types; all mean "cannot read"
+        raise DatasetError(json_path, f"cannot read mask {path}: {_first_line(error)}", field=field) from None
+    if array.ndim == 3:
+        array = array[..., 0]
+    if array.ndim != 2 or array.dtype.kind not in "uifb":
+        raise DatasetError(
+            json_path, f"mask {path} must be a grey or RGB image", field=field, value=f"shape {array.shape}"
+        )
+    high = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(array.dtype, 1.0)
+    return (array.astype(np.float32) > 0.5 * high).astype(np.float32)
+
+
 def read_image(
-    path: Path, background: Tensor, downscale: int, json_path: Path, field: str
+    path: Path, background: Tensor, downscale: int, json_path: Path, field: str, mask: Path | None = None
 ) -> tuple[Tensor, Tensor | None]:
     """An image composited over `background`, as float32 (h, w, 3) in [0, 1], and its alpha (h, w).
 
     Args:
         background: Tensor with shape (3,), the colour behind transparent pixels.
         downscale: integer factor; the image is area-averaged (premultiplied) by it.
+        mask: a mask image of the same size (`read_mask`) that becomes the alpha, over any
+            alpha channel the image has (captured datasets keep masks beside the photos).
     """
     try:
         array = np.asarray(iio.imread(path))
     except Exception as error:  # noqa: BLE001 -- imageio's plugins raise many types; all mean "cannot read"
         raise DatasetError(json_path, f"cannot read image {path}: {_first_line(error)}", field=field) from None
+    if mask is not None and array.ndim == 3:
+        matte = read_mask(mask, json_path, field)
+        if matte.shape != array.shape[:2]:
+            raise DatasetError(
+                json_path,
+                f"mask {mask} differs in size from its image {path}",
+                field=field,
+                value=f"{matte.shape[1]}x{matte.shape[0]} against {array.shape[1]}x{array.shape[0]}",
+            )
+        high = {np.dtype(np.uint8): 255, np.dtype(np.uint16): 65535}.get(array.dtype, 1.0)
+        array = np.concatenate([array[..., :3], (matte * high).astype(array.dtype)[..., None]], axis=-1)
     if array.ndim != 3 or array.shape[-1] not in (3, 4):
         raise DatasetError(
             json_path,
@@ -210,6 +241,19 @@ def write_image(path: Path, image: Tensor, alpha: Tensor | None = None, backgrou
     atomic_write_bytes(path, iio.imwrite("<bytes>", data, extension=".png"))
 
 
+def write_image_and_mask(
+    image_path: Path, mask_path: Path, image: Tensor, alpha: Tensor | None, background: Tensor
+) -> None:
+    """Write an (h, w, 3) image composited over `background` as a straight RGB PNG at
+    `image_path`, and its (h, w) alpha, when known, as a grey mask PNG at `mask_path`: the layout
+    of captured datasets, whose readers composite the photo with its mask again."""
+    if alpha is not None:
+        a = alpha[..., None]
+        image = ((image - (1 - a) * background) / a.clamp_min(1e-6)).where(a > 0, 0).clamp(0, 1)
+        write_image(mask_path, alpha[..., None].expand(-1, -1, 3))
+    write_image(image_path, image)
+
+
 def encode_png(array: np.ndarray) -> bytes:
     """A lossless PNG of an (H, W, 3 | 4) image: uint8 and uint16 as they are, floats in [0, 1] as 8 bits."""
     if array.dtype not in (np.uint8, np.uint16):
@@ -250,8 +294,9 @@ def load_frames(
     downscale: int,
     lazy: bool,
     intrinsics_of: IntrinsicsOf,
+    masks: Sequence[Path] | None = None,
 ) -> Views:
-    """The views a transforms file's `frames` list describes, for either format.
+    """The views a listing's `frames` list describes, for any format.
 
     Args:
         root: the dataset folder; every `file_path` must resolve inside it.
@@ -262,6 +307,7 @@ def load_frames(
         lazy: read only the first image now (for its size) and the rest on access.
         intrinsics_of: `intrinsics_of(w, h, i)` gives (camera_angle_x, None) or
             (None, (fx, fy, cx, cy)) for frame i at the file's full resolution.
+        masks: one mask file per frame (`read_image`), or None to take alpha from the images.
     """
     background = torch.as_tensor(background, dtype=torch.float32)
     poses, paths, names = [], [], []
@@ -276,7 +322,8 @@ def load_frames(
         names.append(file_path)
 
     def load(i: int):
-        return read_image(paths[i], background, downscale, json_path, f"frames[{i}].file_path")
+        mask = None if masks is None else masks[i]
+        return read_image(paths[i], background, downscale, json_path, f"frames[{i}].file_path", mask)
 
     first, first_alpha = load(0)
     height, width = first.shape[:2]

@@ -56,7 +56,13 @@ class ExperimentConfig:
     pool: int = 300
     """Candidate pool size of built-in scenes (uniform on the hemisphere)."""
     n_test: int = 50
-    """Test views evaluated (the first n of the test split; the paper uses all 200)."""
+    """Test views evaluated: n spread evenly over the test split (all of it when it holds no more;
+    the paper uses all 200). A captured set without a test split keeps n of its views, at most a
+    quarter, spread over all directions, apart for testing."""
+    layouts: int = 1
+    """Initial layouts: trial k starts from layout k mod `layouts`, one half of the views' azimuths
+    turned by a `layouts`-th of the way round per layout. 1: one layout (a rendered scene's
+    `initial` split as rendered)."""
     render_samples: int = 16
     """Cycles samples per pixel for built-in scenes."""
     field_lr: dict[str, float] = field(default_factory=lambda: dict(LOW_FIELD_LR_SCENES))
@@ -113,6 +119,8 @@ class ExperimentConfig:
         record = {k: getattr(self, k) for k in keep} | {"device": device_kind(self.device)}
         if self.compile is not None:  # absent by default, so results made before it stay valid
             record["compile"] = self.compile
+        if self.layouts != 1:  # likewise: one layout is what every earlier result ran
+            record["layouts"] = self.layouts
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).to_dict().items()})
         return json.loads(json.dumps(record, default=str))

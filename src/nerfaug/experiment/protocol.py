@@ -4,15 +4,15 @@
 from __future__ import annotations
 
 import functools
-import math
 import platform
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import torch
 
-from nerfaug.data import Views, has_split, load_dataset, require_split
+from nerfaug.data import Views, find_split, has_split, load_dataset, require_split
+from nerfaug.data.frame import Hemisphere
 from nerfaug.device import describe_device
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.runfolder import (
@@ -24,6 +24,7 @@ from nerfaug.experiment.runfolder import (
     write_selection,
     write_view_uncertainty,
 )
+from nerfaug.experiment.scene_views import initial_in_half, layout_halves, split_captured, spread_over_frames
 from nerfaug.experiment.store import (
     RunKey,
     code_version,
@@ -32,7 +33,7 @@ from nerfaug.experiment.store import (
     start_run_folder,
     write_result,
 )
-from nerfaug.hemisphere import half_hemisphere_poses
+from nerfaug.hemisphere import angles_from_pose
 
 PROGRESS_EVERY = 50
 # Pixels across of the saved FisherRF image of a test view: three backward passes per pixel.
@@ -48,6 +49,14 @@ class SceneData:
     initial: Views
     pool: Views
     test: Views
+    layout: int = 0
+    """Which initial layout of the configured ones the initial views are."""
+    record: dict = field(default_factory=dict)
+    """How the views were chosen (the test rule, the half, the frame of a captured set), for the run's record."""
+
+    def names(self) -> dict:
+        """The names of the initial and test views, as a run records them."""
+        return {"initial": list(self.initial.names), "test": list(self.test.names)}
 
 
 def scene_folder(scene: str) -> Path | None:
@@ -90,7 +99,8 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
     folder = scene_dataset_dir(root, scene, config)
     if scene_folder(scene) is not None:
         load_dataset(folder, "train", lazy=True)  # fail early, with the dataset's own error
-        require_split(folder, "test", "a test split is needed for evaluation")
+        if not is_captured_set(folder):  # a captured set's test views are kept apart by direction
+            require_split(folder, "test", "a test split is needed for evaluation")
         return folder
     from nerfaug.scenes import BUILTIN_SCENES
 
@@ -140,22 +150,16 @@ def dataset_cache_dir(root: Path) -> Path:
     return Path(root) / "datasets" / "cache"
 
 
-def initial_view_indices(pool: Views, n: int) -> list[int]:
-    """For datasets without an `initial` split: the pool views nearest (in direction) to the fixed
-    half-hemisphere layout `half_hemisphere_poses(n)`, so every trial starts from the same views."""
-    targets = half_hemisphere_poses(n)[:, :3, 3]
-    targets = targets / targets.norm(dim=-1, keepdim=True)
-    directions = pool.cameras.positions / pool.cameras.positions.norm(dim=-1, keepdim=True)
-    chosen: list[int] = []
-    for target in targets:
-        similarity = directions @ target
-        similarity[chosen] = -math.inf
-        chosen.append(int(similarity.argmax()))
-    return chosen
+def is_captured_set(folder: Path) -> bool:
+    """Whether `folder` is a captured set: one listing of every view (LLFF, IDR, nerfstudio), no splits."""
+    return not find_split(folder, "train").format.has_splits
 
 
-def load_scene_data(folder: Path, config: ExperimentConfig, cache_dir: Path | None = None) -> SceneData:
-    """Initial, pool (candidates) and test views of a dataset folder at the configured size.
+def load_scene_data(
+    folder: Path, config: ExperimentConfig, cache_dir: Path | None = None, layout: int = 0
+) -> SceneData:
+    """Initial, pool (candidates) and test views of a dataset folder at the configured size, for
+    initial layout `layout` (of `config.layouts`; `nerfaug.experiment.scene_views`).
 
     With `cache_dir`, each split's downscaled images are read from (or written to) a cache there
     (`nerfaug.scenes.cache`), keyed by the digest of the folder's files: the same images, bit for
@@ -172,16 +176,38 @@ def load_scene_data(folder: Path, config: ExperimentConfig, cache_dir: Path | No
         load = functools.partial(
             load_split_cached, folder, downscale=downscale, cache_dir=cache_dir, digest=folder_digest(folder)
         )
+    if is_captured_set(folder):
+        return captured_scene_data(load(split="train"), config, layout)
     pool = load(split="train")
     test = load(split="test")
-    test = test.subset(range(min(config.n_test, len(test))))
-    if has_split(folder, "initial"):
-        initial = load(split="initial")
-    else:
-        chosen = initial_view_indices(pool, config.n_initial)
-        initial = pool.subset(chosen)
-        pool = pool.subset([i for i in range(len(pool)) if i not in set(chosen)])
-    return SceneData(initial, pool, test)
+    test = test.subset(spread_over_frames(config.n_test, len(test)))
+    if has_split(folder, "initial") and config.layouts == 1:
+        return SceneData(
+            load(split="initial"), pool, test, layout=0, record={"test_rule": "spread over the test split"}
+        )
+    azimuth = angles_from_pose(pool.cameras.camera_to_world)[0]
+    half = layout_halves(azimuth, config.layouts)[layout % config.layouts]
+    chosen = initial_in_half(pool.cameras.camera_to_world, config.n_initial, half, list(range(len(pool))))
+    rest = [i for i in range(len(pool)) if i not in set(chosen)]
+    record = {"test_rule": "spread over the test split", "half": half.to_dict()}
+    return SceneData(pool.subset(chosen), pool.subset(rest), test, layout=layout % config.layouts, record=record)
+
+
+def captured_scene_data(views: Views, config: ExperimentConfig, layout: int) -> SceneData:
+    """A captured set (one listing, no test split) divided by `split_captured`, its cameras moved
+    into the engine frame."""
+    cameras = views.cameras
+    split = split_captured(cameras.camera_to_world, config.n_test, config.n_initial, layout, config.layouts)
+    hemisphere = Hemisphere.from_dict(split.hemisphere)
+    moved = Views(hemisphere.cameras_to_engine(cameras), views.images, views.names, views.alphas, views.loader)
+    record = {"test_rule": "spread over all directions", "half": split.half.to_dict(), "frame": split.hemisphere}
+    return SceneData(
+        moved.subset(split.initial),
+        moved.subset(split.pool),
+        moved.subset(split.test),
+        layout=layout % config.layouts,
+        record=record,
+    )
 
 
 @functools.lru_cache(maxsize=1)
@@ -254,7 +280,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     timing: dict[str, float] = {}
 
     start = time.perf_counter()
-    data = load_scene_data(dataset_dir, config, cache_dir=dataset_cache_dir(root))
+    data = load_scene_data(dataset_dir, config, cache_dir=dataset_cache_dir(root), layout=key.trial)
     engine = config.engine_config(key.scene)
     trainer = Trainer(data.initial, engine, seed=seed, device=config.device, progress=progress, compile=config.compile)
     timing["setup"] = time.perf_counter() - start
@@ -340,6 +366,8 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
         "metrics": evaluation.mean,
         "lpips_status": evaluation.lpips_status,
         "chosen": chosen,
+        "layout": data.layout,
+        "views": data.names() | data.record,
         "timing": timing,
         "host": platform.node(),
         "torch": torch.__version__,

@@ -101,7 +101,17 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         )
     _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
     _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
-    for name in ("trials", "n_new", "n_initial", "n_test", "pool", "resolution", "render_samples", "threads_per_run"):
+    for name in (
+        "trials",
+        "n_new",
+        "n_initial",
+        "n_test",
+        "pool",
+        "resolution",
+        "render_samples",
+        "threads_per_run",
+        "layouts",
+    ):
         value = getattr(config, name)
         _need(isinstance(value, int) and value >= 1, name, value, "must be an integer >= 1")
     _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
@@ -141,9 +151,6 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
 
     train_split = find_split(folder, "train")
     train = train_split.load(lazy=True)
-    test_split = require_split(folder, "test", "a test split is needed for evaluation")
-    test = test_split.load(lazy=True)
-    has_initial = has_split(folder, "initial")
     width, height = train.cameras.width, train.cameras.height
     _need(
         config.resolution <= width,
@@ -159,8 +166,15 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
             "resolution",
             config.resolution,
             f"{folder}'s {width}-px images shrink by whole factors only; the nearest sizes are "
-            f"{', '.join(str(v) for v in sorted(sizes[:3]))}",
+            f"{', '.join(str(v) for v in sorted(sizes[:3]))} (or `nerfaug scene prepare` it at any width)",
         )
+    size = {"path": str(Path(folder).resolve()), "digest": dataset_digest(folder), "width": ran}
+    size["height"] = height // (width // ran)
+    if not train_split.format.has_splits:  # a captured set: its test views are kept apart by direction
+        return size | _check_captured_set(train_split, train, config)
+    test_split = require_split(folder, "test", "a test split is needed for evaluation")
+    test = test_split.load(lazy=True)
+    has_initial = has_split(folder, "initial") and config.layouts == 1
     if has_initial:
         initial_split = find_split(folder, "initial")
         initial = len(initial_split.load(lazy=True))
@@ -188,15 +202,35 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
         f"{test_split.listing} holds only {len(test)} test views",
     )
     splits = ("train", "test", "initial") if has_initial else ("train", "test")
-    return {
-        "path": str(Path(folder).resolve()),
-        "digest": dataset_digest(folder),
+    return size | {
         "content": dataset_content_digest(folder, splits),
-        "width": ran,
-        "height": height // (width // ran),
         "initial": initial,
         "pool": pool,
         "test": config.n_test,
+        # How the views are chosen changes what a run measures: results of another rule are not reused.
+        "views": "test spread over the test split" + ("" if has_initial else f"; {config.layouts} initial layouts"),
+    }
+
+
+def _check_captured_set(split, views, config: ExperimentConfig) -> dict:
+    """A captured set's division into test, initial and candidate views, for every layout."""
+    from nerfaug.experiment.scene_views import split_captured
+
+    try:
+        splits = [
+            split_captured(views.cameras.camera_to_world, config.n_test, config.n_initial, k, config.layouts)
+            for k in range(config.layouts)
+        ]
+    except ValueError as error:
+        raise ValueError(f"{split.listing}: {error}") from None
+    pool = min(len(s.pool) for s in splits)
+    _need(pool >= config.n_new, "n_new", config.n_new, f"the candidate pool of {split.listing} holds only {pool} views")
+    return {
+        "content": dataset_content_digest(split.root, ("train",)),
+        "initial": config.n_initial,
+        "pool": pool,
+        "test": len(splits[0].test),
+        "views": f"captured set: test spread over all directions; {config.layouts} initial layouts",
     }
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -25,6 +26,7 @@ from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.registry import DEFAULT_FIELD, build_field
 
 CHECKPOINT_FORMAT = 1
+PROGRESS_EVERY = 10  # steps between updates of the progress display (and the train callback)
 
 
 class TrainingDiverged(RuntimeError):
@@ -220,13 +222,21 @@ class Trainer:
         self.history.append(entry)
         return entry
 
-    def train(self, until_step: int, checkpoint: str | Path | None = None, checkpoint_every: int = 1000) -> None:
+    def train(
+        self,
+        until_step: int,
+        checkpoint: str | Path | None = None,
+        checkpoint_every: int = 1000,
+        callback: Callable[[dict], None] | None = None,
+    ) -> None:
         """Train until `self.step == until_step`.
 
         Args:
             until_step: the step to stop at (nothing happens if already there).
             checkpoint: if given, save here every `checkpoint_every` steps and at the end; on
                 divergence this file keeps the last good state.
+            callback: called every `PROGRESS_EVERY` steps and at the last with that step's
+                history entry ({"step", "loss", "psnr"}), e.g. to show or log progress.
 
         Raises:
             TrainingDiverged: naming the step, the loss and the kept checkpoint.
@@ -242,8 +252,10 @@ class Trainer:
                 entry = self.train_step()
                 if self._checkpoint_path is not None and self.step % checkpoint_every == 0:
                     self.save_checkpoint(self._checkpoint_path)
-                if self.step % 10 == 0 or self.step == until_step:
+                if self.step % PROGRESS_EVERY == 0 or self.step == until_step:
                     progress.update(task, completed=self.step - start, loss=entry["loss"], psnr=entry["psnr"])
+                    if callback is not None:
+                        callback(entry)
         if self._checkpoint_path is not None:
             self.save_checkpoint(self._checkpoint_path)
 

@@ -22,7 +22,7 @@ import numpy as np
 from nerfaug.coverage import view_coverage
 from nerfaug.metrics import HIGHER_IS_BETTER, METRICS
 from nerfaug.report.collect import Results
-from nerfaug.report.study_table import RunRow, engine_results, homogeneous, table_rows
+from nerfaug.report.study_table import RunRow, engine_results, homogeneous, initial_poses_by_layout, table_rows
 from nerfaug.statistics import paired_comparison, seed_level_comparison, summarise
 
 REFERENCE = "uniform"
@@ -125,9 +125,10 @@ class Study:
         return list(dict.fromkeys(c.engine for c in self.cells))
 
 
-def coverage_of(rows: list[RunRow], initial_poses: list) -> list[dict]:
-    initial = homogeneous(initial_poses)
-    return [{"trial": r.trial, **view_coverage(r.poses(), initial)} for r in rows]
+def coverage_of(rows: list[RunRow], initial: dict[int, list]) -> list[dict]:
+    """Where each run's chosen views lie, relative to the initial views of its own layout."""
+    layouts = {layout: homogeneous(poses) for layout, poses in initial.items()}
+    return [{"trial": r.trial, **view_coverage(r.poses(), layouts[r.layout])} for r in rows]
 
 
 def paired_with(mine: list[RunRow], theirs: list[RunRow], metric: str) -> tuple[list[float], list[float]]:
@@ -138,9 +139,11 @@ def paired_with(mine: list[RunRow], theirs: list[RunRow], metric: str) -> tuple[
     return [a[s] for s in seeds], [b[s] for s in seeds]
 
 
-def make_cell(rows: list[RunRow], scene: str, engine: str, methods: list[str], trials: int, initial: list) -> Cell:
+def make_cell(
+    rows: list[RunRow], scene: str, engine: str, methods: list[str], trials: int, initial: dict[int, list]
+) -> Cell:
     """The (scene, engine) cell of `rows` (the table's rows of that cell); `methods` and `trials`
-    are the plan's, `initial` the scene's initial views (3x4 lists)."""
+    are the plan's, `initial` the scene's initial views per layout (3x4 lists)."""
     by_method: dict[str, MethodResult] = {}
     for method in list(dict.fromkeys([*methods, *(r.method for r in rows)])):
         mine = sorted((r for r in rows if r.method == method), key=lambda r: r.trial)
@@ -214,7 +217,7 @@ def collect_study(table: dict) -> Study:
                 engine,
                 methods,
                 trials,
-                table["scenes"][scene]["initial_poses"],
+                initial_poses_by_layout(table["scenes"][scene]),
             )
             for scene in scenes
             if any(r.engine == engine and r.scene == scene for r in rows)

@@ -6,7 +6,8 @@ whose cells are not all run yet is "open" unless the cells run already decide it
 from __future__ import annotations
 
 from nerfaug.report.document import Block, Heading, Paragraph, Table, p_value
-from nerfaug.report.study import OURS, Study
+from nerfaug.report.study import OURS, Study, regime_comparisons
+from nerfaug.statistics import seed_level_comparison
 
 PAPER_REGIME = "nerfacto-cpu-last-sample"
 STABLE_REGIMES = ("cpu", "nerfacto-cpu")
@@ -112,9 +113,146 @@ HYPOTHESES = (
 )
 
 
+# ---- the real-scene study (docs/study-plan.md, plan of 2026-11-25) ------------------------------
+
+REAL_SCENES = ("mic", "maryRose", "dtu_scan24", "cow")
+HELD_BACK = "moldGoldCape"
+REAL_ENGINES = ("nerfacto-cpu", "nerfacto-cpu-last-sample")
+OURS_FAMILY = ("ours", "ours-paper-sum", "ours-batch-sharp")
+RANKING = (("ours", "entropy-sampling"), ("entropy-sampling", "fisherrf-sampling"))
+
+
+def _real_cells(study: Study, engine: str) -> tuple[list, bool]:
+    """The engine's cells of the four planned real scenes, and whether all four are complete."""
+    cells = [c for c in study.cells if c.engine == engine and c.scene in REAL_SCENES]
+    return cells, len(cells) == len(REAL_SCENES) and all(c.complete for c in cells)
+
+
+def _says(method: str, entry: dict | None) -> str:
+    if entry is None:
+        return f"{method}: not run"
+    return (
+        f"{method} {entry['difference']:+.2f} dB ({entry['wins']}/{entry['n_seeds']} seeds, "
+        f"p x {entry['n_comparisons']} = {p_value(entry['p_bonferroni'])})"
+    )
+
+
+def r1_winners(study: Study) -> dict[str, list[str]]:
+    """engine -> the methods of this project that beat uniform per seed on the real scenes."""
+    found = {}
+    for engine in REAL_ENGINES:
+        comparisons = regime_comparisons(_real_cells(study, engine)[0])
+        found[engine] = [m for m in OURS_FAMILY if (e := comparisons.get(m)) and e["significant"] and e["better"]]
+    return found
+
+
+def r1(study: Study) -> tuple[str, str]:
+    """A method of this project beats uniform per seed on the real scenes, on at least one engine."""
+    parts, complete = [], []
+    for engine in REAL_ENGINES:
+        cells, done = _real_cells(study, engine)
+        comparisons = regime_comparisons(cells)
+        complete.append(done)
+        parts.append(
+            f"{engine} ({len(cells)} scene(s)): " + "; ".join(_says(m, comparisons.get(m)) for m in OURS_FAMILY)
+        )
+    evidence = " | ".join(parts)
+    if any(r1_winners(study).values()):
+        return "supported", evidence
+    return ("not supported" if all(complete) else "open"), evidence
+
+
+def r2(study: Study) -> tuple[str, str]:
+    """Per engine, ours > entropy-sampling > fisherrf-sampling (seed-level, Bonferroni x2)."""
+    verdicts, parts = [], []
+    for engine in REAL_ENGINES:
+        cells, done = _real_cells(study, engine)
+        tests = []
+        for high, low in RANKING:
+            differences = {
+                c.scene: c.methods[high].differences(c.methods[low])
+                for c in cells
+                if high in c.methods and low in c.methods
+            }
+            tests.append(seed_level_comparison(differences, len(RANKING)) if any(differences.values()) else None)
+        if any(t is not None and t["significant"] and not t["better"] for t in tests):
+            verdict = "contradicted"
+        elif all(t is not None and t["significant"] and t["better"] for t in tests):
+            verdict = "holds"
+        else:
+            verdict = "not supported" if done else "open"
+        verdicts.append(verdict)
+        parts.append(
+            f"{engine}: {verdict} (" + "; ".join(_says(f"{h} - {lo}", t) for (h, lo), t in zip(RANKING, tests)) + ")"
+        )
+    for verdict in ("contradicted", "holds", "open"):
+        if verdict in verdicts:
+            return verdict, " | ".join(parts)
+    return "not supported", " | ".join(parts)
+
+
+def r3(study: Study) -> tuple[str, str]:
+    """ours-batch-sharp beats uniform per seed on the real scenes with nerfacto-cpu."""
+    cells, done = _real_cells(study, "nerfacto-cpu")
+    entry = regime_comparisons(cells).get("ours-batch-sharp")
+    evidence = f"nerfacto-cpu ({len(cells)} scene(s)): " + _says("ours-batch-sharp", entry)
+    if entry is not None and entry["significant"] and entry["better"]:
+        return "supported", evidence
+    return ("not supported" if done else "open"), evidence
+
+
+def r4(study: Study) -> tuple[str, str]:
+    """Each method R1 finds better than uniform beats uniform on the held-back scene (per cell,
+    two-sided Wilcoxon, Bonferroni over those methods)."""
+    planned = [(engine, m) for engine, methods in r1_winners(study).items() for m in methods]
+    if not planned:
+        return ("not applicable" if r1(study)[0] == "not supported" else "open"), "no method passed R1 (yet)"
+    held = {c.engine: c for c in study.cells if c.scene == HELD_BACK}
+    parts, passed, decided = [], 0, 0
+    for engine, method in planned:
+        cell = held.get(engine)
+        entry = cell.methods[method].vs_reference.get("psnr") if cell and method in cell.methods else None
+        if entry is None or not cell.complete:
+            parts.append(f"{method} on {engine}: not run yet")
+            continue
+        decided += 1
+        p = min(1.0, entry["p_value"] * len(planned))
+        passed += p < 0.05 and entry["better"]
+        parts.append(f"{method} on {engine}: {entry['difference']:+.2f} dB, p x {len(planned)} = {p_value(p)}")
+    evidence = f"held-back {HELD_BACK}: " + "; ".join(parts)
+    if decided < len(planned):
+        return "open", evidence
+    return ("supported" if passed == len(planned) else "not supported"), evidence
+
+
+REAL_HYPOTHESES = (
+    (
+        "R1",
+        "a method of this project (ours, ours-paper-sum, ours-batch-sharp) beats uniform per seed on the real "
+        "scenes, on at least one engine",
+        r1,
+    ),
+    ("R2", "per engine, ours > entropy-sampling > fisherrf-sampling per seed (the paper's Table II ranking)", r2),
+    (
+        "R3",
+        "ours-batch-sharp, the procedural study's one significant method, beats uniform per seed on the real "
+        "scenes with nerfacto-cpu",
+        r3,
+    ),
+    ("R4", "each method R1 finds better than uniform also beats it on the held-back scene (moldGoldCape)", r4),
+)
+
+
+def hypotheses_of(study: Study) -> tuple:
+    """The planned hypotheses of this study: the real-scene plan's when it ran any scene beyond
+    the procedural three, else the procedural plan's."""
+    scenes = {c.scene for c in study.cells}
+    return HYPOTHESES if scenes <= set(PLAN_SCENES) else REAL_HYPOTHESES
+
+
 def hypotheses_blocks(study: Study) -> list[Block]:
     rows = []
-    for name, text, judge in HYPOTHESES:
+    for name, text, judge in hypotheses_of(study):
         verdict, evidence = judge(study)
         rows.append([name, text, f"**{verdict}**", evidence])
     return [
@@ -127,4 +265,4 @@ def hypotheses_blocks(study: Study) -> list[Block]:
     ]
 
 
-__all__ = ["HYPOTHESES", "hypotheses_blocks"]
+__all__ = ["HYPOTHESES", "REAL_HYPOTHESES", "hypotheses_blocks", "hypotheses_of", "r1", "r2", "r3", "r4"]

@@ -9,9 +9,16 @@ again). Written as JSON, one run per line, rows sorted by (engine, scene, method
 
     {"format": "nerfaug-study-table", "version": 1, "plan": {...study.json...},
      "methods": {name: {"label", "description", "definition"}},
-     "scenes": {scene: {"initial_poses": [[3x4], ...]}},
+     "scenes": {scene: {"initial_poses": [[3x4], ...], "layouts": {"1": [[3x4], ...], ...},
+                        "test_views": [name, ...], "views": {"test_rule": ..., ...}}},
      "runs": [{"engine", "scene", "method", "trial", "seed", "psnr", "ssim", "lpips",
-               "lpips_status", "chosen", "chosen_poses", "code_version", "fingerprint"}, ...]}
+               "lpips_status", "chosen", "chosen_poses", "code_version", "fingerprint",
+               "layout"?}, ...]}
+
+A scene's `initial_poses` are its first (or only) initial layout's; a study with several layouts
+lists the others under `layouts`, and a run started from one of them has its `layout` (absent: 0).
+`test_views` and `views` record which views the runs were scored on and how they were chosen
+(absent in tables of studies run before they were recorded).
 
 Poses are camera-to-world, the top 3x4 rows, rounded to `POSE_DECIMALS` (what the coverage numbers
 are computed from, so rounding never separates the table from its page).
@@ -47,6 +54,7 @@ ROW_FIELDS = (
     "code_version",
     "fingerprint",
 )
+OPTIONAL_ROW_FIELDS = ("layout",)
 
 
 @dataclass(frozen=True)
@@ -72,6 +80,7 @@ class RunRow:
     chosen_poses: list
     code_version: str
     fingerprint: str
+    layout: int = 0
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -104,7 +113,8 @@ def _number(value) -> float | None:
 
 def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
     """A run folder's row and its initial views' poses (3x4 lists); None without a selection
-    record (a run of an older nerfaug, or a damaged folder)."""
+    record (a run of an older nerfaug, or a damaged folder). The row's `layout` is the run's
+    initial layout (0 for runs of one layout)."""
     selection = read_selection(run.folder)
     if selection is None or selection.chosen_poses is None:
         return None
@@ -123,18 +133,20 @@ def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
         chosen_poses=rounded_poses(selection.chosen_poses),
         code_version=str(result["code_version"]),
         fingerprint=str(result["fingerprint"]),
+        layout=int(result.get("layout", 0)),
     )
     return row, rounded_poses(selection.train_poses)
 
 
-def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dict[str, list]]:
-    """Every valid run under `root/<engine>/` as rows, and each scene's initial views.
+def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dict[str, dict]]:
+    """Every valid run under `root/<engine>/` as rows, and what each scene's runs started from
+    and were scored on: {scene: {"initial_poses", "layouts"?, "test_views"?, "views"?}}.
 
     Raises:
-        ReportError: two runs of a scene started from different initial views (the table holds
-            one set per scene).
+        ReportError: two runs of a scene and layout started from different initial views, or two
+            runs of a scene were scored on different test views (the table holds one set each).
     """
-    rows, initial = [], {}
+    rows, scenes = [], {}
     for engine in engines:
         if not (Path(root) / engine / "sweep.json").is_file():
             continue
@@ -143,23 +155,61 @@ def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dic
             if found is None:
                 continue
             row, poses = found
-            if initial.setdefault(row.scene, poses) != poses:
+            scene = scenes.setdefault(row.scene, {})
+            layouts = scene.setdefault("layouts", {})
+            if layouts.setdefault(str(row.layout), poses) != poses:
                 raise ReportError(f"{run.folder}: its initial views differ from other runs of scene {row.scene!r}")
+            views = dict(run.result.get("views", {}))
+            if "test" in views:
+                if scene.setdefault("test_views", views.pop("test")) != run.result["views"]["test"]:
+                    raise ReportError(f"{run.folder}: its test views differ from other runs of scene {row.scene!r}")
+                views.pop("initial", None)
+                scene["views"] = {k: v for k, v in views.items() if k != "half"}
             rows.append(row)
-    return rows, initial
+    return rows, {name: scene_record(scene) for name, scene in scenes.items()}
+
+
+def scene_record(found: dict) -> dict:
+    """A scene's entry in the table: layout 0's initial poses as `initial_poses` (as tables of
+    one layout have always had), the other layouts under `layouts`."""
+    layouts = dict(found.pop("layouts"))
+    record = {"initial_poses": layouts.pop("0", None)}
+    if record["initial_poses"] is None:  # a sitting that ran no trial of layout 0
+        record.pop("initial_poses")
+    if layouts:
+        record["layouts"] = dict(sorted(layouts.items()))
+    return record | found
+
+
+def initial_poses_by_layout(scene: dict) -> dict[int, list]:
+    """A table scene entry's initial poses per layout (3x4 lists)."""
+    found = {int(k): v for k, v in scene.get("layouts", {}).items()}
+    if "initial_poses" in scene:
+        found[0] = scene["initial_poses"]
+    return found
+
+
+def row_dict(row: RunRow) -> dict:
+    """A row as the table stores it: `layout` only where it is not 0, so tables of one layout
+    read as they always have."""
+    record = asdict(row)
+    if record["layout"] == 0:
+        del record["layout"]
+    return record
 
 
 def make_table(
     plan: dict,
     rows: list[RunRow],
-    initial: dict[str, list],
+    initial: dict[str, dict],
     previous: dict | None = None,
     method_records: dict[str, dict] | None = None,
 ) -> dict:
     """The table of `rows` over `previous`, with `plan`, the methods' records and the scenes'
-    initial views. A row replaces the previous row of its run; where `rows` hold an (engine,
-    method) with another fingerprint than the previous rows of it (its settings or its engine
-    changed), those previous rows are dropped: a cell never mixes runs of two configurations.
+    records (`initial`, as `rows_from_folders` gives them: initial views per layout, test views).
+    A row replaces the previous row of its run; where `rows` hold an (engine, method) with another
+    fingerprint than the previous rows of it (its settings or its engine changed), those previous
+    rows are dropped: a cell never mixes runs of two configurations.
 
     `method_records` maps method names to their {"label", "description", "definition"} (the
     method registry's, given by the caller); the table records those of the plan's and the rows'
@@ -173,7 +223,13 @@ def make_table(
     by_key = {row.key: row for row in kept}
     by_key.update({row.key: row for row in rows})
     scenes = dict((previous or {}).get("scenes", {}))
-    scenes.update({scene: {"initial_poses": poses} for scene, poses in initial.items()})
+    for scene, record in initial.items():
+        merged = dict(scenes.get(scene, {}))
+        merged["layouts"] = {**merged.get("layouts", {}), **record.get("layouts", {})}
+        merged.update({k: v for k, v in record.items() if k != "layouts"})
+        if not merged["layouts"]:
+            del merged["layouts"]
+        scenes[scene] = merged
     ordered = sorted(by_key.values(), key=lambda r: r.key)
     methods = list(dict.fromkeys([*plan.get("methods", []), *(r.method for r in ordered)]))
     return {
@@ -185,7 +241,7 @@ def make_table(
             **{name: record for name in methods if (record := (method_records or {}).get(name)) is not None},
         },
         "scenes": dict(sorted(scenes.items())),
-        "runs": [asdict(row) for row in ordered],
+        "runs": [row_dict(row) for row in ordered],
     }
 
 
@@ -223,10 +279,19 @@ def _check_row(path: Path, index: int, run) -> RunRow:
     if not isinstance(run, dict):
         raise _refuse(path, where, "not an object")
     missing = [k for k in ROW_FIELDS if k not in run]
-    unknown = sorted(set(run) - set(ROW_FIELDS))
+    unknown = sorted(set(run) - set(ROW_FIELDS) - set(OPTIONAL_ROW_FIELDS))
     if missing or unknown:
         raise _refuse(path, where, f"missing {missing}" if missing else f"unknown fields {unknown}")
-    for name, kinds in (("engine", str), ("scene", str), ("method", str), ("trial", int), ("seed", int)):
+    for name, kinds in (
+        ("engine", str),
+        ("scene", str),
+        ("method", str),
+        ("trial", int),
+        ("seed", int),
+        ("layout", int),
+    ):
+        if name not in run:  # an optional field
+            continue
         if not isinstance(run[name], kinds) or isinstance(run[name], bool):
             raise _refuse(path, f"{where}.{name}", f"{run[name]!r} is not a {kinds.__name__}")
     for name in ("psnr", "ssim", "lpips"):
@@ -269,8 +334,12 @@ def read_table(path: Path) -> dict:
         row = _check_row(path, index, run)
         if row.key in keys:
             raise _refuse(path, f"runs[{index}]", f"a second row for {'/'.join(map(str, row.key))}")
-        if row.scene not in table["scenes"]:
-            raise _refuse(path, f"runs[{index}].scene", f"{row.scene!r} has no initial views under 'scenes'")
+        if row.layout not in initial_poses_by_layout(table["scenes"].get(row.scene, {})):
+            raise _refuse(
+                path,
+                f"runs[{index}].scene",
+                f"{row.scene!r} has no initial views of layout {row.layout} under 'scenes'",
+            )
         keys.add(row.key)
     return table
 
@@ -301,8 +370,11 @@ __all__ = [
     "RunRow",
     "engine_results",
     "homogeneous",
+    "initial_poses_by_layout",
     "make_table",
     "read_table",
+    "row_dict",
     "rows_from_folders",
+    "scene_record",
     "write_table",
 ]

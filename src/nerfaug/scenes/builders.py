@@ -8,7 +8,10 @@ Each scene echoes what makes its paper counterpart hard:
 - `lego`: a bulldozer of many small parts (treads with cleats, wheels, studs, pistons, a blade);
 - `chair`: thin tapered legs and stretchers, a slatted back;
 - `materials`: orbs of diffuse, glossy, metallic, glass-like and textured materials on a base,
-  reflecting a graded sky, so their colour depends on the viewing direction.
+  reflecting a graded sky, so their colour depends on the viewing direction;
+- `cow`: not procedural but a scanned-looking organic shape, Keenan Crane's "spot" cow (public
+  domain, `assets/cow/`): one smooth closed mesh whose detail is in its image texture, not its
+  geometry.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import bmesh
 from mathutils import Matrix, Vector
 
 # isort: on
+from nerfaug.scenes.builtin import ASSETS
 
 RGB = tuple[float, float, float]
 HALF_EXTENT = 1.1
@@ -268,7 +272,24 @@ def build_materials() -> None:
     fit_to_box()
 
 
-BUILDERS = {"lego": build_lego, "chair": build_chair, "materials": build_materials}
+def build_cow() -> None:
+    """Keenan Crane's "spot" cow: its OBJ imported with its MTL, whose texture (black and white
+    spots, pink nose and udder) drives the Base Color; turned z-up and smooth-shaded."""
+    # The OBJ is y-up, its head towards +z: the importer turns it z-up (head towards +y), and a
+    # quarter turn about z then faces the head towards +x, as the lego's blade.
+    bpy.ops.wm.obj_import(filepath=str(ASSETS / "cow" / "cow.obj"), forward_axis="NEGATIVE_Z", up_axis="Y")
+    (cow,) = (obj for obj in bpy.context.scene.objects if obj.type == "MESH")
+    cow.rotation_euler.z -= math.pi / 2  # XYZ Euler: z turns last, about the world's z axis
+    cow.data.shade_smooth()  # the OBJ has no normals: without this every triangle shows
+    (material,) = cow.data.materials
+    links = material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].links
+    image = links[0].from_node.image if links and links[0].from_node.type == "TEX_IMAGE" else None
+    if image is None or image.size[0] == 0:  # reading size loads the file; never render a white cow
+        raise RuntimeError(f"the cow's texture did not load from {ASSETS / 'cow'}")
+    fit_to_box()
+
+
+BUILDERS = {"lego": build_lego, "chair": build_chair, "materials": build_materials, "cow": build_cow}
 
 
 # ---- scene set-up shared by built-in and user scenes -------------------------------------------

@@ -45,7 +45,7 @@ from nerfaug.hemisphere import (
 )
 from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.progress import progress_bar
-from nerfaug.scenes import worker
+from nerfaug.scenes import builtin, worker
 from nerfaug.scenes.builtin import BUILTIN_SCENES
 
 # Bump when the layout or meaning of a rendered dataset changes; older caches then re-render.
@@ -261,7 +261,8 @@ def dataset_manifest(
     """Everything that determines a rendered dataset's content; equal manifests, equal datasets.
 
     Holds a digest of the scene-building code and the bpy version (both change pixels) and,
-    for a .blend file, a digest of its bytes (editing it must re-render).
+    for a .blend file, a digest of its bytes (editing it must re-render); for a built-in scene
+    built from files (the cow's mesh and texture), a digest of those files.
     """
     digest = hashlib.sha256()
     for path in _SCENE_CODE:
@@ -269,6 +270,8 @@ def dataset_manifest(
     scene = dict(spec)
     if "blend" in spec:
         scene["sha256"] = hashlib.sha256(Path(spec["blend"]).read_bytes()).hexdigest()
+    if spec.get("builtin") in builtin.BUILTIN_ASSETS:
+        scene["assets_sha256"] = assets_digest(spec["builtin"])
     return {
         "format": DATASET_FORMAT,
         "scene": scene,
@@ -284,6 +287,27 @@ def dataset_manifest(
         "bpy": importlib.metadata.version("bpy"),
         "scene_code_sha256": digest.hexdigest(),
     }
+
+
+def assets_digest(scene: str) -> str:
+    """SHA-256 (hex) over the names and bytes of the files the built-in `scene` is built from
+    (`builtin.BUILTIN_ASSETS`); "" for a procedural scene.
+
+    Raises:
+        FileNotFoundError: one of the files is missing (an install without its package data).
+    """
+    names = builtin.BUILTIN_ASSETS.get(scene, ())
+    if not names:
+        return ""
+    digest = hashlib.sha256()
+    for name in names:
+        path = builtin.ASSETS / scene / name
+        if not path.is_file():
+            raise FileNotFoundError(f"the built-in scene {scene!r} needs {path}, which is missing: reinstall nerfaug")
+        data = path.read_bytes()
+        digest.update(f"{name}\0{len(data)}\0".encode())
+        digest.update(data)
+    return digest.hexdigest()
 
 
 def is_complete(root: Path, manifest: dict) -> bool:

@@ -68,7 +68,12 @@ def candidate_entropy(request: Request) -> Tensor:
     config = request.config
     cameras = scoring_cameras(request.candidates, config.entropy_resolution, config.scoring_fov, config.scoring_crop)
     means = mean_view_entropy(
-        request.require_model(), cameras, config.entropy_resolution, config.chunk, config.entropy_mode
+        request.require_model(),
+        cameras,
+        config.entropy_resolution,
+        config.chunk,
+        config.entropy_mode,
+        progress=request.progress,
     ).cpu()
     if config.entropy_max_polar is not None:
         means = torch.where(request.polar > config.entropy_max_polar, 0.0, means.double()).to(means.dtype)
@@ -133,7 +138,12 @@ def fisher(request: Request) -> Estimate:
     """FisherRF's information gain per candidate, with H_train and H_cand (on demand) for its
     greedy selector."""
     h_train, scores, h_of = fisherrf_candidates(
-        request.require_model(), request.train_cameras, request.candidates, request.config, request.generator
+        request.require_model(),
+        request.train_cameras,
+        request.candidates,
+        request.config,
+        request.generator,
+        progress=request.progress,
     )
     scores = scores.cpu()
     return Estimate(scores, fisher=FisherGain(scores, h_train, h_of))
@@ -190,11 +200,13 @@ def fisherrf_candidates(
     candidates: Cameras,
     config: SelectionConfig,
     generator: torch.Generator | None = None,
+    progress: Callable[[int], None] | None = None,
 ) -> tuple[Tensor, Tensor, Callable[[int], Tensor]]:
     """FisherRF's ingredients: H_train over about `config.fisher_train_pixels` pixels spread
     evenly over the training views and weighted to estimate the sum over all their pixels, every
     candidate's score at `config.fisher_resolution`, and H_cand
     on demand (kept within `config.fisher_cache_floats`, else recomputed) for the greedy selection.
+    `progress` is called with the number of candidates scored so far.
 
     Returns:
         h_train: Tensor with shape (P,).
@@ -214,5 +226,6 @@ def fisherrf_candidates(
         config.fisher_probes,
         generator,
         background=background,
+        progress=progress,
     )
     return h_train, scores, h_of

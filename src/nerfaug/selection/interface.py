@@ -32,6 +32,10 @@ class Request:
         n: how many to choose.
         generator: the random source (the same seed gives the same selection).
         config: the method's effective `SelectionConfig` (its own settings applied).
+        excluded: bool Tensor with shape (n_candidates,), candidates that may not be chosen
+            (e.g. too close to a view already kept, `selection.separation`); None for none.
+        progress: called by an estimator that scores candidates one batch at a time with the
+            number scored so far (to show progress); None for silence.
     """
 
     method: str
@@ -41,6 +45,8 @@ class Request:
     n: int
     generator: torch.Generator | None
     config: SelectionConfig
+    excluded: Tensor | None = None
+    progress: Callable[[int], None] | None = None
 
     def require_model(self) -> nn.Module:
         """The model; ValueError naming the method when there is none."""
@@ -57,10 +63,12 @@ class Request:
     @cached_property
     def eligible(self) -> Tensor | None:
         """Bool mask (n_candidates,) of the candidates that may be chosen: those at least
-        `config.min_polar` from the pole. None when every candidate may be."""
-        if self.config.min_polar is None:
-            return None
-        return self.polar >= self.config.min_polar
+        `config.min_polar` from the pole and not `excluded`. None when every candidate may be."""
+        allowed = None if self.config.min_polar is None else self.polar >= self.config.min_polar
+        if self.excluded is None:
+            return allowed
+        free = ~self.excluded.cpu().bool().reshape(-1)
+        return free if allowed is None else allowed & free
 
 
 @dataclass(frozen=True)

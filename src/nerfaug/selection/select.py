@@ -3,6 +3,7 @@ it returns (the chosen indices, with the scores and terms they were chosen by)."
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import torch
@@ -13,6 +14,7 @@ from nerfaug.selection.config import SelectionConfig
 from nerfaug.selection.interface import Request
 from nerfaug.selection.methods import get_method
 from nerfaug.selection.registry import get_estimator, get_selector
+from nerfaug.selection.separation import separated_views
 
 
 @dataclass
@@ -86,6 +88,8 @@ def select_views(
     n: int,
     generator: torch.Generator | None = None,
     config: SelectionConfig | None = None,
+    min_separation: float = 0.0,
+    progress: Callable[[int], None] | None = None,
 ) -> Selection:
     """Choose `n` of the candidate views with a registered method.
 
@@ -100,6 +104,10 @@ def select_views(
             the same selection.
         config: estimator and selector options; None for the defaults. The method's own
             settings (`MethodSpec.settings`) are applied over it.
+        min_separation: radians; > 0 keeps every two chosen views at least this far apart about
+            the origin (`selection.separation`); 0, the default, chooses as the method does.
+        progress: called with the number of candidates scored so far, after each batch the
+            estimator scores (estimators that render); None for silence.
 
     Returns:
         Selection(indices (n,), scores (n_candidates,), components, method).
@@ -107,8 +115,13 @@ def select_views(
     spec = get_method(method)
     if not 0 <= n <= len(candidates):
         raise ValueError(f"cannot choose {n} views out of {len(candidates)} candidates")
-    request = Request(spec.name, model, train_cameras, candidates, n, generator, spec.effective_config(config))
+    config = spec.effective_config(config)
+    request = Request(spec.name, model, train_cameras, candidates, n, generator, config, progress=progress)
     estimate = get_estimator(spec.estimator)(request)
-    indices, estimate = get_selector(spec.selector, spec.estimator)(request, estimate)
+    selector = get_selector(spec.selector, spec.estimator)
+    if min_separation > 0:
+        indices, estimate = separated_views(request, estimate, selector, min_separation)
+    else:
+        indices, estimate = selector(request, estimate)
     components = {k: v.detach().cpu() for k, v in estimate.components().items()}
     return Selection(indices.cpu(), estimate.scores.detach().cpu(), components, spec.name)

@@ -235,6 +235,7 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
                 seed=request.seed,
                 config=request.selection or None,
                 constraints=constraints,
+                min_separation=request.min_separation,
             )
             session.save()
             return proposal.transforms()

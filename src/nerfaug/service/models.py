@@ -83,6 +83,9 @@ class ProposeRequest(Strict):
     selection: dict = Field(default_factory=dict, description="SelectionConfig fields (`--selection.*`)")
     constraints: Constraints | None = None
     candidates: list | None = Field(None, description="reachable 4x4 poses to choose from instead of the hemisphere")
+    min_separation: float = Field(
+        0.0, ge=0, lt=180, description="degrees between any two proposed views, seen from the centre (0: off)"
+    )
 
 
 class UncertaintyRequest(Strict):

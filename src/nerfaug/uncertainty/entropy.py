@@ -25,6 +25,7 @@ are ever NaN or infinite.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 from torch import Tensor, nn
@@ -102,7 +103,12 @@ def minmax_normalise(values: Tensor) -> Tensor:
 
 
 def mean_view_entropy(
-    model: nn.Module, cameras: Cameras, resolution: int = 40, chunk: int = 4096, mode: str = "escape"
+    model: nn.Module,
+    cameras: Cameras,
+    resolution: int = 40,
+    chunk: int = 4096,
+    mode: str = "escape",
+    progress: Callable[[int], None] | None = None,
 ) -> Tensor:
     """Mean ray entropy of each view, rendered at reduced resolution, with no per-view
     post-processing (in "authors" mode: the mean of their per-ray entropy, max over each view).
@@ -118,6 +124,7 @@ def mean_view_entropy(
         resolution: width of the reduced rendering in pixels (height keeps the aspect ratio).
         chunk: rays per batch (a batch holds whole views).
         mode: as in `ray_entropy`.
+        progress: called after each batch with the number of views scored so far.
 
     Returns:
         Tensor with shape (n_views,), on the cameras' device.
@@ -136,6 +143,8 @@ def mean_view_entropy(
         else:
             entropy = ray_entropy(weights.flatten(0, 1), mode).reshape(len(batch), n_pixels)
         scores.append(entropy.mean(dim=-1))
+        if progress is not None:
+            progress(batch[-1] + 1)
     return torch.cat(scores).to(cameras.camera_to_world.device)
 
 

@@ -476,6 +476,7 @@ def fisherrf_view_scores(
     chunk: int = 1024,
     background: Tensor | None = None,
     views_per_batch: int = 32,
+    progress: Callable[[int], None] | None = None,
 ) -> tuple[Tensor, Callable[[int], Tensor]]:
     """FisherRF scores of many views, holding at most `cache_floats` floats of H_cand.
 
@@ -489,6 +490,7 @@ def fisherrf_view_scores(
         cache_floats: memory bound on the kept H_cand, in floats (default 2^28, 1 GiB).
         generator: seeds the probes; drawn from once.
         views_per_batch: views whose H_cand are computed together.
+        progress: called after each batch with the number of views scored so far.
 
     Returns:
         scores: Tensor with shape (n_views,).
@@ -520,6 +522,8 @@ def fisherrf_view_scores(
         kept.update(zip(batch, h))
         if len(kept) > keep:
             kept = {i: kept[i] for i in sorted(kept, key=lambda i: float(scores[i]), reverse=True)[:keep]}
+        if progress is not None:
+            progress(batch[-1] + 1)
 
     def h_of(index: int) -> Tensor:
         return kept[index] if index in kept else compute([index])[0]
