@@ -129,7 +129,7 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
 
     planned = []
 
-    def make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command):
+    def make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command, **_):
         config = study_module.base_config(preset).replace(resolution=resolution, device="cpu")
         plan = study_module.StudyPlan(out, config, ["test"], command=command)
         planned.append(plan)
