@@ -200,3 +200,11 @@ def test_a_commands_help_loads_no_torch(command):
     assert done.returncode == 0, done.stderr
     assert f"usage: nerfaug {command}" in done.stdout
     assert done.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_trains_old_preset_option_names_its_new_spelling(capsys):
+    with pytest.raises(SystemExit) as refused:
+        main(["train", "data", "--out", "run", "--preset=test"])
+    assert refused.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("nerfaug: --preset: `nerfaug train` takes the NeRF engine preset as --engine")

@@ -257,6 +257,21 @@ def scene() -> None:
     _dispatch(["scene", "--help"])
 
 
+# Options that were renamed so that each name means one thing across commands: (command, old) -> new.
+RENAMED = {("train", "--preset"): "--engine"}
+
+
+def _check_renamed(argv: list[str]) -> None:
+    """Name the new spelling of a renamed option, instead of tyro's "unrecognized option"."""
+    for word in argv[1:]:
+        new = RENAMED.get((argv[0], word.partition("=")[0]))
+        if new is not None:
+            raise SystemExit(
+                f"{word.partition('=')[0]}: `nerfaug {argv[0]}` takes the NeRF engine preset as {new} "
+                "(--preset is an experiment's protocol, in `nerfaug run` and `nerfaug study`)"
+            )
+
+
 def command(name: str):
     """The function of the command `name` (`COMMANDS`), its module imported now, its docstring
     reflowed for the help."""
@@ -279,6 +294,7 @@ def _dispatch(argv: list[str]) -> None:
     parsing = COMMAND_LINE.set(tuple(argv))
     try:
         if argv and argv[0] in COMMANDS:  # only this command's module is imported
+            _check_renamed(argv)
             tyro.cli(command(argv[0]), args=argv[1:], prog=f"nerfaug {argv[0]}")
             return
         if not argv or argv[0] in ("-h", "--help"):
