@@ -17,7 +17,7 @@ from nerfaug.capture.frame import ENGINE_RADIUS
 from nerfaug.capture.images import as_array
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.requests import RequestError
+from nerfaug.capture.requests import RequestError, check_seed
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frames import check_pose
 from nerfaug.selection.candidates import with_poses
@@ -72,15 +72,14 @@ class ProposalRequest:
             raise RequestError("n", self.n, "must be >= 1 (a whole number of views to propose)")
         if int(self.n_candidates) < 1:
             raise RequestError("n_candidates", self.n_candidates, "must be >= 1")
-        if self.seed is not None and int(self.seed) < 0:
-            raise RequestError("seed", self.seed, "must be >= 0")
+        seed = None if self.seed is None else check_seed(self.seed)
         config = SelectionConfig.from_dict(self.config) if isinstance(self.config, dict) else self.config
         constraints = self.constraints
         if isinstance(constraints, dict):
             constraints = ViewConstraints.from_dict(constraints)
         elif constraints is not None:
             constraints = constraints.check()
-        return replace(self, n=int(self.n), config=config, constraints=constraints)
+        return replace(self, n=int(self.n), seed=seed, config=config, constraints=constraints)
 
 
 def describe_candidates(candidates) -> str:
