@@ -95,3 +95,15 @@ def test_a_session_saved_before_digests_opens_with_a_warning_naming_its_checkpoi
         session = CaptureSession.open(run)
     session.save()  # records the digest: no warning from now on
     CaptureSession.open(run)
+
+
+def test_a_command_scope_releases_what_it_held_and_holding_twice_does_not_wait(run):
+    from nerfaug.capture.lock import command_scope, hold
+
+    with command_scope():
+        first = hold(run, "nerfaug train", wait=False)
+        assert hold(run, "nerfaug propose", wait=False) is first  # this process holds it already
+        assert try_lock(run, "other") is None
+    lock = try_lock(run, "other")
+    assert lock is not None
+    lock.release()

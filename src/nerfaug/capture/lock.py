@@ -152,15 +152,23 @@ def command_scope() -> Iterator[None]:
             _SCOPE.reset(token)
 
 
-_PROCESS_LOCKS: list[SessionLock] = []  # held until the process ends (outside a command_scope)
+_HELD: dict[Path, SessionLock] = {}  # what `hold` took, by folder: a second `hold` in this process reuses it
 
 
 def hold(run_dir: Path, holder: str, wait: bool = True, on_wait: Callable[[str], None] | None = None) -> SessionLock:
-    """`acquire`, kept until the enclosing `command_scope` ends (else until the process ends)."""
-    lock = acquire(run_dir, holder, wait=wait, on_wait=on_wait)
+    """`acquire`, kept until the enclosing `command_scope` ends (else until the process ends); a
+    session this process already holds this way is not waited for."""
+    key = Path(run_dir).resolve()
+    if key in _HELD and _HELD[key].handle is not None:
+        return _HELD[key]
+    lock = _HELD[key] = acquire(run_dir, holder, wait=wait, on_wait=on_wait)
     scope = _SCOPE.get()
     if scope is not None:
-        scope.callback(lock.release)
-    else:
-        _PROCESS_LOCKS.append(lock)
+        scope.callback(_release, key)
     return lock
+
+
+def _release(key: Path) -> None:
+    lock = _HELD.pop(key, None)
+    if lock is not None:
+        lock.release()
