@@ -326,10 +326,12 @@ def main(argv: list[str] | None = None) -> None:
     # smallest subnormal is zero: expected, and eight lines of noise before any one-line error.
     warnings.filterwarnings("ignore", message="The value of the smallest subnormal", category=UserWarning)
     try:
+        from nerfaug.capture.lock import command_scope
         from nerfaug.device import configure_process
 
         configure_process()
-        _dispatch(argv)
+        with command_scope():  # a session a command locked is unlocked when it ends
+            _dispatch(argv)
     except SystemExit as done:
         if isinstance(done.code, str):  # a command's own refusal: one line, bad input
             print(f"nerfaug: {' '.join(done.code.split())}", file=sys.stderr)

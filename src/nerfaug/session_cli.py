@@ -22,7 +22,7 @@ import tyro
 
 from nerfaug import serve_cli
 from nerfaug.capture.constraints import ViewConstraints
-from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState
+from nerfaug.capture.state import SESSION_FILE, DuplicateViews, SessionState, UnverifiedCheckpoint
 from nerfaug.cli_hints import none_means
 from nerfaug.cli_options import COMMAND_LINE, given_options
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
@@ -48,10 +48,22 @@ def _device(device: str) -> str:
         raise SystemExit(f"--device: {error}") from None
 
 
-def _open(run: Path, device: str):
+def _open(run: Path, device: str, changing: str | None = None):
+    """The session in `run`; `changing` (the command, e.g. "train") locks it first until the
+    command ends, waiting for another command that changes it (`nerfaug.capture.lock`)."""
     from nerfaug.capture import CaptureSession
 
-    return CaptureSession.open(run, device=_device(device), progress=True)
+    if changing is not None:
+        _lock(run, changing)
+    with _warning_lines():
+        return CaptureSession.open(run, device=_device(device), progress=True)
+
+
+def _lock(run: Path, command: str) -> None:
+    from nerfaug.capture.lock import hold
+
+    if (run / SESSION_FILE).is_file():  # else open() says what is wrong with the folder
+        hold(run, f"nerfaug {command}", on_wait=lambda line: print(line, file=sys.stderr, flush=True))
 
 
 # `nerfaug train` and `add` save the session this often (seconds of training; a killed command
@@ -73,13 +85,15 @@ def _configure(threads: int) -> None:
 
 @contextlib.contextmanager
 def _warning_lines():
-    """Show the capture's warnings (`DuplicateViews`) as one line each, `warning: ...` on stderr."""
+    """Show the capture's warnings (`DuplicateViews`, `UnverifiedCheckpoint`) as one line each,
+    `warning: ...` on stderr."""
     with warnings.catch_warnings():
         warnings.simplefilter("always", DuplicateViews)
+        warnings.simplefilter("always", UnverifiedCheckpoint)
         default = warnings.showwarning
 
         def show(message, category, filename, lineno, file=None, line=None):
-            if issubclass(category, DuplicateViews):
+            if issubclass(category, (DuplicateViews, UnverifiedCheckpoint)):
                 print(f"warning: {message}", file=sys.stderr)
             else:
                 default(message, category, filename, lineno, file, line)
@@ -163,29 +177,6 @@ def _train(session, steps: int, every_s: float = CHECKPOINT_EVERY_S) -> dict:
     return last
 
 
-def _check_poses_out(out: Path, force: bool) -> None:
-    """Refuse to write a proposal over a file that is not an earlier, unedited proposal (or its
-    map), unless `force`."""
-    from nerfaug.capture.proposal import written_by_nerfaug
-    from nerfaug.errors import FolderRefused
-
-    if out.exists() and not out.is_file():
-        raise FolderRefused(f"{out}: not a file; give --out a .json file name")
-    ours = out.is_file() and written_by_nerfaug(out)
-    if force:
-        return
-    if out.is_file() and not ours:
-        raise FolderRefused(
-            f"{out}: exists and is not a poses file nerfaug wrote (or was edited since), so it is not "
-            "overwritten; choose another --out (or --force to overwrite it)"
-        )
-    if out.with_suffix(".png").exists() and not ours:
-        raise FolderRefused(
-            f"{out.with_suffix('.png')}: exists and would be overwritten by the proposal's map; choose another "
-            "--out (or --force to overwrite it)"
-        )
-
-
 def _create(data: Path, out: Path, split: str | None, **options):
     """A new session on `data` in `out`, after one line saying how many views it trains on and why."""
     from nerfaug.capture import CaptureSession
@@ -196,8 +187,9 @@ def _create(data: Path, out: Path, split: str | None, **options):
     if split is None:
         split, why = default_split(data)
     print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
-    with _warning_lines():
+    with _warning_lines(), _as_options():
         session = CaptureSession.create(data, out, split=split, progress=True, **options)
+    _lock(out, "train")
     h = session.hemisphere
     print(
         f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
@@ -274,7 +266,7 @@ def train(
                 f"{options}: only for a new session; {path / SESSION_FILE} keeps this session's "
                 "settings, so drop them (or start a new session with `nerfaug train DATA --out NEW_RUN`)"
             )
-        session = _open(path, device)
+        session = _open(path, device, changing="train")
         print(f"training {path} further: {len(session.trainer.train_views)} views, from step {session.step}")
     else:
         if out is None:
@@ -347,10 +339,12 @@ def propose(
             to the hemisphere's candidates or to --candidates.
         min_separation: keep every two proposed views at least this many degrees apart, seen
             from the hemisphere's centre (0: off, the method's own choice).
-        force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
+        force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited
+            (never inside a capture session's folder: its proposals are its own record).
         threads: torch threads for scoring the candidates.
     """
     from nerfaug.capture.choose import ProposalRequest
+    from nerfaug.capture.proposal import check_poses_out
 
     request = ProposalRequest(
         n,
@@ -364,9 +358,9 @@ def propose(
     )
     with _as_options():
         request = request.checked()  # before the session is opened: a refused call loads nothing
-    _check_poses_out(out, force)
+    check_poses_out(out, force)
     _configure(threads)
-    session = _open(run, device)
+    session = _open(run, device, changing="propose")
     proposal = session.propose(
         request.n,
         request.method,
@@ -415,7 +409,7 @@ def add(
     _check_steps(steps)  # before anything is written: a refused call changes nothing
     _check_period(checkpoint_every)
     _configure(threads)
-    session = _open(run, device)
+    session = _open(run, device, changing="add")
     with _warning_lines():
         names = session.add_views(images, poses)
     session.save()  # the addition's record is kept even if training is stopped at once
