@@ -88,6 +88,16 @@ QUICK: dict[str, dict] = {
         ],
         "needs": "{work}/synthetic/transforms_initial.json",
     },
+    "bench_dense": {
+        "always": ["--data", "{work}/synthetic", "--threads", "1", "--out", "{work}/dense.json"],
+        "small": None,
+        "needs": "{work}/synthetic/transforms_train.json",
+    },
+    "bench_engine_walk": {
+        "always": ["--data", "{work}/synthetic", "--threads", "1", "--out", "{work}/walk"],
+        "small": None,
+        "needs": "{work}/synthetic/transforms_initial.json",
+    },
     "bench_trial": {
         "always": ["--data", "{work}/synthetic", "--threads", "1"],
         "small": ["--steps", "240", "--n-test", "3", "--no-lpips"],

@@ -223,11 +223,15 @@ def main(argv: list[str] | None = None) -> None:
     if threading.current_thread() is threading.main_thread():  # signal handlers live in the main thread
         previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        if not wants_help(argv):  # --help imports no torch: it only reads the options
+        if wants_help(argv):  # --help imports no torch: it only reads the options
+            _dispatch(argv)
+        else:
+            from nerfaug.capture.lock import command_scope
             from nerfaug.device import configure_process
 
             configure_process()
-        _dispatch(argv)
+            with command_scope():  # a session a command locked is unlocked when it ends
+                _dispatch(argv)
     except SystemExit as done:
         if isinstance(done.code, str):  # a command's own refusal: one line, bad input
             print(f"nerfaug: {' '.join(done.code.split())}", file=sys.stderr)

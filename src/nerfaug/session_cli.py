@@ -32,29 +32,6 @@ DEFAULT_SELECTION = SelectionConfig()
 DEFAULT_CONSTRAINTS = ViewConstraints()
 
 
-def _check_poses_out(out: Path, force: bool) -> None:
-    """Refuse to write a proposal over a file that is not an earlier, unedited proposal (or its
-    map), unless `force`."""
-    from nerfaug.capture.proposal import written_by_nerfaug
-    from nerfaug.errors import FolderRefused
-
-    if out.exists() and not out.is_file():
-        raise FolderRefused(f"{out}: not a file; give --out a .json file name")
-    ours = out.is_file() and written_by_nerfaug(out)
-    if force:
-        return
-    if out.is_file() and not ours:
-        raise FolderRefused(
-            f"{out}: exists and is not a poses file nerfaug wrote (or was edited since), so it is not "
-            "overwritten; choose another --out (or --force to overwrite it)"
-        )
-    if out.with_suffix(".png").exists() and not ours:
-        raise FolderRefused(
-            f"{out.with_suffix('.png')}: exists and would be overwritten by the proposal's map; choose another "
-            "--out (or --force to overwrite it)"
-        )
-
-
 def propose(
     run: RunFolder,
     n: int = 6,
@@ -102,10 +79,12 @@ def propose(
             to the hemisphere's candidates or to --candidates.
         min_separation: keep every two proposed views at least this many degrees apart, seen
             from the hemisphere's centre (0: off, the method's own choice).
-        force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited.
+        force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited
+            (never inside a capture session's folder: its proposals are its own record).
         threads: torch threads for scoring the candidates.
     """
     from nerfaug.capture.choose import ProposalRequest
+    from nerfaug.capture.proposal import check_poses_out
 
     request = ProposalRequest(
         n,
@@ -119,9 +98,9 @@ def propose(
     )
     with _as_options():
         request = request.checked()  # before the session is opened: a refused call loads nothing
-    _check_poses_out(out, force)
+    check_poses_out(out, force)
     _configure(threads)
-    session = _open(run, device)
+    session = _open(run, device, changing="propose")
     proposal = session.propose(
         request.n,
         request.method,

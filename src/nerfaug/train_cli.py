@@ -54,10 +54,23 @@ def _device(device: str) -> str:
         raise SystemExit(f"--device: {error}") from None
 
 
-def _open(run: Path, device: str):
+def _open(run: Path, device: str, changing: str | None = None):
+    """The session in `run`; `changing` (the command, e.g. "train") locks it first until the
+    command ends, waiting for another command that changes it (`nerfaug.capture.lock`)."""
     from nerfaug.capture import CaptureSession
 
-    return CaptureSession.open(run, device=_device(device), progress=True)
+    if changing is not None:
+        _lock(run, changing)
+    with _warning_lines():
+        return CaptureSession.open(run, device=_device(device), progress=True)
+
+
+def _lock(run: Path, command: str) -> None:
+    from nerfaug.capture.lock import hold
+    from nerfaug.capture.state import SESSION_FILE
+
+    if (run / SESSION_FILE).is_file():  # else open() says what is wrong with the folder
+        hold(run, f"nerfaug {command}", on_wait=lambda line: print(line, file=sys.stderr, flush=True))
 
 
 def _configure(threads: int) -> None:
@@ -70,15 +83,17 @@ def _configure(threads: int) -> None:
 
 @contextlib.contextmanager
 def _warning_lines():
-    """Show the capture's warnings (`DuplicateViews`) as one line each, `warning: ...` on stderr."""
-    from nerfaug.capture.state import DuplicateViews
+    """Show the capture's warnings (`DuplicateViews`, `UnverifiedCheckpoint`) as one line each,
+    `warning: ...` on stderr."""
+    from nerfaug.capture.state import DuplicateViews, UnverifiedCheckpoint
 
     with warnings.catch_warnings():
         warnings.simplefilter("always", DuplicateViews)
+        warnings.simplefilter("always", UnverifiedCheckpoint)
         default = warnings.showwarning
 
         def show(message, category, filename, lineno, file=None, line=None):
-            if issubclass(category, DuplicateViews):
+            if issubclass(category, (DuplicateViews, UnverifiedCheckpoint)):
                 print(f"warning: {message}", file=sys.stderr)
             else:
                 default(message, category, filename, lineno, file, line)
@@ -179,8 +194,9 @@ def _create(data: Path, out: Path, split: str | None, **options):
     if split is None:
         split, why = default_split(data)
     print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
-    with _warning_lines():
+    with _warning_lines(), _as_options():
         session = CaptureSession.create(data, out, split=split, progress=True, **options)
+    _lock(out, "train")
     h = session.hemisphere
     print(
         f"session created in {out}: {len(session.trainer.train_views)} views; hemisphere centre "
@@ -378,7 +394,7 @@ def train(
         )
         return
     _configure(threads)
-    session = _open(run, device)
+    session = _open(run, device, changing="train")
     verb = "resuming" if data is not None else "training"
     print(
         f"{run}: {verb} from step {session.step}, its last save, until step {steps} "
@@ -425,7 +441,7 @@ def add(
     _check_steps(steps)  # before anything is written: a refused call changes nothing
     _check_period(checkpoint_every)
     _configure(threads)
-    session = _open(run, device)
+    session = _open(run, device, changing="add")
     with _warning_lines():
         names = session.add_views(images, poses)
     session.save()  # the addition's record is kept even if training is stopped at once

@@ -119,7 +119,8 @@ def test_the_data_package_has_no_import_cycle():
 
     for module in graph:
         visit(module, [])
-    assert all("nerfaug.data.formats" not in targets for targets in graph.values())
+    # No format imports the registry that picks it; only `prepare`, which copies any format, sits above it.
+    assert [m for m, targets in graph.items() if "nerfaug.data.formats" in targets] == ["nerfaug.data.prepare"]
     assert graph["nerfaug.data.views"] == set()
     assert graph["nerfaug.data.errors"] == set()
 

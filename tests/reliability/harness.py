@@ -66,13 +66,21 @@ def run_cli(argv: list[str], cwd: Path | None = None) -> Outcome:
     return Outcome(code, out.getvalue(), err.getvalue(), escaped)
 
 
+# A session's lock file says who last took the session's lock (`nerfaug.capture.lock`): a
+# command takes it before it reads the session, so it is not the session's data and not compared.
+LOCK_FILE = ".lock"
+
+
 def tree_hash(folder: Path) -> dict[str, str]:
-    """Every file and folder under `folder` (relative path -> sha256, or "dir"); {} if absent."""
+    """Every file and folder under `folder` (relative path -> sha256, or "dir"), but a session's
+    lock file; {} if absent."""
     folder = Path(folder)
     if folder.is_file():
         return {".": hashlib.sha256(folder.read_bytes()).hexdigest()}
     found = {}
     for path in sorted(folder.rglob("*")) if folder.exists() else []:
+        if path.name == LOCK_FILE:
+            continue
         rel = str(path.relative_to(folder))
         found[rel] = "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
     return found

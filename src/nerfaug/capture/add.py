@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -31,10 +31,12 @@ class Addition:
     Attributes:
         names: the new frames' names (image file stems).
         frames: the images as the bytes to store, with their world-frame poses.
+        warnings: what was warned about (`DuplicateViews`), one line each.
     """
 
     names: list[str]
     frames: list[NewFrame]
+    warnings: list[str] = field(default_factory=list)
 
 
 def prepare_addition(
@@ -119,12 +121,12 @@ def prepare_addition(
             raise DatasetError(pose_source, "two new images share this name", field=f"names[{i}]", value=name)
         seen.add(name)
 
-    warn_repeated_poses(frames, checked, expected_names, pose_source)
+    repeated = warn_repeated_poses(frames, checked, expected_names, pose_source)
     new_frames = []
     for name, capture, pose in zip(expected_names, captures, checked):
         data, suffix = stored_bytes(capture, png_only=dataset.format.png_only)
         new_frames.append(NewFrame(name, data, suffix, pose.double().tolist()))
-    return Addition(list(expected_names), new_frames)
+    return Addition(list(expected_names), new_frames, repeated)
 
 
 def write_addition(addition: Addition, dataset: DatasetSplit, camera: Cameras) -> dict[str, str]:
@@ -134,9 +136,10 @@ def write_addition(addition: Addition, dataset: DatasetSplit, camera: Cameras) -
     return {str(f["file_path"]): sha256_bytes(new.data) for f, new in zip(listed, addition.frames)}
 
 
-def warn_repeated_poses(frames: list, poses: torch.Tensor, names: Sequence[str], source: str) -> None:
+def warn_repeated_poses(frames: list, poses: torch.Tensor, names: Sequence[str], source: str) -> list[str]:
     """Warn (`DuplicateViews`) for each new pose equal to a pose already in the dataset or to
     another new one: the same view added twice trains on one viewpoint as if it were two.
+    Returns the warnings' lines (for a caller that reports them elsewhere, as the service does).
 
     Args:
         frames: the dataset's frames (each with a `transform_matrix`).
@@ -150,10 +153,9 @@ def warn_repeated_poses(frames: list, poses: torch.Tensor, names: Sequence[str],
     every = torch.cat([old, new])
     labels = [f"{n} (in the dataset)" for n in old_names] + list(names)
     close = (new[:, None] - every[None]).abs().amax(-1) <= 1e-5  # float32 poses read back
+    lines = []
     for i, j in close.nonzero().tolist():
         if j < len(old) or j - len(old) > i:
-            warnings.warn(
-                f"{source}: new view {names[i]} has the same pose as {labels[j]} (the same view added twice)",
-                DuplicateViews,
-                stacklevel=4,
-            )
+            lines.append(f"{source}: new view {names[i]} has the same pose as {labels[j]} (the same view added twice)")
+            warnings.warn(lines[-1], DuplicateViews, stacklevel=4)
+    return lines

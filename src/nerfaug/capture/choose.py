@@ -17,7 +17,7 @@ from nerfaug.capture.constraints import ViewConstraints, constrained_indices
 from nerfaug.capture.images import as_array
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.requests import RequestError
+from nerfaug.capture.requests import RequestError, check_seed
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frame import ENGINE_RADIUS
 from nerfaug.data.frames import check_pose
@@ -75,8 +75,7 @@ class ProposalRequest:
             raise RequestError("n", self.n, "must be >= 1 (a whole number of views to propose)")
         if int(self.n_candidates) < 1:
             raise RequestError("n_candidates", self.n_candidates, "must be >= 1")
-        if self.seed is not None and int(self.seed) < 0:
-            raise RequestError("seed", self.seed, "must be >= 0")
+        seed = None if self.seed is None else check_seed(self.seed)
         if not 0 <= float(self.min_separation) < 180:
             raise RequestError("min_separation", self.min_separation, "must be in [0, 180) degrees")
         config = SelectionConfig.from_dict(self.config) if isinstance(self.config, dict) else self.config
@@ -86,7 +85,12 @@ class ProposalRequest:
         elif constraints is not None:
             constraints = constraints.check()
         return replace(
-            self, n=int(self.n), config=config, constraints=constraints, min_separation=float(self.min_separation)
+            self,
+            n=int(self.n),
+            seed=seed,
+            config=config,
+            constraints=constraints,
+            min_separation=float(self.min_separation),
         )
 
 

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import hashlib
 import io
+import json
+import warnings
 from pathlib import Path
 
 import torch
 
-from nerfaug.capture.state import SESSION_FILE, Integrity, SessionError
+from nerfaug.capture.state import SESSION_FILE, Integrity, SessionError, UnverifiedCheckpoint
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import DatasetSplit
 
@@ -55,6 +57,45 @@ def check_checkpoint(path: Path, integrity: Integrity) -> None:
             f"{path}: not this session's checkpoint (sha256 {found[:12]}..., session.json records "
             f"{integrity.checkpoint[:12]}...): it was replaced, e.g. copied from another session; {_RESTORE}"
         )
+
+
+def check_unrecorded_checkpoint(path: Path, trainer, seed: int, engine: dict, frames: list) -> None:
+    """For a session saved before digests were kept: refuse a checkpoint whose seed, engine or
+    training views are not the session's (e.g. copied from another session), else warn
+    (`UnverifiedCheckpoint`) that it could not be checked by content.
+
+    Args:
+        path: the checkpoint file.
+        trainer: the `Trainer` loaded from it.
+        seed, engine: the session's seed and engine settings (session.json).
+        frames: the session dataset's frames, in order.
+
+    Raises:
+        SessionError: naming the checkpoint and what differs.
+    """
+    names = [str(f.get("file_path")) if isinstance(f, dict) else "?" for f in frames]
+    trained = [str(n) for n in trainer.train_views.names]
+    config = json.loads(json.dumps(trainer.config.to_dict()))  # as session.json holds it (lists, not tuples)
+    differs = [k for k in sorted(set(config) & set(engine)) if config[k] != engine[k]]
+    problem = None
+    if int(trainer.seed) != int(seed):
+        problem = f"its seed is {trainer.seed}, the session's {seed}"
+    elif differs:
+        problem = f"its engine setting {differs[0]!r} is {config[differs[0]]!r}, the session's {engine[differs[0]]!r}"
+    elif trained[: len(names)] != names[: len(trained)]:
+        i = next(i for i, (a, b) in enumerate(zip(trained, names)) if a != b)
+        problem = f"it was trained on view {trained[i]!r} where the session's dataset has {names[i]!r}"
+    if problem is not None:
+        raise SessionError(
+            f"{path}: not this session's checkpoint ({problem}): it was replaced, e.g. copied from another "
+            f"session; {_RESTORE}"
+        )
+    warnings.warn(
+        f"{path}: {SESSION_FILE} records no digest of it (saved by an earlier nerfaug), so it is used as found; "
+        "its digest is recorded at the next save",
+        UnverifiedCheckpoint,
+        stacklevel=3,
+    )
 
 
 def capture_digests(dataset: DatasetSplit, frames: list, start: int = 0) -> dict[str, str]:

@@ -3,6 +3,8 @@ JSON (world-frame poses, every candidate's score) that a robot, Blender or `add_
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,10 +14,13 @@ import torch
 from torch import Tensor
 
 import nerfaug
+from nerfaug import owned
 from nerfaug.cameras import Cameras
+from nerfaug.capture.state import RUN_KIND, SESSION_FILE
 from nerfaug.data import DatasetError
 from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import check_pose
+from nerfaug.errors import FolderRefused
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
 
 
@@ -131,9 +136,11 @@ class Proposal:
         data = self.transforms(include_candidates)
         if self.map_path is not None and Path(self.map_path).exists():
             map_copy = path.with_suffix(".png")
+            image = Path(self.map_path).read_bytes()
             if Path(self.map_path).resolve() != map_copy.resolve():
-                atomic_write_bytes(map_copy, Path(self.map_path).read_bytes())
+                atomic_write_bytes(map_copy, image)
             data["nerfaug"]["map"] = map_copy.name
+            data["nerfaug"]["map_sha256"] = hashlib.sha256(image).hexdigest()
         data["nerfaug"]["frames_sha256"] = frames_digest(data["frames"])
         atomic_write_json(path, data)
         return path
@@ -142,22 +149,72 @@ class Proposal:
 def frames_digest(frames: list) -> str:
     """A digest of a poses file's frames: a file whose frames no longer match the digest written
     with them was edited (e.g. poses a robot actually reached) and is not nerfaug's to overwrite."""
-    import hashlib
-    import json
-
     return hashlib.sha256(json.dumps(frames, sort_keys=True).encode()).hexdigest()
 
 
 def written_by_nerfaug(path: str | Path) -> bool:
     """Whether `path` is a poses file `Proposal.write` wrote and nobody edited since."""
-    import json
-
     try:
         data = json.loads(Path(path).read_text())
         info = data["nerfaug"]
         return isinstance(info["proposal"], int) and info["frames_sha256"] == frames_digest(data["frames"])
     except (OSError, ValueError, KeyError, TypeError):
         return False
+
+
+def map_written_by_nerfaug(path: str | Path) -> bool:
+    """Whether the map beside the poses file `path` (same name, .png) is the one `Proposal.write`
+    wrote with it, unchanged since (its digest is recorded in the poses file)."""
+    path = Path(path)
+    try:
+        recorded = json.loads(path.read_text())["nerfaug"]["map_sha256"]
+        found = hashlib.sha256(path.with_suffix(".png").read_bytes()).hexdigest()
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return written_by_nerfaug(path) and found == recorded
+
+
+def session_folder_of(path: str | Path) -> Path | None:
+    """The capture session's run folder `path` lies in (a folder holding session.json or marked as
+    a run folder), or None."""
+    for folder in Path(path).resolve().parents:
+        if (folder / SESSION_FILE).is_file() or owned.marked(folder, RUN_KIND):
+            return folder
+    return None
+
+
+def check_poses_out(out: str | Path, force: bool = False) -> None:
+    """Refuse to write a proposal (`out` and the map beside it, `out` with .png) over a file
+    nerfaug did not write, or that was edited since (unless `force`), and always inside a
+    capture session's folder (its proposals/ are the session's own record).
+
+    Raises:
+        FolderRefused: naming the file and what to do.
+    """
+    out = Path(out)
+    image = out.with_suffix(".png")
+    if out.suffix.lower() == ".png":
+        raise FolderRefused(f"{out}: the map is written beside the poses file with .png; give --out a .json file name")
+    if out.exists() and not out.is_file():
+        raise FolderRefused(f"{out}: not a file; give --out a .json file name")
+    session = session_folder_of(out)
+    if session is not None:
+        raise FolderRefused(
+            f"{out}: lies inside the capture session {session}, whose files are its own record; choose an "
+            "--out outside it (the session keeps every proposal in its proposals folder)"
+        )
+    if force:
+        return
+    if out.is_file() and not written_by_nerfaug(out):
+        raise FolderRefused(
+            f"{out}: exists and is not a poses file nerfaug wrote (or was edited since), so it is not "
+            "overwritten; choose another --out (or --force to overwrite it)"
+        )
+    if image.exists() and not (out.is_file() and map_written_by_nerfaug(out)):
+        raise FolderRefused(
+            f"{image}: exists and is not the map nerfaug wrote with {out.name} (or was changed since), and "
+            "would be overwritten by the proposal's map; choose another --out (or --force to overwrite it)"
+        )
 
 
 def read_poses(path: str | Path) -> tuple[Tensor, list[str]]:

@@ -5,6 +5,7 @@ A session lives in a run folder:
 
     run/
       .nerfaug              marker: nerfaug made this folder (nothing is removed from a folder without it)
+      .lock                 who changes the session now (`nerfaug.capture.lock`; the commands and the service)
       session.json          state (`SessionState`): step, seed, engine, intrinsics, hemisphere, proposals, additions
       checkpoint.pt         the trainer (`Trainer.save_checkpoint`): model, optimiser, RNG, views
       dataset/              the dataset as it has grown, as the train split of a registered format
@@ -33,7 +34,7 @@ from nerfaug.capture.dataset import duplicate_frames, engine_views
 from nerfaug.capture.evaluate import evaluate_model, load_held_out
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
-from nerfaug.capture.requests import check_steps
+from nerfaug.capture.requests import check_radius, check_seed, check_split, check_steps
 from nerfaug.capture.runfolder import check_new_run
 from nerfaug.capture.state import (
     CHECKPOINT_FILE,
@@ -132,7 +133,6 @@ class CaptureSession:
                 or lies inside it, or is a session folder that lost its session.json.
         """
         from nerfaug.nerf.config import NerfConfig
-        from nerfaug.nerf.trainer import Trainer
 
         data_dir, run_dir = Path(data_dir).resolve(), Path(run_dir)
         if (run_dir / SESSION_FILE).exists():
@@ -141,8 +141,9 @@ class CaptureSession:
                 "(`nerfaug train RUN` trains it further)"
             )
         check_new_run(data_dir, run_dir)
-        if int(seed) < 0:
-            raise ValueError(f"seed must be >= 0, got {seed}")
+        seed, split = check_seed(seed), check_split(split)
+        if radius is not None:
+            radius = check_radius(radius)
         if int(downscale) < 1:
             raise ValueError(f"downscale must be a positive integer, got {downscale}")
         if len(background) != 3 or not all(0 <= float(c) <= 1 for c in background):
@@ -162,8 +163,34 @@ class CaptureSession:
         preset_name = preset if config is None else "custom"
         config = config if config is not None else NerfConfig.preset(preset)
 
-        # Everything is checked: from here on the run folder is written, and marked as nerfaug's first.
+        # Everything is checked: from here on the run folder is written, and marked as nerfaug's first;
+        # a failure (an unreadable image, Ctrl-C) removes what was written, leaving no half-made session.
+        existed = run_dir.exists()
         owned.mark(run_dir, RUN_KIND)
+        settings = {
+            "seed": seed,
+            "downscale": downscale,
+            "background": background,
+            "centre": centre,
+            "radius": radius,
+            "up": up,
+            "data_dir": data_dir,
+            "split": split,
+            "preset": preset_name,
+        }
+        try:
+            return cls._build(run_dir, source, cameras, store, hemisphere, config, device, progress, settings)
+        except BaseException:
+            _remove_unfinished(run_dir, existed)
+            raise
+
+    @classmethod
+    def _build(cls, run_dir, source, cameras, store, hemisphere, config, device, progress, settings: dict):
+        """`create`'s writing half, once everything is checked: the dataset copy, the state, the NeRF."""
+        from nerfaug.nerf.trainer import Trainer
+
+        seed, downscale, background = settings["seed"], settings["downscale"], settings["background"]
+        centre, radius, up, data_dir, split = (settings[k] for k in ("centre", "radius", "up", "data_dir", "split"))
         # The dataset folder is new: check_new_run refused a run folder holding anything.
         dataset = DatasetSplit(run_dir / DATASET_DIR, store, DATASET_SPLIT)
         owned.mark(dataset.root, DATASET_KIND)
@@ -172,7 +199,7 @@ class CaptureSession:
         state = SessionState(
             source=SourceInfo(str(data_dir), split, source.format.name),
             dataset=DatasetInfo.of(store),
-            preset=preset_name,
+            preset=settings["preset"],
             engine=config.to_dict(),
             seed=int(seed),
             downscale=int(downscale),
@@ -237,6 +264,8 @@ class CaptureSession:
         in_model = len(trainer.train_views)
         session._saved = (trainer.step, in_model)
         frames = session.frames()
+        if state.integrity.checkpoint is None:
+            integrity.check_unrecorded_checkpoint(checkpoint, trainer, state.seed, state.engine, frames)
         if len(frames) < in_model:
             raise SessionError(
                 f"{dataset.listing} lists {len(frames)} frames but the checkpoint was "
@@ -458,7 +487,11 @@ class CaptureSession:
         self.state.views_in_model = len(self.trainer.train_views)
         matched = [p.number for p in self.state.proposals if set(addition.names) <= set(p.names)]
         record = AdditionRecord(
-            step=self.step, names=list(addition.names), proposal=matched[-1] if matched else None, created=now()
+            step=self.step,
+            names=list(addition.names),
+            proposal=matched[-1] if matched else None,
+            created=now(),
+            extra={"warnings": list(addition.warnings)} if addition.warnings else {},
         )
         self.state.additions.append(record)
         return list(addition.names)
@@ -485,7 +518,7 @@ class CaptureSession:
     def held_out(self, data: str | Path, split: str = "test", max_views: int | None = None) -> Views:
         """`split` of the dataset folder `data` (same scene and world frame) at the training
         resolution, over the session's background: what `evaluate` scores."""
-        return load_held_out(data, split, self.state.downscale, self.state.background, max_views)
+        return load_held_out(data, check_split(split), self.state.downscale, self.state.background, max_views)
 
     def evaluate(self, views: Views, lpips="auto", progress: bool = False) -> EvaluationResult:
         """PSNR, SSIM and LPIPS of the NeRF's renders of world-frame `views` (`held_out`) against
@@ -521,3 +554,18 @@ class CaptureSession:
             source.split,
             source_splits,
         )
+
+
+def _remove_unfinished(run_dir: Path, existed: bool) -> None:
+    """Remove what a failed `create` wrote: the run folder, or its contents when it was there
+    before (empty or only nerfaug's marker: `check_new_run` refused anything else)."""
+    import shutil
+
+    if not existed:
+        shutil.rmtree(run_dir, ignore_errors=True)
+        return
+    for path in run_dir.iterdir():
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)

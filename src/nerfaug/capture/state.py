@@ -41,6 +41,11 @@ class DuplicateViews(UserWarning):
     """The same view (camera pose) twice in a dataset or an addition; the message names the frames."""
 
 
+class UnverifiedCheckpoint(UserWarning):
+    """A checkpoint that session.json records no digest of (a session saved before digests were
+    kept) is used; the message names it. Its digest is recorded at the next save."""
+
+
 def now() -> str:
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
 

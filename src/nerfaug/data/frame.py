@@ -172,6 +172,11 @@ class Hemisphere:
         return cls(tuple(data["centre"]), float(data["radius"]), tuple(data["up"]))
 
 
+# A given radius farther than this factor from the cameras' distance to the centre is refused:
+# the engine frame scales the scene by it, and the cameras would leave the NeRF's box.
+RADIUS_FACTOR = 1000.0
+
+
 def estimate_hemisphere(
     camera_to_world: Tensor, centre=None, radius: float | None = None, up=(0.0, 0.0, 1.0)
 ) -> Hemisphere:
@@ -193,6 +198,12 @@ def estimate_hemisphere(
             raise ValueError(f"up must be a 3-vector or 'estimate', got {up!r}")
         up = estimate_up(poses)
     centre = estimate_centre(poses) if centre is None else torch.as_tensor(centre, dtype=torch.float64)
+    distance = float((poses[:, :3, 3] - centre).norm(dim=-1).mean())
     if radius is None:
-        radius = float((poses[:, :3, 3] - centre).norm(dim=-1).mean())
+        radius = distance
+    elif distance > 0 and not distance / RADIUS_FACTOR <= float(radius) <= distance * RADIUS_FACTOR:
+        raise ValueError(
+            f"radius {float(radius):g}: the cameras lie {distance:.4g} from the centre on average; give a radius "
+            f"within {RADIUS_FACTOR:g}x of that (or none: their mean distance)"
+        )
     return Hemisphere(tuple(centre.tolist()), radius, tuple(torch.as_tensor(up, dtype=torch.float64).tolist()))

@@ -8,6 +8,11 @@ The names a choice field may take are listed here, next to the field: `REJECTION
 
 from __future__ import annotations
 
+import functools
+import math
+import numbers
+import types
+import typing
 from dataclasses import asdict, dataclass, fields, replace
 from types import MappingProxyType
 from typing import Annotated
@@ -64,6 +69,50 @@ AUTHORS_SETTINGS = MappingProxyType(
         "scoring_crop": 0.5,  # ... of which only the central 400x400 of 800x800 is used
     }
 )
+
+
+def _fits(value, hint, finite: bool = True) -> bool:
+    """Whether `value` has the type `hint` names (int, float, str, None, their unions, lists and
+    tuples of them); a bool is not a number, and a float must be `finite` (inside a list or tuple
+    the field's own check says what is wrong with its numbers)."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(_fits(value, arg, finite) for arg in args)
+    if hint is type(None):
+        return value is None
+    if isinstance(value, bool) and hint is not bool:
+        return False
+    if hint is float:
+        return isinstance(value, numbers.Real) and (not finite or math.isfinite(value))
+    if hint is int:
+        return isinstance(value, numbers.Integral)
+    if hint in (str, bool):
+        return isinstance(value, hint)
+    if origin in (list, tuple) and not isinstance(value, (list, tuple)):
+        return False
+    if origin is list or (origin is tuple and len(args) == 2 and args[1] is Ellipsis):
+        return all(_fits(v, args[0], finite=False) for v in value)
+    if origin is tuple:
+        return len(value) == len(args) and all(_fits(v, a, finite=False) for v, a in zip(value, args))
+    return True
+
+
+@functools.cache
+def _field_types(cls) -> dict:
+    return typing.get_type_hints(cls)
+
+
+def _type_problem(config) -> str | None:
+    """The first field of `config` whose value is not of its declared type, as one line, or None."""
+    hints = _field_types(type(config))
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if not _fits(value, hints[f.name]):
+            hint = hints[f.name]
+            words = {float: "a finite number", int: "a whole number", str: "a string", bool: "true or false"}
+            wanted = words.get(hint) or "of type " + str(hint).replace("typing.", "").replace("NoneType", "None")
+            return f"SelectionConfig.{f.name}={value!r} must be {wanted}"
+    return None
 
 
 def _metric_problem(metric) -> str | None:
@@ -194,6 +243,8 @@ class SelectionConfig:
     batch_entropy_sigma: Annotated[float | None, none_means("no discount", "RADIANS")] = None
 
     def __post_init__(self) -> None:
+        if problem := _type_problem(self):  # before any comparison: "abc" >= 0 would be a TypeError
+            raise ValueError(problem)
         for name, value, valid in [
             ("entropy_mode", self.entropy_mode, ENTROPY_MODES),
             ("normalisation", self.normalisation, NORMALISATIONS),

@@ -1,6 +1,9 @@
 """The HTTP API over a `SessionHub`: FastAPI routes, thin over the library (the same
-`CaptureSession` calls the CLI makes), the token check, the upload limits, and every error as
-`{"detail": "one line"}` (`nerfaug.service.errors`).
+`CaptureSession` calls the CLI makes), the token check, the request limits (`limits`), and every
+error as `{"detail": "one line"}` (`nerfaug.service.errors`).
+
+Health and session states are answered on the event loop from snapshots; every other request's
+work runs in the hub's bounded per-session queues (`work`), so a busy session never delays them.
 
     GET  /health                                 liveness, version, session ids
     GET  /sessions                               session ids
@@ -16,8 +19,10 @@
 
 from __future__ import annotations
 
+import asyncio
 import functools
 import hmac
+import inspect
 from contextlib import asynccontextmanager
 from pathlib import Path
 
@@ -27,6 +32,7 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from pydantic import ValidationError
+from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
 from swagger_ui_bundle import swagger_ui_path
 
@@ -34,10 +40,11 @@ import nerfaug
 from nerfaug.service import models
 from nerfaug.service.errors import ServiceError, bad_input, status_of
 from nerfaug.service.hub import SessionHub, check_session_id
-from nerfaug.service.uploads import MEGABYTE, check_names, check_poses, parse_json_field, read_upload, write_uploads
+from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
+from nerfaug.service.uploads import check_names, check_poses, parse_json_field, read_upload, write_uploads
 
-# A request may carry this many images of the upload limit (plus the form's other fields).
-MAX_IMAGES_PER_REQUEST = 64
+# Kept for clients of earlier versions: images one request may carry.
+MAX_IMAGES_PER_REQUEST = MAX_CAPTURES_PER_REQUEST
 # Where the API page's script and style are served from: Swagger UI's files as the package
 # `swagger_ui_bundle` ships them, so /docs works on a closed network (FastAPI's own page loads
 # them from a CDN).
@@ -56,21 +63,48 @@ def validation_line(errors: list[dict]) -> str:
     return " ".join(text.split())
 
 
+def _as_service_error(error: Exception) -> ServiceError:
+    if isinstance(error, ServiceError):
+        return error
+    if isinstance(error, ValidationError):
+        return bad_input(validation_line(error.errors()))
+    return ServiceError(*status_of(error))
+
+
 def answers(endpoint):
-    """Turn a library error raised by `endpoint` into its HTTP status (one place: `status_of`)."""
+    """Turn a library error raised by `endpoint` (or by the work it awaited) into its HTTP status
+    (one place: `status_of`)."""
+    if inspect.iscoroutinefunction(endpoint):
+
+        @functools.wraps(endpoint)
+        async def waiting(*args, **kwargs):
+            try:
+                return await endpoint(*args, **kwargs)
+            except Exception as error:  # noqa: BLE001 -- mapped to a status, never a traceback to the client
+                raise _as_service_error(error) from None
+
+        return waiting
 
     @functools.wraps(endpoint)
     def wrapper(*args, **kwargs):
         try:
             return endpoint(*args, **kwargs)
-        except ServiceError:
-            raise
-        except ValidationError as error:
-            raise bad_input(validation_line(error.errors())) from None
         except Exception as error:  # noqa: BLE001 -- mapped to a status, never a traceback to the client
-            raise ServiceError(*status_of(error)) from None
+            raise _as_service_error(error) from None
 
     return wrapper
+
+
+async def done(future):
+    """The result of work queued in the hub (`SessionHub.submit`), awaited without blocking the loop."""
+    return await asyncio.wrap_future(future)
+
+
+def check_count(images: list, field: str = "images") -> None:
+    if len(images) > MAX_CAPTURES_PER_REQUEST:
+        raise ServiceError(
+            413, f"{field}: {len(images)} files; a request may carry at most {MAX_CAPTURES_PER_REQUEST} images"
+        )
 
 
 def _token_ok(request: Request, token: str) -> bool:
@@ -85,7 +119,7 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         hub: the sessions.
         token: when given, every request must send `Authorization: Bearer TOKEN`.
         max_upload_mb: the largest image file accepted (a request may hold
-            `MAX_IMAGES_PER_REQUEST` of them).
+            `MAX_CAPTURES_PER_REQUEST` of them).
     """
     limit = int(max_upload_mb * MEGABYTE)
 
@@ -119,15 +153,13 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
     async def guard(request: Request, call_next):
         if token is not None and not _token_ok(request, token):
             return JSONResponse({"detail": "missing or wrong token: send 'Authorization: Bearer TOKEN'"}, 401)
-        length = request.headers.get("content-length", "")
-        if length.isdigit() and int(length) > limit * MAX_IMAGES_PER_REQUEST + MEGABYTE:
-            size, most = int(length) / MEGABYTE, limit * MAX_IMAGES_PER_REQUEST / MEGABYTE
-            return JSONResponse({"detail": f"request body: {size:.1f} MB is over the limit of {most:g} MB"}, 413)
         return await call_next(request)
+
+    app.add_middleware(BodyLimit, max_upload_bytes=limit)  # outermost: before anything reads the body
 
     @app.exception_handler(ServiceError)
     async def service_error(request, error: ServiceError):
-        return JSONResponse({"detail": error.message}, error.status)
+        return JSONResponse({"detail": error.message}, error.status, headers=error.headers)
 
     @app.exception_handler(RequestValidationError)
     async def invalid(request, error: RequestValidationError):
@@ -138,69 +170,77 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         return JSONResponse({"detail": " ".join(str(error.detail).split())}, error.status_code)
 
     @app.get("/health", response_model=models.Health)
-    def health():
+    async def health():
         return {"status": "ok", "version": nerfaug.__version__, "sessions": hub.ids()}
 
     @app.get("/sessions", response_model=list[str])
-    def sessions():
+    async def sessions():
         return hub.ids()
 
     @app.post("/sessions/from-dataset", status_code=201, response_model=models.SessionState)
     @answers
-    def create_from_dataset(request: models.CreateFromDataset):
+    async def create_from_dataset(request: models.CreateFromDataset):
         from nerfaug.capture import CaptureSession
 
-        data = hub.dataset_path(request.dataset)
-        return hub.created(
-            request.id,
-            lambda folder: CaptureSession.create(
-                data, folder, split=request.split or "train", device=hub.device, **_settings(request)
-            ),
-        )
+        split = request.split or "train"
+        data = hub.dataset_path(request.dataset, split)
+        create = functools.partial(CaptureSession.create, data, split=split, device=hub.device, **_settings(request))
+        return await done(hub.submit_create(request.id, create))
 
     @app.post("/sessions/from-uploads", status_code=201, response_model=models.SessionState)
     @answers
-    def create_from_uploads(
+    async def create_from_uploads(
         settings: str = Form(description="JSON of CreateFromUploads: id, intrinsics, poses, preset, seed, ..."),
-        images: list[UploadFile] = File(description="the images, in the order of the poses"),
+        images: list[UploadFile] = File(
+            description=f"the images, in the order of the poses (at most {MAX_CAPTURES_PER_REQUEST})"
+        ),
     ):
-        import torch
-
-        from nerfaug.cameras import Cameras
-        from nerfaug.capture import CaptureSession
-        from nerfaug.data import EXCHANGE_FORMAT, DatasetSplit, NewFrame, get_format
-
         request = models.CreateFromUploads.model_validate(parse_json_field(settings, "settings"))
         check_session_id(request.id)
-        k = request.intrinsics
-        uploads = [read_upload(f, i, limit, (k.width, k.height)) for i, f in enumerate(images)]
-        check_names(uploads)
-        poses = check_poses(request.poses, "poses", len(uploads))
-
-        cx, cy = k.width / 2 if k.cx is None else k.cx, k.height / 2 if k.cy is None else k.cy
-        camera = Cameras(torch.eye(4), k.fx, k.fy or k.fx, cx, cy, k.width, k.height)
-        frames = [NewFrame(u.name, u.data, u.suffix, pose.double().tolist()) for u, pose in zip(uploads, poses)]
+        check_count(images)
 
         def create(folder: Path):
+            import torch
+
+            from nerfaug.cameras import Cameras
+            from nerfaug.capture import CaptureSession
+            from nerfaug.data import EXCHANGE_FORMAT, DatasetSplit, NewFrame, get_format
+
+            k = request.intrinsics
+            uploads = [read_upload(f, i, limit, (k.width, k.height)) for i, f in enumerate(images)]
+            check_names(uploads)
+            poses = check_poses(request.poses, "poses", len(uploads))
+            cx, cy = k.width / 2 if k.cx is None else k.cx, k.height / 2 if k.cy is None else k.cy
+            camera = Cameras(torch.eye(4), k.fx, k.fy or k.fx, cx, cy, k.width, k.height)
+            frames = [NewFrame(u.name, u.data, u.suffix, pose.double().tolist()) for u, pose in zip(uploads, poses)]
             with hub.staging() as tmp:
                 data = DatasetSplit(Path(tmp) / "data", get_format(EXCHANGE_FORMAT))
                 data.append(frames, camera)
                 return CaptureSession.create(data.root, folder, device=hub.device, **_settings(request))
 
-        return hub.created(request.id, create)
+        return await done(hub.submit_create(request.id, create))
 
     @app.get("/sessions/{session_id}", response_model=models.SessionState)
     @answers
-    def state(session_id: str):
-        return hub.state(session_id)
+    async def state(session_id: str):
+        """The session's state from its last snapshot: answered at once, even while it trains."""
+        if hub.has_snapshot(session_id):
+            return hub.state(session_id)
+        return await run_in_threadpool(hub.state, session_id)  # reads its session.json once
 
     @app.post("/sessions/{session_id}/captures", status_code=201, response_model=models.Added)
     @answers
-    def add_captures(
+    async def add_captures(
         session_id: str,
         poses: str = Form(description="JSON list of 4x4 poses, one per image, in upload order"),
-        images: list[UploadFile] = File(description="captured images; their file names name the new views"),
+        images: list[UploadFile] = File(
+            description="captured images (PNG, JPEG, TIFF, BMP or WebP; stored under the suffix of the format "
+            f"their bytes are); their file names name the new views; at most {MAX_CAPTURES_PER_REQUEST}"
+        ),
     ):
+        check_session_id(session_id)
+        check_count(images)
+
         def add(session):
             k = session.state.intrinsics
             uploads = [read_upload(f, i, limit, (k.width, k.height)) for i, f in enumerate(images)]
@@ -209,24 +249,24 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
             with hub.staging() as tmp:
                 names = session.add_views(write_uploads(Path(tmp), uploads), matrices)
             session.save()  # the captures are on disk now, and in the checkpoint's count
-            return {"names": names, "views": len(session.trainer.train_views), "step": session.step}
+            warned = session.state.additions[-1].extra.get("warnings", [])
+            return {"names": names, "views": len(session.trainer.train_views), "step": session.step, "warnings": warned}
 
-        check_session_id(session_id)
-        return hub.run(session_id, add)
+        return await done(hub.submit(session_id, add))
 
     @app.post("/sessions/{session_id}/train", status_code=202, response_model=models.Job)
     @answers
-    def train(session_id: str, request: models.TrainRequest):
-        return hub.train(session_id, request.steps)
+    async def train(session_id: str, request: models.TrainRequest):
+        return await done(hub.submit_train(session_id, request.steps))
 
     @app.post("/sessions/{session_id}/proposals")
     @answers
-    def propose(session_id: str, request: models.ProposeRequest):
+    async def propose(session_id: str, request: models.ProposeRequest):
         """The proposal as a Blender-style transforms JSON (world-frame poses, angles, scores)."""
-        candidates = None if request.candidates is None else check_poses(request.candidates, "candidates")
         constraints = None if request.constraints is None else request.constraints.model_dump()
 
         def choose(session):
+            candidates = None if request.candidates is None else check_poses(request.candidates, "candidates")
             proposal = session.propose(
                 request.n,
                 request.method,
@@ -240,7 +280,7 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
             session.save()
             return proposal.transforms()
 
-        return hub.run(session_id, choose)
+        return await done(hub.submit(session_id, choose))
 
     @app.post(
         "/sessions/{session_id}/uncertainty",
@@ -248,24 +288,25 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         response_class=Response,
     )
     @answers
-    def uncertainty(session_id: str, request: models.UncertaintyRequest):
+    async def uncertainty(session_id: str, request: models.UncertaintyRequest):
         """PNG: render, depth, ray entropy and FisherRF panels with colour bars; npz: the arrays."""
         from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 
         pose = check_poses(request.pose, "pose")
-        maps = hub.run(
-            session_id,
-            lambda session: session.uncertainty_maps(pose, request.width, request.fisher, request.fisher_width)[0],
-        )
-        if request.format == "npz":
-            return Response(npz_bytes(maps), media_type="application/octet-stream")
-        return Response(figure_bytes(maps), media_type="image/png")
+
+        def images(session):
+            maps = session.uncertainty_maps(pose, request.width, request.fisher, request.fisher_width)[0]
+            return npz_bytes(maps) if request.format == "npz" else figure_bytes(maps)
+
+        data = await done(hub.submit(session_id, images))
+        return Response(data, media_type="application/octet-stream" if request.format == "npz" else "image/png")
 
     @app.post("/sessions/{session_id}/evaluate", response_model=models.Evaluation)
     @answers
-    def evaluate(session_id: str, request: models.EvaluateRequest):
+    async def evaluate(session_id: str, request: models.EvaluateRequest):
         """The session's NeRF scored on a held-out split at its training resolution (`nerfaug eval`)."""
-        data = hub.dataset_path(request.dataset)
+        check_session_id(session_id)
+        data = hub.dataset_path(request.dataset, request.split)
 
         def score(session):
             views = session.held_out(data, request.split, request.max_views)
@@ -280,8 +321,7 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
                 "per_view": result.per_view,
             }
 
-        check_session_id(session_id)
-        return hub.run(session_id, score)
+        return await done(hub.submit(session_id, score))
 
     return app
 

@@ -1,8 +1,10 @@
 """The one place library errors become HTTP status codes: every error is answered as
-`{"detail": "one line"}` naming the field and the value."""
+`{"detail": "one line"}` naming the field and the value (a value the client sent; never what a
+file on the server holds)."""
 
 from __future__ import annotations
 
+from nerfaug.capture.lock import SessionBusy
 from nerfaug.capture.state import SessionError
 from nerfaug.data import DatasetError
 from nerfaug.errors import FolderRefused
@@ -11,10 +13,11 @@ from nerfaug.errors import FolderRefused
 class ServiceError(Exception):
     """An answer other than success: an HTTP status and one line saying why."""
 
-    def __init__(self, status: int, message: str):
+    def __init__(self, status: int, message: str, headers: dict[str, str] | None = None):
         super().__init__(message)
         self.status = status
         self.message = " ".join(message.split())
+        self.headers = headers
 
 
 def bad_input(message: str) -> ServiceError:
@@ -26,14 +29,18 @@ def status_of(error: BaseException) -> tuple[int, str]:
     """The HTTP status and one-line message for an error raised inside a request.
 
     422: bad input (`DatasetError`, `ValueError`: a value, pose or image the client sent);
-    409: the session's folder refuses the operation or is inconsistent (`FolderRefused`,
-    `SessionError`); 404: a file the request names does not exist; 500: anything else, named as
-    an internal error.
+    409: the session's folder refuses the operation, is inconsistent, or another process is
+    changing it (`FolderRefused`, `SessionError`, `SessionBusy`); 404: a file the request names
+    does not exist; 500: anything else, named as an internal error.
     """
     if isinstance(error, ServiceError):
         return error.status, error.message
     text = " ".join(str(error).split()) or type(error).__name__
-    if isinstance(error, (FolderRefused, SessionError)):
+    if isinstance(error, DatasetError) and error.value is not None:
+        # The value may be what a file holds (a dataset's JSON); the file, field and problem say enough.
+        field = f", field '{error.field}'" if error.field is not None else ""
+        text = " ".join(f"{error.path}{field}: {error.problem}".split())
+    if isinstance(error, (FolderRefused, SessionError, SessionBusy)):
         return 409, text
     if isinstance(error, (DatasetError, ValueError)):
         return 422, text

@@ -1,14 +1,16 @@
 """The sessions a service holds: one `CaptureSession` per folder under the service root, one lock
-per session (requests to a session run one at a time), training in a worker thread per session,
-and a record of each training job so that a restarted service resumes it.
+per session (requests to a session run one at a time), the session folder's lock file held while
+the service has it open (`nerfaug.capture.lock`: a `nerfaug train/add/propose` of it is refused
+meanwhile), requests' work in bounded per-session queues (`nerfaug.service.work`), training in a
+worker thread per session, and a record of each training job so that a restarted service resumes it.
 
     ROOT/
       <id>/                 a capture session (`nerfaug train/propose/add ROOT/<id>` open it too)
       .service/jobs/<id>.json   the session's training job: target step, state
 
 Training holds the session's lock for a chunk of steps at a time, so other requests to the
-session wait at most one chunk; the state a client polls is a snapshot taken after each chunk,
-read without the lock, so it is answered while training runs.
+session wait at most one chunk; the state a client polls is a snapshot taken after each chunk (or,
+for a session not opened yet, read from its session.json), never waiting for a lock or a worker.
 """
 
 from __future__ import annotations
@@ -21,13 +23,16 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from time import monotonic, time
 
+from nerfaug.capture import lock as session_lock
 from nerfaug.capture.state import SESSION_FILE
 from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.service.errors import ServiceError, bad_input, status_of
+from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
 
 SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 JOBS_DIR = Path(".service") / "jobs"
 CHUNK_STEPS = 10  # training steps per hold of the session's lock
+MAX_TRAINING = 4  # sessions training at once (each a thread running torch)
 # The job's file records the step it reached at most this often (seconds), so that a restart
 # after a kill knows how many steps beyond the last save are redone.
 RECORD_EVERY_S = 1.0
@@ -77,6 +82,7 @@ class Slot:
         self.job: Job | None = None
         self.thread: threading.Thread | None = None
         self.snapshot: dict = {}
+        self.folder_lock: session_lock.SessionLock | None = None  # the session folder's, while open here
 
 
 class SessionHub:
@@ -87,14 +93,28 @@ class SessionHub:
         device: torch device sessions train and render on.
         checkpoint_every: seconds of training between saves (and a save at each job's end).
         chunk_steps: training steps per hold of a session's lock.
+        workers, per_session, total: the request queues' bounds (`WorkQueues`).
+        max_training: sessions that may train at once (one more: 503).
     """
 
-    def __init__(self, root: Path, device: str = "cpu", checkpoint_every: float = 60.0, chunk_steps: int = CHUNK_STEPS):
+    def __init__(
+        self,
+        root: Path,
+        device: str = "cpu",
+        checkpoint_every: float = 60.0,
+        chunk_steps: int = CHUNK_STEPS,
+        workers: int = WORKERS,
+        per_session: int = PER_SESSION,
+        total: int = TOTAL,
+        max_training: int = MAX_TRAINING,
+    ):
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
         self.device = device
         self.checkpoint_every = float(checkpoint_every)
         self.chunk_steps = int(chunk_steps)
+        self.work = WorkQueues(workers, per_session, total)
+        self.max_training = int(max_training)
         self._slots: dict[str, Slot] = {}
         self._slots_lock = threading.Lock()
         self._stopping = threading.Event()
@@ -121,13 +141,24 @@ class SessionHub:
             return slot
 
     def opened(self, slot: Slot):
-        """The slot's session, opened on first use (hold `slot.lock`)."""
+        """The slot's session, opened on first use (hold `slot.lock`); its folder's lock is taken
+        first and kept (`SessionBusy`, a 409, while a `nerfaug` command is changing it)."""
         if slot.session is None:
             from nerfaug.capture import CaptureSession
 
-            slot.session = CaptureSession.open(self.root / slot.id, device=self.device)
+            self._lock_folder(slot)
+            try:
+                slot.session = CaptureSession.open(self.root / slot.id, device=self.device)
+            except BaseException:
+                slot.folder_lock.release()
+                slot.folder_lock = None
+                raise
             self._snapshot(slot)
         return slot.session
+
+    def _lock_folder(self, slot: Slot) -> None:
+        if slot.folder_lock is None:
+            slot.folder_lock = session_lock.acquire(self.root / slot.id, session_lock.SERVICE, wait=False)
 
     def created(self, session_id: str, create) -> dict:
         """Create a session with `create(folder)` (a function returning the `CaptureSession`)."""
@@ -144,12 +175,44 @@ class SessionHub:
                 with self._slots_lock:
                     self._slots.pop(session_id, None)
                 raise
+            self._lock_folder(slot)  # nobody else knows the new folder yet: free
             slot.session.save()
             self._snapshot(slot)
         return self.state(session_id)
 
-    def dataset_path(self, relative: str) -> Path:
-        """A dataset folder named relative to the root, refused when it leaves the root."""
+    def submit(self, session_id: str, action):
+        """`run(session_id, action)` queued behind the session's earlier requests (a Future);
+        404 for an unknown session, 429/503 when the queues are full (`WorkQueues.submit`)."""
+        self.slot(session_id)
+        return self.work.submit(session_id, lambda: self.run(session_id, action))
+
+    def submit_create(self, session_id: str, create):
+        """`created(session_id, create)` in the session's queue (a Future)."""
+        folder = self.folder(session_id)
+        if folder.exists():
+            raise ServiceError(409, f"session {session_id!r}: {folder.name} already exists under the service root")
+        return self.work.submit(session_id, lambda: self.created(session_id, create))
+
+    def submit_train(self, session_id: str, steps: int):
+        """`train(session_id, steps)` in the session's queue (opening a session loads its model)."""
+        self.slot(session_id)
+        training = sum(
+            1
+            for s in list(self._slots.values())
+            if s.id != session_id and s.job is not None and s.job.state == "running"
+        )
+        if training >= self.max_training:
+            raise ServiceError(
+                503,
+                f"{training} sessions are training, the most this service runs at once; retry when one has finished",
+                headers={"Retry-After": "30"},
+            )
+        return self.work.submit(session_id, lambda: self.train(session_id, steps))
+
+    def dataset_path(self, relative: str, split: str | None = None) -> Path:
+        """A dataset folder named relative to the root (links followed), refused when it leaves the
+        root; given `split`, its listing file is found first, which refuses one that links outside
+        the folder (`find_split`), so no file outside the root is read."""
         if not relative or Path(relative).is_absolute():
             raise bad_input(f"dataset {relative!r}: give a folder relative to the service root")
         path = (self.root / relative).resolve()
@@ -157,6 +220,10 @@ class SessionHub:
             raise bad_input(f"dataset {relative!r}: lies outside the service root")
         if not path.is_dir():
             raise ServiceError(404, f"dataset {relative!r}: no such folder under the service root")
+        if split is not None:
+            from nerfaug.data.formats import find_split
+
+            find_split(path, split)
         return path
 
     def run(self, session_id: str, action):
@@ -192,14 +259,39 @@ class SessionHub:
             "intrinsics": asdict(session.state.intrinsics),
         }
 
+    def has_snapshot(self, session_id: str) -> bool:
+        """Whether the session's state is in memory (`state` then reads no file)."""
+        slot = self._slots.get(session_id)
+        return slot is not None and bool(slot.snapshot)
+
     def state(self, session_id: str) -> dict:
-        """The session's state (never waits for its training): the last snapshot and the job."""
+        """The session's state, never waiting for a lock or a worker: the last snapshot (or, for a
+        session not opened yet, what its session.json and dataset listing say) and the job."""
         slot = self.slot(session_id)
-        if not slot.snapshot:
-            with slot.lock:
-                self.opened(slot)
+        snapshot = slot.snapshot or self._stored_snapshot(session_id)
         job = slot.job
-        return {**slot.snapshot, "running": job is not None and job.state == "running", "job": job and job.to_dict()}
+        return {**snapshot, "running": job is not None and job.state == "running", "job": job and job.to_dict()}
+
+    def _stored_snapshot(self, session_id: str) -> dict:
+        """A session's state from its files, without loading its model (no losses: they are in the
+        checkpoint)."""
+        from nerfaug.capture import CaptureSession
+        from nerfaug.capture.state import SessionState
+
+        folder = self.folder(session_id)
+        state = SessionState.read(folder)
+        names = [str(f["file_path"]) for f in CaptureSession(folder, None, state).frames()]
+        return {
+            "id": session_id,
+            "step": state.step,
+            "views": len(names),
+            "names": names,
+            "last_losses": [],
+            "proposals": len(state.proposals),
+            "additions": len(state.additions),
+            "hemisphere": state.hemisphere.to_dict(),
+            "intrinsics": asdict(state.intrinsics),
+        }
 
     # -- training --
 
@@ -294,8 +386,14 @@ class SessionHub:
         return resumed
 
     def shutdown(self, timeout: float = 30.0) -> None:
-        """Stop the training workers at their next chunk; each saves its session first."""
+        """Stop the training workers at their next chunk (each saves its session first), drop the
+        requests not started, and release the sessions' folders."""
         self._stopping.set()
+        self.work.shutdown()
         for slot in list(self._slots.values()):
             if slot.thread is not None:
                 slot.thread.join(timeout)
+        for slot in list(self._slots.values()):
+            if slot.folder_lock is not None:
+                slot.folder_lock.release()
+                slot.folder_lock = None

@@ -1,9 +1,12 @@
-"""What a client uploads, checked before anything is written: images (size limit, decodable,
-RGB(A), the session camera's size, a usable name) and poses (4x4, finite, rigid), each error one
-line naming the field (`images[2] (capture_000_02.png)`, `poses[1]`)."""
+"""What a client uploads, checked before anything is written: images (size limit, a format whose
+header gives the size, the pixel count and the session camera's size read from the header before
+any pixel is decoded, decodable, RGB(A), a usable name; stored under the suffix of the format their
+bytes are) and poses (4x4, finite, rigid), each error one line naming the field
+(`images[2] (capture_000_02.png)`, `poses[1]`)."""
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from dataclasses import dataclass
@@ -19,8 +22,17 @@ from nerfaug.capture.images import CAPTURE_SUFFIXES
 from nerfaug.data import DatasetError
 from nerfaug.data.frames import check_pose
 from nerfaug.service.errors import ServiceError, bad_input
+from nerfaug.service.limits import MAX_IMAGE_PIXELS, MEGABYTE
 
-MEGABYTE = 1024 * 1024
+# The formats an upload may be, by what Pillow reads in its header, and the suffixes that name them
+# (the first is the one an upload is stored under when its name says another format).
+UPLOAD_FORMATS = {
+    "PNG": (".png",),
+    "JPEG": (".jpg", ".jpeg"),
+    "TIFF": (".tif", ".tiff"),
+    "BMP": (".bmp",),
+    "WEBP": (".webp",),
+}
 
 
 @dataclass
@@ -33,7 +45,9 @@ class Upload:
     shape: tuple[int, ...]
 
 
-def read_upload(file, index: int, limit_bytes: int, size: tuple[int, int] | None) -> Upload:
+def read_upload(
+    file, index: int, limit_bytes: int, size: tuple[int, int] | None, max_pixels: int = MAX_IMAGE_PIXELS
+) -> Upload:
     """Read and check uploaded image `index`.
 
     Args:
@@ -41,9 +55,11 @@ def read_upload(file, index: int, limit_bytes: int, size: tuple[int, int] | None
         index: its position in the request's `images` field.
         limit_bytes: the largest accepted file.
         size: (width, height) the image must have, or None to accept any.
+        max_pixels: the most pixels an image may have (checked in its header, before decoding).
 
     Raises:
-        ServiceError: 413 over the limit; 422 for a bad name, an undecodable file, a wrong shape.
+        ServiceError: 413 over the byte or pixel limit; 422 for a bad name, a format other than
+            `UPLOAD_FORMATS`, an undecodable file, a wrong size or shape.
     """
     filename = PurePath(str(file.filename or "")).name
     label = f"images[{index}] ({filename or 'no file name'})"
@@ -55,6 +71,15 @@ def read_upload(file, index: int, limit_bytes: int, size: tuple[int, int] | None
     data = file.file.read(limit_bytes + 1)
     if len(data) > limit_bytes:
         raise ServiceError(413, f"{label}: larger than the upload limit of {limit_bytes / MEGABYTE:.3g} MB")
+    kind, width, height = image_header(data, label)
+    if width * height > max_pixels:
+        raise ServiceError(
+            413, f"{label}: {width}x{height} pixels is over the limit of {max_pixels} pixels per image (not decoded)"
+        )
+    if size is not None and (width, height) != tuple(size):
+        raise bad_input(f"{label}: image is {width}x{height} pixels but the camera is {size[0]}x{size[1]}")
+    if suffix not in UPLOAD_FORMATS[kind]:  # stored under the name its bytes say
+        suffix = UPLOAD_FORMATS[kind][0]
     try:
         array = np.asarray(iio.imread(data, extension=suffix))
     except Exception:  # noqa: BLE001 -- imageio raises many types; all mean "not an image"
@@ -66,6 +91,24 @@ def read_upload(file, index: int, limit_bytes: int, size: tuple[int, int] | None
             f"{label}: image is {array.shape[1]}x{array.shape[0]} pixels but the camera is {size[0]}x{size[1]}"
         )
     return Upload(stem, suffix, data, tuple(array.shape))
+
+
+def image_header(data: bytes, label: str) -> tuple[str, int, int]:
+    """The format ("PNG", "JPEG", ...: a key of `UPLOAD_FORMATS`) and the size in pixels an image's
+    header states, read without decoding its pixels; 422 naming `label` for anything else."""
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(data)) as image:  # reads the header only
+            kind, (width, height) = image.format, image.size
+    except Image.DecompressionBombError:
+        raise ServiceError(413, f"{label}: the image header states far too many pixels (not decoded)") from None
+    except Exception:  # noqa: BLE001 -- Pillow raises many types; all mean "no header it knows"
+        kind, width, height = None, 0, 0
+    if kind not in UPLOAD_FORMATS:
+        names = ", ".join(s for suffixes in UPLOAD_FORMATS.values() for s in suffixes)
+        raise bad_input(f"{label}: not an image this service can read (send one of {names})")
+    return kind, int(width), int(height)
 
 
 def check_names(uploads: list[Upload]) -> None:
