@@ -95,12 +95,13 @@ def checkpoint_copied_into_a_session_saved_before_digests(tmp, bases):
     """A session an earlier nerfaug saved (no digests in session.json) with another session's checkpoint."""
     run = _session(tmp, bases)
     other = tmp / "other"
-    argv = ["train", bases.dataset, "--out", other, "--preset", "test", "--steps", "2", "--seed", "1"]
+    argv = ["train", bases.dataset, "--out", other, "--engine", "test", "--steps", "2", "--seed", "1"]
     outcome = run_cli([*argv, "--device", "cpu"])
     assert outcome.code == 0, outcome.err
     edit_json(run / "session.json", lambda data: data.pop("integrity", None))
     (run / "checkpoint.pt").write_bytes((other / "checkpoint.pt").read_bytes())
-    return Case(["train", run, "--steps", "1", "--device", "cpu"], [run], says=("checkpoint.pt", "another session"))
+    # --steps is the step to reach: beyond the session's 3, so the checkpoint is loaded.
+    return Case(["train", run, "--steps", "10", "--device", "cpu"], [run], says=("checkpoint.pt", "another session"))
 
 
 def _hold(run: Path, holder: str) -> None:
@@ -119,7 +120,7 @@ def _hold(run: Path, holder: str) -> None:
 def train_a_session_a_service_holds(tmp, bases):
     run = _session(tmp, bases)
     _hold(run, "nerfaug serve")
-    argv = ["train", run, "--steps", "1", "--device", "cpu"]
+    argv = ["train", run, "--steps", "10", "--device", "cpu"]  # beyond the session's step 3
     return Case(argv, [run], code=1, says=(str(run), "`nerfaug serve`", str(os.getpid())))
 
 
