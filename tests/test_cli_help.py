@@ -6,8 +6,9 @@ import re
 
 import pytest
 
-from nerfaug.cli import main, preset_default, reflow
+from nerfaug.cli import main, reflow
 from nerfaug.experiment.store import fingerprint
+from nerfaug.run_cli import preset_default
 
 
 def help_text(argv: list[str], capsys, monkeypatch) -> str:
@@ -31,14 +32,19 @@ def test_a_presets_default_groups_the_presets_that_agree():
     assert preset_default("trials") == "(default: the preset's: quick, ablation: 5; paper: 10; tiny: 2)"
 
 
-def test_top_level_usage_lists_every_command(capsys, monkeypatch):
+def test_top_level_help_lists_every_command(capsys, monkeypatch):
     from nerfaug import session_cli
+    from nerfaug.cli import COMMANDS
 
     text = help_text([], capsys, monkeypatch)
     usage = re.search(r"usage: nerfaug \[-h\] \{([^}]*)\}", text)
     assert usage is not None, text
     listed = set(usage.group(1).split(","))
-    assert {"scene", "run", "report", "methods", "study", *session_cli.COMMANDS} <= listed
+    assert {"scene", "run", "report", "methods", "study", "serve", "uncertainty", *session_cli.COMMANDS} <= listed
+    assert listed == set(COMMANDS)
+    # The examples above the usage line show every command too (as `nerfaug NAME ...`).
+    shown = {line.split()[1] for line in text.split("usage:")[0].splitlines() if line.startswith("nerfaug ")}
+    assert shown == set(COMMANDS), set(COMMANDS) ^ shown
 
 
 def test_study_help_lists_selection_options_and_no_none_defaults(capsys, monkeypatch):
@@ -143,3 +149,54 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
     assert sharper != default and planned[2].config.selection.sharpness == 0.5
     assert planned[2].command[-2:] == ["--selection.sharpness", "0.5"]
     assert not any(word.startswith("--selection") for word in planned[1].command)
+
+
+# The code's words and the project's history, which belong in docs (docs/methods.md), not in --help.
+INTERNAL = (
+    "ray_entropy",
+    "combined_uncertainty",
+    "H_train",
+    "H_cand",
+    "Rademacher",
+    "the 15 of",
+    "BENCHMARKS.md",
+    "benchmarks/",
+    "nerfaug.selection",
+    "nerfaug.uncertainty",
+    "Spearman",
+    "(default: )",
+)
+
+
+def test_every_help_speaks_the_users_words_and_each_option_name_means_one_thing(capsys, monkeypatch):
+    helps = every_command(capsys, monkeypatch)
+    for command, text in helps.items():
+        for word in INTERNAL:
+            assert word not in text, (command, word)
+    # --engine is a NeRF engine preset wherever it appears, with the same names.
+    engines = {c: re.search(r"--engine \{([^}]*)\}", t) for c, t in helps.items() if "--engine " in t}
+    assert {"run", "train"} <= set(engines)
+    assert len({m.group(1) for m in engines.values()}) == 1
+    # --preset is an experiment's protocol (run, study), never an engine preset.
+    assert "--preset" not in helps["train"]
+    assert "quick" in re.search(r"--preset \{([^}]*)\}", helps["run"]).group(1)
+    # The angle convention of every output: elevation.
+    assert "elevation" in helps["propose"] and "azimuth, polar" not in helps["propose"]
+
+
+@pytest.mark.parametrize("command", ["train", "add", "serve", "uncertainty"])
+def test_a_commands_help_loads_no_torch(command):
+    """`nerfaug train --help` (and the other light commands') parse their options before anything
+    heavy is imported: torch alone takes seconds to import (BENCHMARKS.md, "`--help` start-up")."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys\nfrom nerfaug.cli import main\n"
+        f"try:\n    main([{command!r}, '--help'])\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('torch', 'numpy', 'fastapi', 'matplotlib') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert f"usage: nerfaug {command}" in done.stdout
+    assert done.stdout.strip().splitlines()[-1] == "[]"

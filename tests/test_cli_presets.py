@@ -94,3 +94,10 @@ def test_a_flag_given_as_its_negation_is_given():
         Options(no_cache=True), "engine", ["run", "--engine.no-random-background", "--engine.no-cache"]
     )
     assert found == {"random_background": False, "no_cache": True}
+
+
+def test_run_prints_its_size_and_an_estimate_before_it_starts(planned, capsys):
+    planned("--trials", "3", "--workers", "1", "--device", "cpu")
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith("nerfaug run: 6 runs (1 scene x 2 methods x 3 trials), 24x24 pixels, 60 steps each")
+    assert "6 to run: about " in first and "(cpu, 1 run at a time" in first and "An estimate" in first

@@ -29,7 +29,7 @@ EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 # Options appended to each `nerfaug` subcommand of the walk-through (the last of a repeated option wins).
 SMALL = {
     "scene": ["--res", "32", "--pool", "12", "--test", "4", "--samples", "4"],
-    "train": ["--preset", "test", "--steps", "20", "--device", "cpu"],
+    "train": ["--engine", "test", "--steps", "20", "--device", "cpu"],
     "propose": ["--n", "2", "--n-candidates", "20", "--device", "cpu"],
     "render-proposals": ["--samples", "4"],
     "add": ["--steps", "10", "--device", "cpu"],

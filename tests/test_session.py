@@ -312,8 +312,8 @@ def test_cli_train_propose_add_export(dataset, tmp_path, capsys):
     from nerfaug.cli import main
 
     run, poses_json, captures = tmp_path / "run", tmp_path / "poses.json", tmp_path / "captures"
-    main(["train", str(dataset), "--out", str(run), "--steps", "2", "--preset", "test", "--seed", "1"])
-    main(["train", str(run), "--steps", "1"])
+    main(["train", str(dataset), "--out", str(run), "--steps", "2", "--engine", "test", "--seed", "1"])
+    main(["train", str(run), "--steps", "3"])  # until step 3
     assert json.loads((run / "session.json").read_text())["step"] == 3
     main(
         [

@@ -1,6 +1,7 @@
 """`nerfaug train/add/eval` beyond the bad inputs of tests/reliability: which split a new session
-trains on, warnings for repeated views, the thread policy, periodic checkpoints that survive a
-SIGKILL, a save interrupted between its two writes, and `eval` on a known case."""
+trains on, warnings for repeated views, the thread policy, `--steps` as the step to reach, a
+SIGKILLed `train` resumed by the same command, settings other than the session's refused with the
+command that goes on, a save interrupted between its two writes, and `eval` on a known case."""
 
 import json
 import os
@@ -43,7 +44,7 @@ def dataset(root: Path, rendered: bool = True, train=None) -> Path:
 
 
 def train_new(data: Path, run: Path, *extra) -> None:
-    main(["train", str(data), "--out", str(run), "--preset", "test", "--steps", "2", "--device", "cpu", *extra])
+    main(["train", str(data), "--out", str(run), "--engine", "test", "--steps", "2", "--device", "cpu", *extra])
 
 
 @pytest.mark.parametrize(
@@ -98,7 +99,7 @@ def test_session_training_takes_one_torch_thread_unless_told(tmp_path, monkeypat
     monkeypatch.setattr(nerfaug.device, "configure_process", lambda threads=None: calls.append(threads))
     data = dataset(tmp_path / "data")
     train_new(data, tmp_path / "run")
-    main(["train", str(tmp_path / "run"), "--steps", "1", "--threads", "2", "--device", "cpu"])
+    main(["train", str(tmp_path / "run"), "--steps", "3", "--threads", "2", "--device", "cpu"])
     assert [c for c in calls if c is not None] == [1, 2]  # cli.main's own call sets no threads
 
 
@@ -113,13 +114,25 @@ def test_a_session_saved_between_its_two_writes_still_opens(tmp_path):
     assert CaptureSession.open(run).step == 2
 
 
-def test_a_killed_train_loses_at_most_the_checkpoint_period(tmp_path):
-    """A real SIGKILL of `nerfaug train` once a periodic (1 s) checkpoint is on disk: the session
-    resumes from it."""
-    data, run = dataset(tmp_path / "data"), tmp_path / "run"
-    argv = ["train", data, "--out", run, "--preset", "test", "--steps", "1000000", "--device", "cpu"]
-    command = [sys.executable, "-m", "nerfaug.cli", *map(str, argv), "--checkpoint-every", "1"]
-    child = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+def nerfaug(*argv, check: bool = True) -> subprocess.CompletedProcess:
+    """`nerfaug ARGV` as a real process (bounded in time: a guard against a hang)."""
+    command = [sys.executable, "-m", "nerfaug.cli", *map(str, argv)]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert not check or done.returncode == 0, done.stderr
+    return done
+
+
+@pytest.mark.slow
+def test_a_killed_train_resumes_with_the_same_command_and_stops_at_the_requested_step(tmp_path):
+    """A real SIGKILL of `nerfaug train DATA --out RUN --steps N` once a periodic checkpoint is on
+    disk: the same command resumes from that save, says so, and ends at step N; once more, it only
+    says the session is there already."""
+    data, run, target = dataset(tmp_path / "data"), tmp_path / "run", 400
+    argv = ["train", data, "--out", run, "--engine", "test", "--steps", target, "--device", "cpu"]
+    argv += ["--checkpoint-every", "0.2"]
+    child = subprocess.Popen(
+        [sys.executable, "-m", "nerfaug.cli", *map(str, argv)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
     try:
         deadline = time.monotonic() + 300  # a guard against a hang, not a timing assertion
         while time.monotonic() < deadline and child.poll() is None:
@@ -128,18 +141,65 @@ def test_a_killed_train_loses_at_most_the_checkpoint_period(tmp_path):
                     break
             except (OSError, ValueError, KeyError):
                 pass
-            time.sleep(0.2)
+            time.sleep(0.05)
         assert child.poll() is None, child.stderr.read().decode()
         os.kill(child.pid, signal.SIGKILL)
     finally:
         child.kill()
         child.wait()
     saved = json.loads((run / "session.json").read_text())["step"]
-    assert saved > 0
-    session = CaptureSession.open(run)
-    assert session.step >= saved
+    assert 0 < saved < target
+
+    again = nerfaug(*argv)
+    assert f"resuming from step {saved}, its last save, until step {target}" in again.stdout
+    assert f"step {target}" in again.stdout.splitlines()[-1]
+    assert CaptureSession.open(run).step == target
+
+    checkpoint = (run / "checkpoint.pt").read_bytes()
+    once_more = nerfaug(*argv)
+    assert f"already at step {target}" in once_more.stdout and "nothing to do" in once_more.stdout
+    assert (run / "checkpoint.pt").read_bytes() == checkpoint
+
+
+def test_train_steps_is_the_step_to_reach_not_steps_to_add(tmp_path, capsys):
+    run = tmp_path / "run"
+    train_new(dataset(tmp_path / "data"), run)  # until step 2
+    main(["train", str(run), "--steps", "5", "--device", "cpu"])
+    assert "training from step 2, its last save, until step 5" in capsys.readouterr().out
+    assert CaptureSession.open(run).step == 5
     main(["train", str(run), "--steps", "3", "--device", "cpu"])
-    assert CaptureSession.open(run).step == session.step + 3
+    assert "already at step 5 (--steps 3); nothing to do" in capsys.readouterr().out
+    assert CaptureSession.open(run).step == 5
+
+
+def test_the_same_command_with_other_settings_is_refused_naming_the_command_that_goes_on(tmp_path, capsys):
+    data, run = dataset(tmp_path / "data"), tmp_path / "run"
+    train_new(data, run)
+    before = (run / "session.json").read_text()
+    capsys.readouterr()
+    argv = ["train", str(data), "--out", str(run), "--engine", "test", "--steps", "9", "--device", "cpu"]
+    with pytest.raises(SystemExit) as refused:
+        main([*argv, "--seed", "4", "--downscale", "2"])
+    assert refused.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1
+    assert "--seed 4 (the session's: 0)" in error and "--downscale 2 (the session's: 1)" in error
+    assert "(at step 2)" in error and f"`nerfaug train {run} --steps 9`" in error
+    assert "CaptureSession" not in error and "--engine" not in error  # the engine is the session's
+    assert (run / "session.json").read_text() == before
+    # A run folder as the path: options equal to the session's are fine, others refused.
+    main(["train", str(run), "--engine", "test", "--seed", "0", "--steps", "3", "--device", "cpu"])
+    assert CaptureSession.open(run).step == 3
+    with pytest.raises(SystemExit):
+        main(["train", str(run), "--engine", "cpu", "--steps", "4", "--device", "cpu"])
+    assert "--engine cpu (the session's: test)" in capsys.readouterr().err
+
+
+def test_train_threads_policy_agrees_with_a_sweeps():
+    from nerfaug.experiment.config import ExperimentConfig
+    from nerfaug.train_cli import THREADS
+
+    assert ExperimentConfig().threads_per_run == THREADS
 
 
 def test_eval_scores_renders_of_the_nerf_itself_as_near_perfect(tmp_path, capsys):
@@ -166,3 +226,19 @@ def test_eval_scores_renders_of_the_nerf_itself_as_near_perfect(tmp_path, capsys
     # Random images at the same poses score far worse; eval's own JSON may be overwritten.
     main(["eval", str(run), "--data", str(own), "--split", "noise", "--out", str(out), "--device", "cpu"])
     assert json.loads(out.read_text())["mean"]["psnr"] < 20.0
+
+
+def test_an_estimated_pole_is_one_setting_of_the_session(tmp_path, capsys):
+    data, run = dataset(tmp_path / "data"), tmp_path / "run"
+    train_new(data, run, "--estimate-up")
+    capsys.readouterr()
+    argv = ["train", str(data), "--out", str(run), "--engine", "test", "--steps", "2", "--device", "cpu"]
+    with pytest.raises(SystemExit):
+        main(argv)  # the same command without --estimate-up: one difference, named once
+    error = capsys.readouterr().err
+    assert "--estimate-up off (the session's: on)" in error and "--up" not in error
+    main([*argv, "--estimate-up"])  # the same command: at step 2 already
+    assert "already at step 2" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["train", str(run), "--up", "0", "0", "1", "--steps", "3", "--device", "cpu"])
+    assert "--up 0 0 1 (the session's: estimated)" in capsys.readouterr().err

@@ -6,11 +6,16 @@ nerfaug run --preset quick --out results/quick  the paper's experiment, then its
 nerfaug report results/quick                    (re)write report.md and report.html
 nerfaug study --out results/study               which method wins where, on which engine
 nerfaug methods                                 list the view-selection methods
-nerfaug train DATA --out RUN                    active capture: train on what you have,
+nerfaug train DATA --out RUN --steps N          active capture: train on what you have (until step N),
 nerfaug propose RUN --n 6 --out poses.json      ask where to look next,
 nerfaug add RUN --images DIR --poses poses.json add what you captured, and go on training
+nerfaug render-proposals RUN --poses poses.json --scene lego --out DIR
+                                                (simulation) render the proposed views with Blender
+nerfaug uncertainty RUN --poses poses.json --out DIR
+                                                what the NeRF sees and how unsure it is, per pixel
 nerfaug export RUN --format nerfstudio --out DIR
 nerfaug eval RUN --data DATA --split test       PSNR/SSIM/LPIPS of the session on held-out views
+nerfaug serve --root SESSIONS                   the same over HTTP, for a robot (API docs at /docs)
 """
 
 from __future__ import annotations
@@ -21,52 +26,30 @@ import re
 import sys
 import warnings
 from pathlib import Path
-from typing import Annotated, Literal, get_args
+from typing import Annotated
 
 import tyro
 
-from nerfaug.cli_options import COMMAND_LINE, given_fields
-from nerfaug.experiment.config import PresetName
-from nerfaug.experiment.config import preset as make_preset
-from nerfaug.nerf.config import EnginePreset
-from nerfaug.selection.config import SelectionConfig
+from nerfaug.cli_options import COMMAND_LINE
 
 Positional = tyro.conf.Positional
-# The defaults `--selection.*` options start from (read-only use: never mutated).
-DEFAULT_SELECTION = SelectionConfig()
-
-
-def preset_default(name: str) -> str:
-    """The help's default for an option whose value `--preset` decides: each preset's, e.g.
-    "(default: the preset's: quick, ablation: 5; paper: 10; tiny: 2)"."""
-    presets: dict[str, list[str]] = {}
-    for preset_name in get_args(PresetName):
-        value = getattr(make_preset(preset_name), name)
-        presets.setdefault(" ".join(map(str, value)) if isinstance(value, tuple) else str(value), []).append(
-            preset_name
-        )
-    if len(presets) == 1:
-        return f"(default: {next(iter(presets))}, in every preset)"
-    return "(default: the preset's: " + "; ".join(f"{', '.join(p)}: {v}" for v, p in presets.items()) + ")"
-
-
-def _from_preset(kind, name: str, metavar: str):
-    return Annotated[kind | None, tyro.conf.arg(metavar=metavar, help_behavior_hint=preset_default(name))]
-
-
-ENGINES = "{" + ",".join(get_args(EnginePreset)) + "}"
-Scenes = _from_preset(tuple[str, ...], "scenes", "SCENE [SCENE ...]")
-Methods = _from_preset(tuple[str, ...], "methods", "METHOD [METHOD ...]")
-Trials = _from_preset(int, "trials", "INT")
-Steps = _from_preset(int, "steps", "INT")
-Engine = _from_preset(EnginePreset, "engine", ENGINES)
-Resolution = _from_preset(int, "resolution", "INT")
-Seed = _from_preset(int, "seed", "INT")
-Data = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: the preset's scenes)")]
-Workers = Annotated[
-    int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one at a time on a GPU)")
-]
-Address = Annotated[str | None, tyro.conf.arg(metavar="ADDRESS", help_behavior_hint="(default: a local Ray instance)")]
+# Each command's home, "module:function": a command's module is imported only when it runs, so
+# `nerfaug train --help` answers without loading torch (what the experiment commands' options need).
+COMMANDS = {
+    "scene": "nerfaug.cli:scene",
+    "run": "nerfaug.run_cli:run",
+    "report": "nerfaug.cli:report",
+    "methods": "nerfaug.cli:methods",
+    "study": "nerfaug.study_cli:study",
+    "train": "nerfaug.train_cli:train",
+    "propose": "nerfaug.session_cli:propose",
+    "add": "nerfaug.train_cli:add",
+    "export": "nerfaug.session_cli:export",
+    "eval": "nerfaug.session_cli:evaluate",
+    "render-proposals": "nerfaug.session_cli:render_proposals",
+    "uncertainty": "nerfaug.serve_cli:uncertainty",
+    "serve": "nerfaug.serve_cli:serve",
+}
 
 
 def reflow(docstring: str | None) -> str | None:
@@ -152,117 +135,11 @@ def scene_prepare(
     print(f"dataset prepared in {path}")
 
 
-def run(
-    out: Path = Path("results/quick"),
-    preset: PresetName = "quick",
-    scenes: Scenes = None,
-    data: Data = None,
-    methods: Methods = None,
-    trials: Trials = None,
-    steps: Steps = None,
-    engine: Engine = None,
-    resolution: Resolution = None,
-    seed: Seed = None,
-    backend: Literal["local", "ray"] = "local",
-    workers: Workers = None,
-    address: Address = None,
-    force: bool = False,
-    report: bool = True,
-    device: Literal["auto", "cpu", "cuda"] = "auto",
-    selection: SelectionConfig = DEFAULT_SELECTION,
-) -> None:
-    """Run the paper's experiment (scenes x methods x trials), then write its report.
-
-    Re-running the same command skips completed runs; killing it loses at most the runs in flight.
-
-    Args:
-        out: results folder.
-        preset: the protocol the other options change: quick (lego at 100x100 on the CPU, minutes),
-            paper (Sec. IV: three scenes, 10 trials, 10k steps), ablation (Tables I and II), tiny
-            (seconds; a smoke test).
-        scenes: built-in scene names or dataset folders.
-        data: a Blender-format dataset folder to run on (its train split is the candidate pool,
-            its test split the evaluation); shorthand for --scenes DATA.
-        methods: selection methods (see `nerfaug methods`); the first is compared with the others.
-        trials: trials per (scene, method); trial k uses seed + k.
-        steps: training steps per run.
-        engine: NeRF engine preset.
-        resolution: image size of built-in scenes (or the width user data is downscaled to).
-        seed: base seed.
-        backend: local (this machine) or ray (one task per run; --address joins a cluster).
-        workers: concurrent runs (local backend) or Ray CPUs to start (local Ray).
-        address: the Ray cluster to join.
-        force: move the runs already in --out aside (into OUT/superseded/, nothing is deleted) and
-            redo every run; needed when OUT's sweep.json is missing or its settings differ.
-        report: write report.md / report.html at the end.
-        device: where runs train, select and evaluate: auto (cuda when this machine has a GPU,
-            else cpu), cpu or cuda. Part of the results' fingerprint (the numbers differ).
-        selection: options of the selection methods (every one is part of the results'
-            fingerprint); those given here replace the preset's, and a method's own settings (e.g.
-            ours-authors') apply over them.
-    """
-    from dataclasses import replace
-
-    from nerfaug.device import resolve_device
-    from nerfaug.experiment.config import preset as make_preset
-    from nerfaug.experiment.sweep import run_sweep
-
-    config = make_preset(preset)
-    changes = {
-        k: v
-        for k, v in dict(
-            methods=methods, trials=trials, steps=steps, engine=engine, resolution=resolution, seed=seed
-        ).items()
-        if v is not None
-    }
-    if data is not None:  # a path, never taken for a built-in scene of the same name
-        changes["scenes"] = (str(data) if data.is_absolute() else os.path.join(".", data),)
-    elif scenes is not None:
-        changes["scenes"] = scenes
-    # auto is decided here, once, so every run (and the fingerprint) sees the same device.
-    try:
-        changes["device"] = resolve_device(device).type
-    except ValueError as error:
-        raise SystemExit(f"--device: {error}") from None
-    changes["selection"] = replace(config.selection, **given_fields(selection, "selection", COMMAND_LINE.get()))
-    config = config.replace(**changes)
-    if workers is None:
-        # One run per core on a CPU; on a GPU one run at a time (each holds its own CUDA context).
-        workers = 1 if config.device == "cuda" else max(1, (os.cpu_count() or 1) // config.threads_per_run)
-    try:
-        outcome = run_sweep(
-            config,
-            out,
-            backend=backend,
-            workers=workers,
-            address=address,
-            force=force,
-            command=["nerfaug", *sys.argv[1:]],
-        )
-    except KeyboardInterrupt:
-        from nerfaug.errors import Interrupted
-        from nerfaug.experiment.store import finished_runs
-
-        raise Interrupted(
-            f"{out}: interrupted; its {len(finished_runs(out))} finished run(s) are kept; re-run the "
-            "same command to resume"
-        ) from None
-    if report:
-        from nerfaug.report import write_report
-
-        paths = write_report(out, paper_tables())
-        print("report: " + ", ".join(str(p) for p in paths))
-    if outcome.failed:
-        print(f"{len(outcome.failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
-        for key, why in outcome.failed.items():
-            print(f"  {key}: {why}", file=sys.stderr)
-        raise SystemExit(1)
-
-
 def paper_tables():
     """The rows of the paper's ablation tables as the method registry defines them, and its
     protocol's image side (the experiments' paper preset): what a report compares with the paper,
     as `nerfaug.report.PaperTables`."""
+    from nerfaug.experiment.config import preset as make_preset
     from nerfaug.report import PaperTables
     from nerfaug.selection import TABLE_I_ROWS, TABLE_II_ROWS
 
@@ -316,37 +193,64 @@ def one_line(error: BaseException) -> str:
     return text or type(error).__name__
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, as Ctrl-C is: `finally` blocks run, so a child process
+    (the Blender render worker) is stopped and what was saved is kept."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def wants_help(argv: list[str]) -> bool:
+    """Whether `argv` asks for help (nothing is run then, so nothing is set up for running)."""
+    return not argv or "-h" in argv or "--help" in argv
+
+
 def main(argv: list[str] | None = None) -> None:
     """The `nerfaug` command. Errors end as one line on stderr (exit 2: bad input, 1: failure,
-    130: Ctrl-C); `--debug` or NERFAUG_DEBUG=1 shows the traceback instead."""
+    130: Ctrl-C, 143: SIGTERM); `--debug` or NERFAUG_DEBUG=1 shows the traceback instead."""
+    import signal
+    import threading
+
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("NERFAUG_DEBUG", "") not in ("", "0")
     argv = [arg for arg in argv if arg != "--debug"]
     # Flushing denormals (configure_process) makes numpy warn, once per float type, that the
     # smallest subnormal is zero: expected, and eight lines of noise before any one-line error.
     warnings.filterwarnings("ignore", message="The value of the smallest subnormal", category=UserWarning)
+    previous = None
+    if threading.current_thread() is threading.main_thread():  # signal handlers live in the main thread
+        previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        from nerfaug.capture.lock import command_scope
-        from nerfaug.device import configure_process
-
-        configure_process()
-        with command_scope():  # a session a command locked is unlocked when it ends
+        if wants_help(argv):  # --help imports no torch: it only reads the options
             _dispatch(argv)
+        else:
+            from nerfaug.capture.lock import command_scope
+            from nerfaug.device import configure_process
+
+            configure_process()
+            with command_scope():  # a session a command locked is unlocked when it ends
+                _dispatch(argv)
     except SystemExit as done:
         if isinstance(done.code, str):  # a command's own refusal: one line, bad input
             print(f"nerfaug: {' '.join(done.code.split())}", file=sys.stderr)
             raise SystemExit(2) from None
         raise
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         if debug:
             raise
-        print("nerfaug: interrupted; files already written are kept (finished runs, saved sessions)", file=sys.stderr)
-        raise SystemExit(130) from None
+        why = "stopped (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
+        print(f"nerfaug: {why}; files already written are kept (finished runs, saved sessions)", file=sys.stderr)
+        raise SystemExit(143 if isinstance(stop, Terminated) else 130) from None
     except Exception as error:
         if debug:
             raise
         print(f"nerfaug: {one_line(error)}", file=sys.stderr)
         raise SystemExit(exit_code(error)) from None
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def scene() -> None:
@@ -357,26 +261,34 @@ def scene() -> None:
     _dispatch(["scene", "--help"])
 
 
-def _dispatch(argv: list[str]) -> None:
-    from nerfaug import session_cli
-    from nerfaug.study_cli import study
+def command(name: str):
+    """The function of the command `name` (`COMMANDS`), its module imported now, its docstring
+    reflowed for the help."""
+    import importlib
 
-    commands = {"scene": scene, "run": run, "report": report, "methods": methods, "study": study}
-    commands.update(session_cli.COMMANDS)
-    for command in [*commands.values(), scene_render, scene_prepare]:
-        command.__doc__ = reflow(command.__doc__)
+    module, _, function = COMMANDS[name].partition(":")
+    found = getattr(importlib.import_module(module), function)
+    found.__doc__ = reflow(found.__doc__)
+    return found
+
+
+def _dispatch(argv: list[str]) -> None:
     if argv[:1] == ["scene"]:
-        tyro.extras.subcommand_cli_from_dict(
-            {"render": scene_render, "prepare": scene_prepare}, args=argv[1:], prog="nerfaug scene"
-        )
+        scene_commands = {"render": scene_render, "prepare": scene_prepare}
+        for function in scene_commands.values():
+            function.__doc__ = reflow(function.__doc__)
+        tyro.extras.subcommand_cli_from_dict(scene_commands, args=argv[1:], prog="nerfaug scene")
         return
-    if not argv or argv[0] in ("-h", "--help"):
-        print(__doc__.strip())
-        print()
     parsing = COMMAND_LINE.set(tuple(argv))
     try:
+        if argv and argv[0] in COMMANDS:  # only this command's module is imported
+            tyro.cli(command(argv[0]), args=argv[1:], prog=f"nerfaug {argv[0]}")
+            return
+        if not argv or argv[0] in ("-h", "--help"):
+            print(__doc__.strip())
+            print()
         tyro.extras.subcommand_cli_from_dict(
-            commands,
+            {name: command(name) for name in COMMANDS},
             args=argv,
             prog="nerfaug",
             description="Choose which views to add when a NeRF has too little data.",

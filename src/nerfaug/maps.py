@@ -107,11 +107,11 @@ def _draw(
     for polar_deg in (30, 60, 90):
         r = _disk_radius(np.radians(polar_deg), projection)
         ax.plot(r * np.cos(theta), r * np.sin(theta), color="0.6", lw=0.6 if polar_deg < 90 else 1.0)
-        if polar_deg < 90:  # polar-angle rings; the rim (90 degrees) is the horizon
+        if polar_deg < 90:  # rings labelled by elevation, as every output; the rim (0 degrees) is the horizon
             ax.text(
                 r * math.cos(math.radians(112)),
                 r * math.sin(math.radians(112)),
-                f"{polar_deg}°",
+                f"{90 - polar_deg}°",
                 color="0.8",
                 fontsize=6,
                 ha="center",

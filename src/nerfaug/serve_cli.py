@@ -88,6 +88,7 @@ def serve(
     from nerfaug.service.hub import SessionHub
 
     configure_process(threads=threads)
+    _log_to_stderr()
     hub = SessionHub(root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every)
     app = create_app(hub, token=token, max_upload_mb=max_upload_mb)
     # The event loop answers /health and states while worker threads run torch: it gets the GIL
@@ -97,6 +98,19 @@ def serve(
     gc.freeze()
     print(f"serving the sessions in {root} on http://{host}:{port} (API docs: /docs)", flush=True)
     uvicorn.run(app, host=host, port=port, log_level="warning")
+
+
+def _log_to_stderr() -> None:
+    """The service's own messages (a training job resumed after a restart, ...) as plain lines on stderr."""
+    import logging
+    import sys
+
+    logger = logging.getLogger("nerfaug.service")
+    if not logger.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
 
 
 def uncertainty(

@@ -103,8 +103,8 @@ def study(
         workers: concurrent runs.
         force: discard existing runs and redo them.
         device: auto (cuda when there is a GPU), cpu or cuda.
-        preset: study (the paper's protocol at 100x100) or tiny (a smoke test: seconds per run, after
-            the built-in scenes are rendered).
+        preset: the study's protocol: study (the paper's at 100x100) or tiny (a smoke test: seconds
+            per run, after the built-in scenes are rendered).
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
         table: the per-run table to record runs in and summarise; runs it records with their
@@ -137,6 +137,7 @@ def study(
             workers = (
                 1 if plan.config.device == "cuda" else max(1, (os.cpu_count() or 1) // plan.config.threads_per_run)
             )
+        print(study_size_line(plan, workers), flush=True)
         outcomes = study_runs.run_study(plan, workers=workers, force=force, table=previous)
         failed = {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
     recorded = record_table(out, table_path, previous)
@@ -150,6 +151,36 @@ def study(
         for key, why in failed.items():
             print(f"  {key}: {why}", file=sys.stderr)
         raise SystemExit(1)
+
+
+def study_size_line(plan, workers: int) -> str:
+    """How many runs the study makes, how big, and about how long on this device (`nerfaug.run_size`)."""
+    from nerfaug.experiment.store import finished_runs
+    from nerfaug.run_size import per_cell, size_line
+
+    config = plan.config
+    each = len(plan.scenes) * len(config.methods) * config.trials
+    done = {engine: min(len(finished_runs(Path(plan.out) / engine)), each) for engine in plan.engines}
+    shape = " x ".join(
+        (
+            per_cell(len(plan.engines), "engine"),
+            per_cell(len(plan.scenes), "scene"),
+            per_cell(len(config.methods), "method"),
+            per_cell(config.trials, "trial"),
+        )
+    )
+    runs = {engine: each - done[engine] for engine in plan.engines}
+    return size_line(
+        "nerfaug study",
+        runs,
+        sum(done.values()),
+        shape,
+        config.resolution,
+        config.steps,
+        config.n_test,
+        config.device,
+        workers,
+    )
 
 
 def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
@@ -181,4 +212,4 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     return recorded
 
 
-__all__ = ["method_records", "record_table", "study"]
+__all__ = ["method_records", "record_table", "study", "study_size_line"]

@@ -192,9 +192,16 @@ def test_nerfaug_propose_takes_the_constraints(session_dir, tmp_path, capsys):
     frames = json.loads(out.read_text())["frames"]
     assert len(frames) == 2
     for frame in frames:
-        assert 40 - 1e-3 <= 90 - math.degrees(frame["polar"]) <= 90 + 1e-3
+        assert "polar" not in frame  # one angle convention in every output: elevation
+        assert 40 - 1e-3 <= math.degrees(frame["elevation"]) <= 90 + 1e-3
         assert 90 - 1e-3 <= math.degrees(frame["azimuth"]) <= 270 + 1e-3
-    capsys.readouterr()
+    # The printed angles are the constraint's: elevation, in degrees.
+    printed = [
+        float(line.split("elevation")[1].split()[0])
+        for line in capsys.readouterr().out.splitlines()
+        if "elevation" in line
+    ]
+    assert len(printed) == 2 and all(40 - 0.1 <= e <= 90 + 0.1 for e in printed)
     with pytest.raises(SystemExit) as done:
         main([*args, "--force", "--elevation", "89.9", "90"])
     assert done.value.code == 2

@@ -60,7 +60,7 @@ def copy_dataset(tmp: Path, bases: Bases, name: str = "data") -> Path:
 
 def train_on(data: Path, tmp: Path, *extra) -> Case:
     return Case(
-        ["train", data, "--out", tmp / "run", "--preset", "test", "--steps", "1", "--device", "cpu", *extra], [data]
+        ["train", data, "--out", tmp / "run", "--engine", "test", "--steps", "1", "--device", "cpu", *extra], [data]
     )
 
 

@@ -34,7 +34,7 @@ def train_into_the_folder_holding_the_dataset(tmp, bases):
     project = tmp / "proj"
     copy(bases.dataset, project / "dataset")
     return Case(
-        ["train", project / "dataset", "--out", project, "--preset", "test", "--steps", "1", "--device", "cpu"],
+        ["train", project / "dataset", "--out", project, "--engine", "test", "--steps", "1", "--device", "cpu"],
         [project],
         says=(str(project),),
     )
@@ -43,7 +43,7 @@ def train_into_the_folder_holding_the_dataset(tmp, bases):
 @case
 def train_out_is_the_dataset(tmp, bases):
     data = copy_dataset(tmp, bases)
-    return Case(["train", data, "--out", data, "--preset", "test", "--device", "cpu"], [data], says=(str(data),))
+    return Case(["train", data, "--out", data, "--engine", "test", "--device", "cpu"], [data], says=(str(data),))
 
 
 @case
@@ -54,7 +54,7 @@ def train_out_is_a_users_folder(tmp, bases):
     (tmp / "mine" / "dataset").mkdir()
     (tmp / "mine" / "dataset" / "photo.png").write_bytes(b"1234")
     return Case(
-        ["train", data, "--out", tmp / "mine", "--preset", "test", "--device", "cpu"],
+        ["train", data, "--out", tmp / "mine", "--engine", "test", "--device", "cpu"],
         [data, tmp / "mine"],
         says=("mine",),
     )
@@ -65,7 +65,7 @@ def train_out_is_a_file(tmp, bases):
     data = copy_dataset(tmp, bases)
     (tmp / "out.txt").write_text("x")
     return Case(
-        ["train", data, "--out", tmp / "out.txt", "--preset", "test", "--device", "cpu"],
+        ["train", data, "--out", tmp / "out.txt", "--engine", "test", "--device", "cpu"],
         [data, tmp / "out.txt"],
         says=("out.txt",),
     )
@@ -90,9 +90,9 @@ def train_downscale_larger_than_images(tmp, bases):
 
 
 @case
-def train_unknown_preset(tmp, bases):
+def train_unknown_engine(tmp, bases):
     data = copy_dataset(tmp, bases)
-    return Case(train_on(data, tmp, "--preset", "fastest").argv, [data, tmp], says=("fastest",), usage=True)
+    return Case(train_on(data, tmp, "--engine", "fastest").argv, [data, tmp], says=("fastest",), usage=True)
 
 
 @case
@@ -522,22 +522,27 @@ def render_proposals_poses_missing(tmp, bases):
 
 
 def _train_session_with(tmp, bases, options: list[str], says: tuple[str, ...]) -> Case:
-    """`nerfaug train RUN` on an existing session with `options` that only shape a new one."""
+    """`nerfaug train RUN` on an existing session (engine test, seed 0, at step 3) with `options`
+    that shape a new session: the refusal names the session's step and the command that goes on."""
     run = _session(tmp, bases)
-    return Case(["train", run, *options, "--steps", "1", "--device", "cpu"], [run], says=(*says, "session.json"))
+    go_on = f"nerfaug train {run} --steps 10"
+    argv = ["train", run, *options, "--steps", "10", "--device", "cpu"]
+    return Case(argv, [run], says=(*says, "at step 3", go_on))
 
 
 @case
 def train_session_with_new_session_options(tmp, bases):
-    """Options that only shape a new session are refused, not silently ignored, on an existing one."""
-    return _train_session_with(tmp, bases, ["--preset", "paper", "--seed", "3"], ("--preset", "--seed"))
+    """Settings other than the session's are refused, not silently ignored, on an existing one."""
+    options = ["--engine", "paper", "--seed", "3"]
+    return _train_session_with(tmp, bases, options, ("--engine paper (the session's: test)", "--seed 3"))
 
 
 @case
 def train_session_with_new_session_options_at_their_defaults(tmp, bases):
-    """Given at their default values, such options are still given, and still refused."""
-    options = ["--preset=cpu", "--seed", "0", "--no-estimate-up"]
-    return _train_session_with(tmp, bases, options, ("--preset", "--seed", "--estimate-up"))
+    """Given at their default values, settings other than the session's are still given, and
+    still refused (those equal to the session's are not named)."""
+    options = ["--engine=cpu", "--seed", "0", "--no-estimate-up"]
+    return _train_session_with(tmp, bases, options, ("--engine cpu (the session's: test)",))
 
 
 @case
@@ -548,7 +553,7 @@ def train_over_a_session_that_lost_its_session_json(tmp, bases):
     run = _session(tmp, bases)
     (run / "session.json").unlink()
     (run / "dataset" / "my_notes.txt").write_text("mine")
-    argv = ["train", data, "--out", run, "--preset", "test", "--steps", "1", "--device", "cpu"]
+    argv = ["train", data, "--out", run, "--engine", "test", "--steps", "1", "--device", "cpu"]
     return Case(argv, [data, run], says=(str(run), "session.json"))
 
 
@@ -561,7 +566,7 @@ def checkpoint_copied_from_another_session(tmp, bases):
         bases.dataset,
         "--out",
         other,
-        "--preset",
+        "--engine",
         "test",
         "--steps",
         "2",
@@ -605,7 +610,7 @@ def transforms_file_linking_outside_the_dataset(tmp, bases):
 @case
 def train_out_inside_the_dataset(tmp, bases):
     data = copy_dataset(tmp, bases)
-    argv = ["train", data, "--out", data / "run", "--preset", "test", "--steps", "1", "--device", "cpu"]
+    argv = ["train", data, "--out", data / "run", "--engine", "test", "--steps", "1", "--device", "cpu"]
     return Case(argv, [data], says=(str(data / "run"), "inside the dataset"))
 
 

@@ -172,7 +172,7 @@ def make_bases(root: Path):
     dataset = make_dataset(root / "dataset")
     session, results = root / "session", root / "results"
     for argv in (
-        ["train", dataset, "--out", session, "--preset", "test", "--steps", "3", "--device", "cpu"],
+        ["train", dataset, "--out", session, "--engine", "test", "--steps", "3", "--device", "cpu"],
         ["run", "--data", dataset, "--out", results, *TINY],
     ):
         outcome = run_cli(argv)

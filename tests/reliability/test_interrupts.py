@@ -14,7 +14,7 @@ import torch
 from cases import TINY
 from harness import copy, run_cli, write_images
 
-from nerfaug import session_cli
+from nerfaug import train_cli
 from nerfaug.capture import CaptureSession
 
 
@@ -32,7 +32,7 @@ def _interrupt_at(monkeypatch, step: int, times: int = 1) -> None:
     monkeypatch.setattr(CaptureSession, "train", train_then_interrupt)
     # A clock that advances one second per reading: read once at the start, once after each
     # 10-step chunk and once after each save, so with a 2 s period the session saves every 20 steps.
-    monkeypatch.setattr(session_cli, "monotonic", itertools.count().__next__)
+    monkeypatch.setattr(train_cli, "monotonic", itertools.count().__next__)
 
 
 def _saved_step(run) -> tuple[int, int]:
@@ -56,6 +56,7 @@ def test_first_ctrl_c_saves_the_session_where_training_stopped(bases, tmp_path, 
     _interrupt_at(monkeypatch, start + 30)
     line = _one_line(run_cli(["train", run, "--steps", "100", "--device", "cpu", "--checkpoint-every", "2"]))
     assert f"saved at step {start + 30}" in line and str(run) in line
+    assert f"`nerfaug train {run} --steps 100` goes on from there" in line  # the same target
     assert _saved_step(run) == (start + 30, start + 30)
     assert CaptureSession.open(run).step == start + 30
 
@@ -79,12 +80,14 @@ def test_ctrl_c_while_training_after_add_keeps_the_added_views(bases, tmp_path, 
     (tmp_path / "poses.json").write_text(json.dumps({"camera_angle_x": test["camera_angle_x"], "frames": frames}))
     images = write_images(tmp_path / "captures", names)
     _interrupt_at(monkeypatch, start + 10, times=2)  # stopped at once, before any periodic checkpoint
-    _one_line(
+    line = _one_line(
         run_cli(
             ["add", run, "--images", images, "--poses", tmp_path / "poses.json", "--steps", "100", "--device", "cpu"]
             + ["--checkpoint-every", "2"]
         )
     )
+    # add's --steps counts from the step it adds at; the command that finishes names the step to reach.
+    assert f"`nerfaug train {run} --steps {start + 100}` goes on from there" in line
     state = json.loads((run / "session.json").read_text())
     assert state["additions"][-1]["names"] == names
     session = CaptureSession.open(run)

@@ -162,7 +162,7 @@ def test_the_whole_capture_loop(server, root):
     a, b = first - centre, second - centre
     assert np.degrees(np.arccos(np.clip(a @ b / np.linalg.norm(a) / np.linalg.norm(b), -1, 1))) >= 25 - 1e-3
     for frame in frames:
-        assert 20 - 1e-3 <= 90 - np.degrees(frame["polar"]) <= 70 + 1e-3
+        assert 20 - 1e-3 <= np.degrees(frame["elevation"]) <= 70 + 1e-3
         assert -1e-3 <= np.degrees(frame["azimuth"]) <= 180 + 1e-3
 
     names = [Path(frame["file_path"]).stem for frame in frames]
@@ -281,6 +281,8 @@ def test_a_killed_server_restarts_with_every_capture_and_resumes_training(tmp_pa
             time.sleep(0.1)
     finally:
         first.kill()
+    saved = json.loads((root / "robot" / "session.json").read_text())["step"]
+    reached = json.loads((root / ".service" / "jobs" / "robot.json").read_text())["step"]
 
     second = Server(root, env=token, headers=auth)
     try:
@@ -290,6 +292,10 @@ def test_a_killed_server_restarts_with_every_capture_and_resumes_training(tmp_pa
         assert {"before_0", "during_0", "during_1"} <= stems
         assert state["step"] >= step_at_add
         assert state["running"] and state["job"]["target"] == target
+        # The resumed job says from which save it went on and how many steps it trains again.
+        assert state["job"]["resumed_from"] == saved and state["job"]["redone"] == max(0, reached - saved)
+        said = f"session robot: training resumed from step {saved}, its last save ({max(0, reached - saved)} steps"
+        assert said in second.log.read_text()
         session = CaptureSession.open(root / "robot", load_model=False)
         assert len(session.frames()) == 7
     finally:

@@ -21,7 +21,7 @@ from typing import Annotated
 import torch
 from torch import Tensor
 
-from nerfaug.cli_hints import none_means
+from nerfaug.cli_hints import empty_means, none_means
 from nerfaug.data.frame import Hemisphere
 
 
@@ -111,7 +111,10 @@ class ViewConstraints:
     elevation: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
     azimuth: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
     radius: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
-    keep_out: tuple[tuple[float, float, float, float], ...] = field(default_factory=tuple)
+    keep_out: Annotated[
+        tuple[tuple[float, float, float, float], ...],
+        empty_means("no cone", "X Y Z HALF_ANGLE [X Y Z HALF_ANGLE ...]"),
+    ] = field(default_factory=tuple)
 
     def check(self) -> ViewConstraints:
         """Validate and normalise the values (floats, tuples) in place; returns self.

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,7 +40,8 @@ class Proposal:
         poses: Tensor with shape (n, 4, 4), world-frame OpenGL camera-to-world: where to capture.
         names: n suggested image names (file stems), e.g. "capture_000_00"; `add_views` matches
             captured files to poses by them.
-        azimuth, polar: Tensors with shape (n,), radians, about the hemisphere's centre and up.
+        azimuth, polar: Tensors with shape (n,), radians, about the hemisphere's centre and up
+            (`elevation`, pi/2 - polar, is what every output shows).
         indices: Tensor with shape (n,), the chosen candidates' indices.
         candidates: the world-frame cameras that were scored (n_candidates).
         scores: Tensor with shape (n_candidates,), every candidate's score (bright on the map).
@@ -73,10 +75,16 @@ class Proposal:
     def __len__(self) -> int:
         return self.poses.shape[0]
 
+    @property
+    def elevation(self) -> Tensor:
+        """Tensor with shape (n,): radians above the hemisphere's equator (pi/2 - polar)."""
+        return math.pi / 2 - self.polar
+
     def transforms(self, include_candidates: bool = False) -> dict:
         """A Blender-style transforms dict, ready for a robot or for Blender:
         {camera_angle_x, w, h, fl_x, fl_y, cx, cy, frames: [{file_path, transform_matrix,
-        azimuth, polar, score}], nerfaug: {...}}. The extra keys are ignored by other readers."""
+        azimuth, elevation, score}], nerfaug: {...}} (angles in radians, elevation above the
+        hemisphere's equator). The extra keys are ignored by other readers."""
         c = self.candidates
         chosen = self.indices.tolist()
         frames = [
@@ -84,10 +92,10 @@ class Proposal:
                 "file_path": f"./{name}",
                 "transform_matrix": pose.tolist(),
                 "azimuth": float(a),
-                "polar": float(p),
+                "elevation": float(e),
                 "score": float(self.scores[i]),
             }
-            for name, pose, a, p, i in zip(self.names, self.poses.double(), self.azimuth, self.polar, chosen)
+            for name, pose, a, e, i in zip(self.names, self.poses.double(), self.azimuth, self.elevation, chosen)
         ]
         info = {
             "proposal": self.number,

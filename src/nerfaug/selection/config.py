@@ -152,56 +152,61 @@ class SelectionConfig:
       alike).
 
     Attributes:
-        entropy_resolution: width in pixels of the candidate renders the entropy is taken over.
-        entropy_mode: `ray_entropy` mode: "escape" (default), "renormalise", "raw", "authors".
-        normalisation: `combined_uncertainty` normalisation: "minmax" (default), "none", "authors".
-        entropy_weight: a in U = a H + b D (the entropy term's weight).
-        distance_weight: b in U = a H + b D (the coverage term's weight).
-        metric: the SPD 3x3 matrix M of the coverage term as nested lists (on the command line
-            nine numbers, row by row); None for the identity.
-        scale_m: the rejection sampler's M; None for the largest score.
-        sampler: "paper" or "authors" (the code's in-order loop, accept if w > 15 nu).
-        authors_threshold: the 15 of the authors' sampler.
-        max_draws: proposals before the rejection sampler gives up.
-        fisher_method: "random-sign" (default) or "exact"; see `nerfaug.uncertainty.fisher`.
-        fisher_train_pixels: training pixels H_train is taken over (a stratified, weighted
-            subsample of the training views, `fisher_train_rays`). With fisher_resolution 45, 4096
-            was chosen as the cheapest setting whose candidate ranking, at step 200 on lego
-            100x100, stays put when either side's pixels double (mean Spearman >= 0.9 and top-6
-            overlap >= 4/6 for each of 4 seeds), measured with unweighted uniform training pixels;
-            with this estimator the means hold but one seed of 4 keeps 2/6 when the training
-            pixels double (benchmarks/bench_fisher.py; BENCHMARKS.md, "FisherRF stability").
-        fisher_train_chunk: rays per squared probe for H_train ("random-sign").
-        fisher_train_probes: Rademacher probes per chunk for H_train ("random-sign"; each is
-            three backward passes, one per colour channel).
-        fisher_resolution: pixels across each candidate H_cand is taken over (a stratified,
-            weighted subsample of its image, `fisher_views`: unbiased for the whole image; the
-            image's width or more takes every pixel).
-        fisher_probes: Rademacher probes per candidate ("random-sign"; likewise).
-        fisher_lambda: lambda of the FisherRF score.
-        fisher_cache_floats: memory bound (floats) on the candidates' Fisher diagonals kept for
-            the greedy selection; beyond it they are recomputed when needed.
+        entropy_resolution: width in pixels of each candidate's render the entropy is measured on.
+        entropy_mode: how a ray's entropy counts the chance that it sees background: "escape" (as
+            one more outcome), "renormalise", "raw" (the paper's formula as written), "authors"
+            (their code); docs/methods.md.
+        normalisation: how the entropy and coverage terms are scaled before they are added:
+            "minmax" (each to [0, 1] over the candidates), "none" (the paper's equation as
+            written), "authors" (their code).
+        entropy_weight: weight of the entropy term (how unsure the NeRF is about a view) in a
+            candidate's score.
+        distance_weight: weight of the coverage term (how far a view is from those trained on)
+            in a candidate's score.
+        metric: the symmetric positive-definite 3x3 matrix that weighs rotations in the coverage
+            term (on the command line nine numbers, row by row).
+        scale_m: the bound the rejection sampler divides scores by.
+        sampler: the rejection sampler: "paper" (random draws, accepted in proportion to the
+            score) or "authors" (their code: candidates in order, accepted above a random
+            threshold).
+        authors_threshold: the "authors" sampler accepts a candidate whose score exceeds this
+            times a random number in [0.05, 1].
+        max_draws: draws after which the rejection sampler gives up with an error.
+        fisher_method: how FisherRF's information is estimated: "random-sign" (random probes,
+            unbiased, fast) or "exact" (slow; for checking); docs/methods.md.
+        fisher_train_pixels: training pixels FisherRF's estimate of what the training views
+            already give is taken over (a random, unbiased subsample; docs/methods.md says how
+            the default was chosen).
+        fisher_train_chunk: rays per random probe in that estimate ("random-sign").
+        fisher_train_probes: random probes per chunk of rays in that estimate ("random-sign";
+            each costs three backward passes).
+        fisher_resolution: pixels across each candidate's image FisherRF scores (a random,
+            unbiased subsample; the image's width or more takes every pixel).
+        fisher_probes: random probes per candidate ("random-sign"; each costs three backward
+            passes).
+        fisher_lambda: FisherRF's regulariser, added to the training views' information.
+        fisher_cache_floats: memory bound (floats) on the candidates' FisherRF information kept
+            while views are chosen one by one; beyond it, it is computed again when needed.
         chunk: rays per forward pass when rendering candidates (small chunks are faster on a CPU).
-        background: colour composited behind rendered rays (FisherRF differentiates colours);
-            None for the model's default.
-        scoring_fov: horizontal field of view, degrees, of the entropy's candidate renders; None
-            for the candidates' own (the authors' code: 75).
-        scoring_crop: the central fraction (width and height) of that view the entropy is taken
-            over, rendered `entropy_resolution` pixels across (the authors' code: 0.5).
-        min_polar: candidates closer than this to the pole (polar angle from +z, radians) are
-            never chosen, by any selector; None for no limit (the authors' sampler: 0.4).
-        entropy_max_polar: candidates farther than this from the pole (radians) get entropy 0
-            before normalisation; None for no limit (the authors' entropy NBV: 0.75).
-        distance_rotations: the rotations the coverage term compares: "pose" (the cameras') or the
-            azimuth's alone, "azimuth" (polar angle set to 0, as the authors' NBV code does).
-        temperature: T of the sampling posterior, scores ** (1/T): 1 keeps the scores, < 1
-            sharpens towards next-best-view, > 1 flattens towards uniform. Samplers only.
-        sharpness: if set, in [0, 1]: T is solved per selection so the posterior's effective
-            sample size is C^(1 - s) n^s (C candidates, n views): 0 keeps it, 1 is next-best-view,
-            and 0.5 the geometric mean (see `nerfaug.selection.posterior`). Overrides `temperature`.
-        batch_entropy_sigma: for batch-aware sampling: the entropy of a candidate theta radians
-            from an accepted view is multiplied by 1 - exp(-theta^2 / (2 sigma^2)); None for no
-            entropy discount (see `nerfaug.selection.batch`).
+        background: colour behind rendered rays (FisherRF differentiates colours).
+        scoring_fov: horizontal field of view, degrees, of the candidate renders the entropy is
+            measured on (the authors' code: 75).
+        scoring_crop: the central fraction (width and height) of that view the entropy is
+            measured on, rendered `--selection.entropy-resolution` pixels across (the authors'
+            code: 0.5).
+        min_polar: candidates within this angle of the pole (straight above; radians, 90 degrees
+            minus the elevation) are never chosen (the authors' sampler: 0.4).
+        entropy_max_polar: candidates farther than this angle from the pole (radians) get entropy
+            0 (the authors' entropy method: 0.75).
+        distance_rotations: the rotations the coverage term compares: "pose" (the cameras' whole
+            rotations) or "azimuth" (the turn about the up axis alone, as the authors' code).
+        temperature: T of the sampler, scores ** (1/T): 1 keeps the scores, < 1 sharpens
+            towards the best-scored view, > 1 flattens towards uniform. Samplers only.
+        sharpness: in [0, 1]: the temperature is chosen per selection so that 0 keeps the
+            scores, 1 takes the best-scored views, and 0.5 lies halfway (docs/methods.md).
+            Replaces `--selection.temperature`.
+        batch_entropy_sigma: for the batch-aware methods: once a view is accepted, the entropy
+            of candidates near it is lowered, within about this angle (radians; docs/methods.md).
     """
 
     entropy_resolution: int = 40
@@ -234,7 +239,7 @@ class SelectionConfig:
     entropy_max_polar: Annotated[float | None, none_means("no limit", "RADIANS")] = None
     distance_rotations: str = "pose"
     temperature: float = 1.0
-    sharpness: Annotated[float | None, none_means("unset: `temperature` applies", "FLOAT")] = None
+    sharpness: Annotated[float | None, none_means("unset: --selection.temperature applies", "FLOAT")] = None
     batch_entropy_sigma: Annotated[float | None, none_means("no discount", "RADIANS")] = None
 
     def __post_init__(self) -> None:

@@ -28,10 +28,13 @@ from pathlib import Path
 
 from fastapi import FastAPI, File, Form, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
+from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
 from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException
+from swagger_ui_bundle import swagger_ui_path
 
 import nerfaug
 from nerfaug.service import models
@@ -42,6 +45,10 @@ from nerfaug.service.uploads import check_names, check_poses, parse_json_field, 
 
 # Kept for clients of earlier versions: images one request may carry.
 MAX_IMAGES_PER_REQUEST = MAX_CAPTURES_PER_REQUEST
+# Where the API page's script and style are served from: Swagger UI's files as the package
+# `swagger_ui_bundle` ships them, so /docs works on a closed network (FastAPI's own page loads
+# them from a CDN).
+DOCS_ASSETS = "/docs-assets"
 
 
 def validation_line(errors: list[dict]) -> str:
@@ -127,7 +134,20 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         version=nerfaug.__version__,
         description="Active capture over sessions: train, propose reachable views, add captures, uncertainty images.",
         lifespan=lifespan,
+        docs_url=None,  # served below, with its assets from the package
+        redoc_url=None,  # ReDoc's page would load its script from a CDN
     )
+    app.mount(DOCS_ASSETS, StaticFiles(directory=str(swagger_ui_path)), name="docs-assets")
+
+    @app.get("/docs", include_in_schema=False)
+    def docs():
+        return get_swagger_ui_html(
+            openapi_url=app.openapi_url,
+            title=f"{app.title} - API",
+            swagger_js_url=f"{DOCS_ASSETS}/swagger-ui-bundle.js",
+            swagger_css_url=f"{DOCS_ASSETS}/swagger-ui.css",
+            swagger_favicon_url=f"{DOCS_ASSETS}/favicon-32x32.png",
+        )
 
     @app.middleware("http")
     async def guard(request: Request, call_next):

@@ -15,6 +15,7 @@ for a session not opened yet, read from its session.json), never waiting for a l
 
 from __future__ import annotations
 
+import logging
 import re
 import tempfile
 import threading
@@ -32,6 +33,10 @@ SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 JOBS_DIR = Path(".service") / "jobs"
 CHUNK_STEPS = 10  # training steps per hold of the session's lock
 MAX_TRAINING = 4  # sessions training at once (each a thread running torch)
+# The job's file records the step it reached at most this often (seconds), so that a restart
+# after a kill knows how many steps beyond the last save are redone.
+RECORD_EVERY_S = 1.0
+log = logging.getLogger("nerfaug.service")
 
 
 def check_session_id(session_id: str) -> str:
@@ -46,7 +51,9 @@ def check_session_id(session_id: str) -> str:
 
 @dataclass
 class Job:
-    """A training job: from `start` to `target` steps; `state` is running, done or failed."""
+    """A training job: from `start` to `target` steps; `state` is running, done or failed.
+    A job a restarted service resumed has `resumed_from` (the step of the session's last save)
+    and `redone` (the steps trained after that save before the service stopped: trained again)."""
 
     target: int
     start: int
@@ -55,6 +62,8 @@ class Job:
     error: str | None = None
     started: float = field(default_factory=time)
     finished: float | None = None
+    resumed_from: int | None = None
+    redone: int = 0
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -312,7 +321,7 @@ class SessionHub:
 
     def _train_worker(self, slot: Slot) -> None:
         job = slot.job
-        saved_at = monotonic()
+        saved_at = recorded_at = monotonic()
         try:
             while not self._stopping.is_set():
                 with slot.lock:
@@ -324,6 +333,9 @@ class SessionHub:
                     if monotonic() - saved_at >= self.checkpoint_every:
                         session.save()
                         saved_at = monotonic()
+                    if monotonic() - recorded_at >= RECORD_EVERY_S:
+                        self._record(slot)
+                        recorded_at = monotonic()
                     self._snapshot(slot)
             with slot.lock:
                 slot.session.save()
@@ -349,9 +361,24 @@ class SessionHub:
                 with slot.lock:
                     session = self.opened(slot)
                     target = int(record["target"])
-                    slot.job = Job(target=target, start=int(record.get("start", session.step)), step=session.step)
+                    redone = max(0, int(record.get("step", session.step)) - session.step)
+                    slot.job = Job(
+                        target=target,
+                        start=int(record.get("start", session.step)),
+                        step=session.step,
+                        resumed_from=session.step,
+                        redone=redone,
+                    )
                     self._record(slot)
                     self._start(slot)
+                log.info(
+                    "session %s: training resumed from step %d, its last save (%d steps after it are trained "
+                    "again), until step %d",
+                    session_id,
+                    session.step,
+                    redone,
+                    target,
+                )
                 resumed.append(session_id)
             except Exception as error:  # noqa: BLE001 -- one bad session must not stop the others
                 slot = self.slot(session_id, must_exist=False)

@@ -187,6 +187,10 @@ class Job(BaseModel):
     started: float
     finished: float | None
     progress: float
+    resumed_from: int | None = Field(
+        None, description="a job a restarted service resumed: the step of the session's last save it went on from"
+    )
+    redone: int = Field(0, description="steps trained after that save before the service stopped, trained again")
 
 
 class SessionState(BaseModel):
