@@ -289,11 +289,10 @@ def command(name: str):
 
 def _dispatch(argv: list[str]) -> None:
     if argv[:1] == ["scene"]:
-        for subcommand in (scene_render, scene_prepare):
-            subcommand.__doc__ = reflow(subcommand.__doc__)
-        tyro.extras.subcommand_cli_from_dict(
-            {"render": scene_render, "prepare": scene_prepare}, args=argv[1:], prog="nerfaug scene"
-        )
+        scene_commands = {"render": scene_render, "prepare": scene_prepare}
+        for function in scene_commands.values():
+            function.__doc__ = reflow(function.__doc__)
+        tyro.extras.subcommand_cli_from_dict(scene_commands, args=argv[1:], prog="nerfaug scene")
         return
     parsing = COMMAND_LINE.set(tuple(argv))
     try:

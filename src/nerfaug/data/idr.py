@@ -17,7 +17,6 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-import scipy.linalg
 import torch
 
 from nerfaug.cameras import Cameras
@@ -42,6 +41,8 @@ def decompose_projection(projection: np.ndarray) -> tuple[np.ndarray, np.ndarray
         (4, 4). The sign ambiguity of RQ is fixed by making K's diagonal positive; a projection
         with det < 0 (a mirrored camera) is negated first, since P and -P project alike.
     """
+    import scipy.linalg  # here, not at the top: every command imports the formats' modules
+
     projection = np.asarray(projection, dtype=np.float64)
     if np.linalg.det(projection[:, :3]) < 0:
         projection = -projection
