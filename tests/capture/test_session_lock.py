@@ -77,9 +77,11 @@ def test_a_command_waits_for_the_command_changing_the_session(run):
 
 
 @pytest.mark.slow
-def test_two_trains_of_one_session_at_once_keep_every_step(run):
-    """Before sessions were locked both exited 0 and the session ended 60 steps short."""
-    first, second = (nerfaug("train", run, "--steps", "60", "--device", "cpu") for _ in range(2))
+def test_two_trains_of_one_session_at_once_both_reach_their_step(run):
+    """`--steps N` is the step to reach: two trains of one session at once, to 60 and to 120, end
+    at 120 whichever takes the lock first (the other waits, then goes on from the first's save or
+    finds its step reached), each exiting 0, and the session opens at that step."""
+    first, second = (nerfaug("train", run, "--steps", steps, "--device", "cpu") for steps in ("60", "120"))
     for process in (first, second):
         _, err = process.communicate(timeout=600)
         assert process.returncode == 0, err

@@ -100,7 +100,7 @@ def test_run_and_propose_help_show_the_selection_options(capsys):
         text = capsys.readouterr().out
         for option in ("--selection.entropy-resolution", "--selection.sharpness", "--selection.min-polar"):
             assert option in text, (command, option)
-        assert "width in pixels of the candidate renders" in text  # the attribute's docstring
+        assert "width in pixels of each candidate's render" in " ".join(text.split())  # the attribute's docstring
 
 
 def test_command_line_selection_applies_over_the_preset():
