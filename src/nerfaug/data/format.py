@@ -20,9 +20,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
+import torch
+
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.frames import resolve_image, stored_image
+from nerfaug.data.frames import resolve_image, stored_image, write_image_and_mask
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
 
@@ -194,6 +196,51 @@ class Format(ABC):
                 }
             )
         return self.write_listing(Path(out), split, header, copied)
+
+
+class CapturedSetFormat(Format):
+    """A format of captured sets: one listing for every view (no splits), the images in one
+    folder and their masks (the alpha) in another, paired by name or order. Subclasses give the
+    folder names, read and write the listing, and describe the cameras (`describe` per frame)."""
+
+    has_splits = False
+    listing_name: ClassVar[str]
+    images: ClassVar[str]
+    masks: ClassVar[str]
+
+    def listing(self, root: Path, split: str) -> Path:
+        return Path(root) / self.listing_name
+
+    def image_folder(self, split: str) -> str:
+        return self.images
+
+    def file_path(self, folder: str, stem: str, suffix: str) -> str:
+        return f"{folder}/{stem}{suffix}"
+
+    def frame_keys(self, camera: Cameras) -> dict:
+        return self.describe(camera)[1][0]
+
+    def stored_names(self, views: Views) -> list[tuple[str, str]]:
+        """Each view's image stem and mask file name as `write` stores them."""
+        stems = [Path(name).stem or f"frame_{i:05d}" for i, name in enumerate(views.names)]
+        return [(stem, f"{stem}.png") for stem in stems]
+
+    def write(self, root, split, views, background=(1.0, 1.0, 1.0)) -> Path:
+        """Images as PNG in the image folder (their alpha, when known, as mask PNGs) and the listing."""
+        root = Path(root)
+        views = views.materialised()
+        if not self.fits(views.cameras):
+            raise ValueError(f"these cameras do not fit the {self.name} format ({self.fits_rule})")
+        background = torch.as_tensor(background, dtype=torch.float32)
+        _, keys = self.describe(views.cameras)
+        frames = []
+        for i, (stem, mask) in enumerate(self.stored_names(views)):
+            alpha = None if views.alphas is None else views.alphas[i]
+            image_path = root / self.images / f"{stem}.png"
+            write_image_and_mask(image_path, root / self.masks / mask, views.images[i], alpha, background)
+            pose = views.cameras.camera_to_world[i].tolist()
+            frames.append({"file_path": f"{self.images}/{stem}.png", "transform_matrix": pose} | keys[i])
+        return self.write_listing(root, split, {}, frames)
 
 
 @dataclass(frozen=True)

@@ -17,12 +17,11 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import Format
-from nerfaug.data.frames import check_pose, load_frames, write_image_and_mask
+from nerfaug.data.format import CapturedSetFormat
+from nerfaug.data.frames import check_pose, load_frames
 from nerfaug.data.llff import image_files
 from nerfaug.data.views import Views
 
@@ -65,25 +64,16 @@ def projection_from(intrinsics: np.ndarray, camera_to_world: np.ndarray) -> np.n
     return world
 
 
-class IdrFormat(Format):
+class IdrFormat(CapturedSetFormat):
     """IDR / NeuS (DTU): `cameras_sphere.npz` with the images of `image/` in name order, masks in `mask/`."""
 
     name = "idr"
     fits_rule = "any pinhole cameras"
-    has_splits = False
-
-    def listing(self, root: Path, split: str) -> Path:
-        return Path(root) / LISTING
-
-    def image_folder(self, split: str) -> str:
-        return IMAGE_FOLDERS[0]
+    listing_name, images, masks = LISTING, IMAGE_FOLDERS[0], MASKS
 
     def stored_image_folder(self, root: Path) -> str:
         """The image folder a folder uses: `image/`, or `images/` where only that exists."""
         return next((f for f in IMAGE_FOLDERS if image_files(Path(root) / f)), IMAGE_FOLDERS[0])
-
-    def file_path(self, folder: str, stem: str, suffix: str) -> str:
-        return f"{folder}/{stem}{suffix}"
 
     def read_listing(self, root: Path, split: str) -> tuple[dict, list]:
         """Frames with `file_path`, `transform_matrix` (OpenGL, the sphere's frame) and `K`."""
@@ -172,31 +162,6 @@ class IdrFormat(Format):
             for i in range(len(cameras))
         ]
 
-    def frame_keys(self, camera: Cameras) -> dict:
-        return self.describe(camera)[1][0]
-
-    def write(self, root, split, views, background=(1.0, 1.0, 1.0)) -> Path:
-        """Images as PNG in `image/` (their alpha, when known, as PNGs in `mask/`) and the listing."""
-        root = Path(root)
-        views = views.materialised()
-        background = torch.as_tensor(background, dtype=torch.float32)
-        _, keys = self.describe(views.cameras)
-        frames = []
-        for i in range(len(views)):
-            stem = f"{i:06d}"  # IDR pairs images and masks by order: numbered names keep that order
-            alpha = None if views.alphas is None else views.alphas[i]
-            write_image_and_mask(
-                root / IMAGE_FOLDERS[0] / f"{stem}.png",
-                root / MASKS / f"{i:03d}.png",
-                views.images[i],
-                alpha,
-                background,
-            )
-            frames.append(
-                {
-                    "file_path": f"{IMAGE_FOLDERS[0]}/{stem}.png",
-                    "transform_matrix": views.cameras.camera_to_world[i].tolist(),
-                }
-                | keys[i]
-            )
-        return self.write_listing(root, split, {}, frames)
+    def stored_names(self, views: Views) -> list[tuple[str, str]]:
+        # IDR pairs images and masks by order: numbered names keep that order.
+        return [(f"{i:06d}", f"{i:03d}.png") for i in range(len(views))]

@@ -21,12 +21,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import Format
-from nerfaug.data.frames import check_pose, load_frames, write_image_and_mask
+from nerfaug.data.format import CapturedSetFormat
+from nerfaug.data.frames import check_pose, load_frames
 from nerfaug.data.views import Views
 
 LISTING = "poses_bounds.npy"
@@ -101,21 +100,12 @@ def read_poses_bounds(path: Path) -> np.ndarray:
     return array
 
 
-class LlffFormat(Format):
+class LlffFormat(CapturedSetFormat):
     """LLFF: `poses_bounds.npy` listing the images of `images/` in name order; masks in `masks/`."""
 
     name = "llff"
     fits_rule = "square pixels and the principal point at the image centre"
-    has_splits = False
-
-    def listing(self, root: Path, split: str) -> Path:
-        return Path(root) / LISTING
-
-    def image_folder(self, split: str) -> str:
-        return IMAGES
-
-    def file_path(self, folder: str, stem: str, suffix: str) -> str:
-        return f"{folder}/{stem}{suffix}"
+    listing_name, images, masks = LISTING, IMAGES, MASKS
 
     def read_listing(self, root: Path, split: str) -> tuple[dict, list]:
         """Frames with `file_path`, `transform_matrix` (OpenGL), `hwf` and `bounds`."""
@@ -191,27 +181,3 @@ class LlffFormat(Format):
 
     def describe(self, cameras: Cameras) -> tuple[dict, list[dict]]:
         return {}, [{"hwf": [cameras.height, cameras.width, float(f)]} for f in cameras.fx]
-
-    def frame_keys(self, camera: Cameras) -> dict:
-        return self.describe(camera)[1][0]
-
-    def write(self, root, split, views, background=(1.0, 1.0, 1.0)) -> Path:
-        """Images as PNG in `images/` (their alpha, when known, as PNGs in `masks/`) and the listing."""
-        root = Path(root)
-        views = views.materialised()
-        if not self.fits(views.cameras):
-            raise ValueError(f"these cameras do not fit the {self.name} format ({self.fits_rule})")
-        background = torch.as_tensor(background, dtype=torch.float32)
-        _, keys = self.describe(views.cameras)
-        frames = []
-        for i, name in enumerate(views.names):
-            stem = Path(name).stem or f"frame_{i:05d}"
-            alpha = None if views.alphas is None else views.alphas[i]
-            write_image_and_mask(
-                root / IMAGES / f"{stem}.png", root / MASKS / f"{stem}.png", views.images[i], alpha, background
-            )
-            frames.append(
-                {"file_path": f"{IMAGES}/{stem}.png", "transform_matrix": views.cameras.camera_to_world[i].tolist()}
-                | keys[i]
-            )
-        return self.write_listing(root, split, {}, frames)
