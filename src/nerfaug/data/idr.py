@@ -13,6 +13,7 @@ One listing for the whole folder (no splits), like the nerfstudio and LLFF forma
 
 from __future__ import annotations
 
+import io
 import zipfile
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from nerfaug.data.format import CapturedSetFormat
 from nerfaug.data.frames import check_pose, load_frames
 from nerfaug.data.llff import image_files
 from nerfaug.data.views import Views
+from nerfaug.jsonio import atomic_write_bytes
 
 LISTING = "cameras_sphere.npz"
 IMAGE_FOLDERS = ("image", "images")  # IDR writes image/, several DTU copies images/
@@ -129,9 +131,9 @@ class IdrFormat(CapturedSetFormat):
             arrays[f"scale_mat_{i}"] = np.eye(4)
         path = self.listing(root, split)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(tmp, **arrays)
-        tmp.replace(path)
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        atomic_write_bytes(path, buffer.getvalue())
         return path
 
     def load(self, root, split="train", background=(1.0, 1.0, 1.0), downscale=1, lazy=False) -> Views:

@@ -18,6 +18,7 @@ experiments (`nerfaug.experiment.protocol`).
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import CapturedSetFormat
 from nerfaug.data.frames import check_pose, load_frames
 from nerfaug.data.views import Views
+from nerfaug.jsonio import atomic_write_bytes
 
 LISTING = "poses_bounds.npy"
 IMAGES = "images"
@@ -152,9 +154,9 @@ class LlffFormat(CapturedSetFormat):
             rows.append(np.concatenate([matrix.reshape(-1), np.asarray(bounds, dtype=np.float64)]))
         path = self.listing(root, split)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npy")
-        np.save(tmp, np.stack(rows))
-        tmp.replace(path)
+        buffer = io.BytesIO()
+        np.save(buffer, np.stack(rows))
+        atomic_write_bytes(path, buffer.getvalue())
         return path
 
     def load(self, root, split="train", background=(1.0, 1.0, 1.0), downscale=1, lazy=False) -> Views:
