@@ -130,7 +130,6 @@ class IdrFormat(CapturedSetFormat):
             )
             arrays[f"scale_mat_{i}"] = np.eye(4)
         path = self.listing(root, split)
-        path.parent.mkdir(parents=True, exist_ok=True)
         buffer = io.BytesIO()
         np.savez(buffer, **arrays)
         atomic_write_bytes(path, buffer.getvalue())

@@ -153,7 +153,6 @@ class LlffFormat(CapturedSetFormat):
             matrix = np.concatenate([llff_from_gl(pose[None])[0], np.array(frame["hwf"], dtype=np.float64)[:, None]], 1)
             rows.append(np.concatenate([matrix.reshape(-1), np.asarray(bounds, dtype=np.float64)]))
         path = self.listing(root, split)
-        path.parent.mkdir(parents=True, exist_ok=True)
         buffer = io.BytesIO()
         np.save(buffer, np.stack(rows))
         atomic_write_bytes(path, buffer.getvalue())
