@@ -130,7 +130,7 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
     planned = []
 
     def make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command, **_):
-        config = study_module.base_config(preset).replace(resolution=resolution, device="cpu")
+        config = study_module.STUDY_PRESETS.choose(preset, resolution=resolution, device="cpu")
         plan = study_module.StudyPlan(out, config, ["test"], command=command)
         planned.append(plan)
         return plan
@@ -144,7 +144,7 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
     main([*base, "--selection.temperature", "1.0", "--selection.entropy-resolution", "40"])
     main([*base, "--selection.sharpness", "0.5"])
     default, same, sharper = (fingerprint(p.config.fingerprinted()) for p in planned)
-    untouched = study_module.base_config("tiny").replace(resolution=100, device="cpu")
+    untouched = study_module.STUDY_PRESETS.choose("tiny", resolution=100, device="cpu")
     assert default == same == fingerprint(untouched.fingerprinted())
     assert sharper != default and planned[2].config.selection.sharpness == 0.5
     assert planned[2].command[-2:] == ["--selection.sharpness", "0.5"]

@@ -25,9 +25,9 @@ def planned(monkeypatch, tmp_path):
         return SweepOutcome([], {})
 
     monkeypatch.setattr(sweep, "run_sweep", run_sweep)
-    tiny = experiment_config.PRESET_SETTINGS["tiny"]
     preset_selection = SelectionConfig(temperature=0.5, entropy_resolution=30, sharpness=0.2)
-    monkeypatch.setitem(experiment_config.PRESET_SETTINGS, "tiny", {**tiny, "selection": preset_selection})
+    tiny = experiment_config.PROTOCOL_PRESETS.choose("tiny", selection=preset_selection)
+    monkeypatch.setitem(experiment_config.PROTOCOL_PRESETS, "tiny", tiny)
 
     def plan(*args: str):
         main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", *args])

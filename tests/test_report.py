@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from nerfaug.cli import paper_tables
-from nerfaug.experiment.config import preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.runfolder import (
     FILES,
     read_selection,
@@ -47,7 +47,7 @@ LPIPS_MISSING = "LPIPS unavailable: AlexNet weights not found at /nowhere/alexne
 
 
 def config():
-    return preset("tiny").replace(scenes=("lego", "chair"), methods=METHODS, trials=3)
+    return PROTOCOL_PRESETS.choose("tiny").replace(scenes=("lego", "chair"), methods=METHODS, trials=3)
 
 
 # A test view's squared error (8x8, rising to the right and down), and each method's uncertainty

@@ -139,11 +139,11 @@ def paper_tables():
     """The rows of the paper's ablation tables as the method registry defines them, and its
     protocol's image side (the experiments' paper preset): what a report compares with the paper,
     as `nerfaug.report.PaperTables`."""
-    from nerfaug.experiment.config import preset as make_preset
+    from nerfaug.experiment.config import PROTOCOL_PRESETS
     from nerfaug.report import PaperTables
     from nerfaug.selection import TABLE_I_ROWS, TABLE_II_ROWS
 
-    return PaperTables(TABLE_I_ROWS, TABLE_II_ROWS, make_preset("paper").resolution)
+    return PaperTables(TABLE_I_ROWS, TABLE_II_ROWS, PROTOCOL_PRESETS["paper"].resolution)
 
 
 def report(results: Positional[Path]) -> None:

@@ -14,8 +14,7 @@ from typing import Annotated, Literal, get_args
 import tyro
 
 from nerfaug.cli_options import COMMAND_LINE, given_fields
-from nerfaug.experiment.config import PresetName
-from nerfaug.experiment.config import preset as make_preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS, PresetName
 from nerfaug.nerf.config import EnginePreset
 from nerfaug.selection.config import SelectionConfig
 
@@ -28,7 +27,7 @@ def preset_default(name: str) -> str:
     "(default: the preset's: quick, ablation: 5; paper: 10; tiny: 2)"."""
     presets: dict[str, list[str]] = {}
     for preset_name in get_args(PresetName):
-        value = getattr(make_preset(preset_name), name)
+        value = getattr(PROTOCOL_PRESETS[preset_name], name)
         presets.setdefault(" ".join(map(str, value)) if isinstance(value, tuple) else str(value), []).append(
             preset_name
         )
@@ -111,7 +110,7 @@ def run(
     from nerfaug.device import resolve_device
     from nerfaug.experiment.sweep import run_sweep
 
-    config = make_preset(preset)
+    config = PROTOCOL_PRESETS.choose(preset)
     changes = {
         k: v
         for k, v in dict(

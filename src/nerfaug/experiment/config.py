@@ -6,8 +6,9 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING
 
+from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
@@ -138,67 +139,66 @@ class ExperimentConfig:
         return NerfConfig.preset(self.engine, **({"field_lr": self.field_lr[name]} if name in self.field_lr else {}))
 
 
-PRESET_SETTINGS: dict[str, dict[str, object]] = {
-    "quick": {"trials": 5, "steps": 800, "pool": 100, "n_test": 20},
-    "paper": {
-        "scenes": ("lego", "chair", "materials"),
-        "trials": 10,
-        "engine": "paper",
-        "resolution": 800,
-        "steps": 10_000,
-        "pool": 500,
-        "n_test": 200,
-        "render_samples": 64,
+PROTOCOL_PRESETS: Presets[ExperimentConfig] = Presets(
+    "preset",
+    {
+        "quick": ExperimentConfig(trials=5, steps=800, pool=100, n_test=20),
+        "paper": ExperimentConfig(
+            scenes=("lego", "chair", "materials"),
+            trials=10,
+            engine="paper",
+            resolution=800,
+            steps=10_000,
+            pool=500,
+            n_test=200,
+            render_samples=64,
+        ),
+        "ablation": ExperimentConfig(
+            methods=tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
+            trials=5,
+        ),
+        "tiny": ExperimentConfig(
+            methods=("ours", "uniform"),
+            trials=2,
+            engine="test",
+            resolution=24,
+            steps=60,
+            add_at_step=20,
+            n_new=2,
+            n_initial=3,
+            pool=12,
+            n_test=3,
+            render_samples=4,
+            save_renders=1,
+        ),
     },
-    "ablation": {
-        "methods": tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
-        "trials": 5,
-    },
-    "tiny": {
-        "methods": ("ours", "uniform"),
-        "trials": 2,
-        "engine": "test",
-        "resolution": 24,
-        "steps": 60,
-        "add_at_step": 20,
-        "n_new": 2,
-        "n_initial": 3,
-        "pool": 12,
-        "n_test": 3,
-        "render_samples": 4,
-        "save_renders": 1,
-    },
-}
-"""Each protocol preset as the fields it sets over `ExperimentConfig`'s defaults (`preset`)."""
+)
+"""The protocols of `nerfaug run --preset`:
 
-PresetName = Literal[tuple(PRESET_SETTINGS)]  # type: ignore[valid-type]
+quick: the default (`make demo`); the built-in lego at 100x100 with the CPU engine, the four
+    methods of the main comparison, five trials each (the fewest with which Mann-Whitney with a
+    Bonferroni factor of 3 can reach p < 0.05), 800 steps (views added at 200, as in the paper),
+    100 candidates and 20 test views: about 10 minutes on two cores from a fresh clone
+    (BENCHMARKS.md, "Demo").
+paper: lego/chair/materials at 800x800 (or the data's resolution), 10k steps, 10 trials, the
+    paper's learning rates and its main comparison.
+ablation: the paper's Tables I and II (terms; NBV vs sampling) on lego.
+tiny: seconds-long smoke run for tests.
+"""
+
+PresetName = PROTOCOL_PRESETS.name_type()
 """The protocol presets' names as a type, for a CLI (tyro) to offer and check."""
 
-STUDY_PRESET_SETTINGS: dict[str, dict[str, object]] = {
-    # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page does
-    # not show them, and they cost seconds per run.
-    "study": {"view_uncertainty": False},
-    "tiny": {**PRESET_SETTINGS["tiny"], "view_uncertainty": False},
-}
-"""The protocols a study can run every engine under, in the shape of `PRESET_SETTINGS`."""
-
-
-def preset(name: str, presets: dict[str, dict[str, object]] = PRESET_SETTINGS) -> ExperimentConfig:
-    """The protocol preset `name`: its settings in `presets` over `ExperimentConfig`'s defaults.
-
-    quick: the default (`make demo`); the built-in lego at 100x100 with the CPU engine, the four
-        methods of the main comparison, five trials each (the fewest with which Mann-Whitney with
-        a Bonferroni factor of 3 can reach p < 0.05), 800 steps (views added at 200, as in the
-        paper), 100 candidates and 20 test views: about 10 minutes on two cores from a fresh
-        clone (BENCHMARKS.md, "Demo").
-    paper: lego/chair/materials at 800x800 (or the data's resolution), 10k steps, 10 trials, the
-        paper's learning rates and its main comparison.
-    ablation: the paper's Tables I and II (terms; NBV vs sampling) on lego.
-    tiny: seconds-long smoke run for tests.
-
-    Raises:
-        ValueError: `name` is not in `presets` (the message lists those that are).
-    """
-    if name not in presets:
-        raise ValueError(f"unknown preset {name!r}; choose one of: {', '.join(presets)}")
-    return ExperimentConfig(**presets[name])
+STUDY_PRESETS: Presets[ExperimentConfig] = Presets(
+    "study preset",
+    {
+        # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page
+        # does not show them, and they cost seconds per run.
+        "study": ExperimentConfig(view_uncertainty=False),
+        "tiny": PROTOCOL_PRESETS.choose("tiny", view_uncertainty=False),
+    },
+)
+"""The protocols a study runs every engine under (`nerfaug study --preset`): "study" is the
+paper's protocol at 100x100 (6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50
+test views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are
+rendered first, which takes minutes)."""

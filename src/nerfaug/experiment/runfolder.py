@@ -33,6 +33,7 @@ import numpy as np
 
 from nerfaug.experiment.store import RESULT_FILE, read_result, write_result
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
+from nerfaug.registry import check_name
 
 
 @dataclass(frozen=True)
@@ -211,9 +212,8 @@ VIEW_ARRAYS = ("render", "error", "entropy", "fisher")
 def write_view_uncertainty(folder: Path, arrays: dict[str, np.ndarray]) -> Path:
     """Write `FILES.view_uncertainty/<name>.npy` for each of `arrays` (names from VIEW_ARRAYS:
     render (H, W, 3), error (H, W), entropy (H, W), fisher (h, w)). Returns the folder."""
-    unknown = sorted(set(arrays) - set(VIEW_ARRAYS))
-    if unknown:
-        raise ValueError(f"unknown view arrays {unknown}; valid: {', '.join(VIEW_ARRAYS)}")
+    for name in arrays:
+        check_name("view array", name, VIEW_ARRAYS)
     target = Path(folder) / FILES.view_uncertainty
     for name, values in arrays.items():
         buffer = io.BytesIO()
@@ -249,8 +249,7 @@ def read_view_uncertainty(folder: Path) -> dict[str, np.ndarray] | None:
 def render_paths(folder: Path, kind: str = "render") -> list[Path]:
     """The saved test renders, sorted by view: kind "render" (the model's image) or "render_vs_gt"
     (render left, ground truth right)."""
-    if kind not in ("render", "render_vs_gt"):
-        raise ValueError(f"unknown render kind {kind!r}; valid: render, render_vs_gt")
+    check_name("render kind", kind, ("render", "render_vs_gt"))
     return sorted((Path(folder) / FILES.renders).glob(f"*_{kind}.png"))
 
 

@@ -25,9 +25,8 @@ import platform
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Literal
 
-from nerfaug.experiment.config import STUDY_PRESET_SETTINGS, ExperimentConfig, preset
+from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
 
 STUDY_FILE = "study.json"
 TABLE_FILE = "study-table.json"
@@ -40,7 +39,7 @@ SMOKE_ENGINES = ("test",)
 GPU_ENGINES = ("paper",)
 """Engine presets left out of a default study on a CPU: the paper's nerfacto-sized engine is about
 100x slower there than the cpu preset (BENCHMARKS.md), so one study would take weeks."""
-StudyPreset = Literal[tuple(STUDY_PRESET_SETTINGS)]  # type: ignore[valid-type]
+StudyPreset = STUDY_PRESETS.name_type()
 
 
 def study_methods() -> tuple[str, ...]:
@@ -84,14 +83,6 @@ def min_trials(n_comparisons: int, alpha: float = 0.05, start: int = DEFAULT_TRI
     while min_attainable_paired_p(n) * max(1, n_comparisons) >= alpha:
         n += 1
     return n
-
-
-def base_config(name: StudyPreset) -> ExperimentConfig:
-    """The protocol every engine runs: "study" is `ExperimentConfig`'s defaults (the paper's
-    protocol at 100x100: 6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50 test
-    views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are rendered
-    first, which takes minutes)."""
-    return preset(name, STUDY_PRESET_SETTINGS)
 
 
 def machine() -> dict:
@@ -335,7 +326,8 @@ def make_plan(
     comparisons = max(1, sum(m != "uniform" for m in methods))
     if trials is None:
         trials = min_trials(comparisons)
-    config = base_config(preset_name).replace(
+    config = STUDY_PRESETS.choose(
+        preset_name,
         methods=methods,
         trials=trials,
         resolution=resolution,
@@ -363,7 +355,6 @@ __all__ = [
     "STUDY_FILE",
     "TABLE_FILE",
     "StudyPlan",
-    "base_config",
     "default_engines",
     "engine_presets",
     "make_plan",

@@ -97,7 +97,7 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
             method in METHODS,
             "methods",
             method,
-            f"unknown selection method; choose from {', '.join(METHODS)} (`nerfaug methods`)",
+            f"unknown selection method; choose one of: {', '.join(METHODS)} (`nerfaug methods`)",
         )
     _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
     _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
