@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import concurrent.futures as futures
 import multiprocessing
+import os
 import platform
 import sys
 import traceback
@@ -35,6 +36,8 @@ from nerfaug.experiment.store import (
     read_result,
     run_fingerprint,
 )
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
 
 Backend = Literal["local", "ray"]
@@ -52,6 +55,12 @@ class SweepOutcome:
     results: list[dict]
     failed: dict[str, str] = field(default_factory=dict)
     skipped: int = 0
+
+
+def default_workers(config: ExperimentConfig) -> int:
+    """Concurrent runs when none are asked for: one per core on a CPU (each run's threads counted);
+    one at a time on a GPU (each run holds its own CUDA context)."""
+    return 1 if config.device == "cuda" else max(1, (os.cpu_count() or 1) // config.threads_per_run)
 
 
 def plan_runs(config: ExperimentConfig) -> list[RunKey]:
@@ -100,6 +109,10 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
             f"unknown selection method; choose one of: {', '.join(METHODS)} (`nerfaug methods`)",
         )
     _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
+    try:
+        check_names(NerfConfig.preset(config.engine))
+    except ValueError as error:
+        raise ValueError(f"--engine {config.engine!r}: {error}") from None
     _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
     for name in (
         "trials",
