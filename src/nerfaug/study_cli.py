@@ -17,6 +17,7 @@ import tyro
 
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
+from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.store import finished_runs
 from nerfaug.experiment.study import StudyPreset
 from nerfaug.experiment.sweep import default_workers
@@ -66,7 +67,9 @@ Trials = Annotated[
 Workers = Annotated[
     int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one on a GPU)")
 ]
-Table = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: OUT/study-table.json)")]
+Table = Annotated[
+    Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint=f"(default: {StudyFolder(Path('OUT')).table})")
+]
 ResultsDoc = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")]
 
 
@@ -132,7 +135,7 @@ class Study:
 
     def __call__(self) -> None:
         out = Path(self.out)
-        table_path = Path(self.table) if self.table is not None else out / study_runs.TABLE_FILE
+        table_path = Path(self.table) if self.table is not None else StudyFolder(out).table
         previous = study_table.read_table(table_path) if table_path.exists() else None
         failed = {} if self.summary_only else self.run(previous)
         recorded = record_table(out, table_path, previous)
@@ -192,7 +195,8 @@ def study_size_line(plan, workers: int) -> str:
     """How many runs the study makes, how big, and about how long on this device (`nerfaug.run_size`)."""
     config = plan.config
     each = len(plan.scenes) * len(config.methods) * config.trials
-    done = {engine: min(len(finished_runs(Path(plan.out) / engine)), each) for engine in plan.engines}
+    study = StudyFolder(Path(plan.out))
+    done = {engine: min(len(finished_runs(study.engine(engine).root)), each) for engine in plan.engines}
     shape = " x ".join(
         (
             per_cell(len(plan.engines), "engine"),
@@ -222,7 +226,7 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     Raises:
         SystemExit: neither OUT/study.json nor the table exists.
     """
-    path = Path(out) / study_runs.STUDY_FILE
+    path = StudyFolder(Path(out)).record
     if not path.is_file():
         if previous is None:
             raise SystemExit(

@@ -15,6 +15,7 @@ from nerfaug.data import Views, find_split, has_split, load_dataset, require_spl
 from nerfaug.data.frame import Hemisphere
 from nerfaug.device import describe_device
 from nerfaug.experiment.config import ExperimentConfig
+from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.experiment.runfolder import (
     FILES,
     write_config,
@@ -91,7 +92,7 @@ def scene_dataset_dir(root: Path, scene: str, config: ExperimentConfig) -> Path:
     folder = scene_folder(scene)
     if folder is not None:
         return folder
-    return Path(root) / "datasets" / f"{scene}-{config.resolution}px"
+    return ResultsFolder(Path(root)).dataset(scene, config.resolution)
 
 
 def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bool = True) -> Path:
@@ -147,7 +148,7 @@ def builtin_dataset_digest(scene: str, config: ExperimentConfig) -> str:
 
 def dataset_cache_dir(root: Path) -> Path:
     """Where a sweep's runs share their downscaled datasets (`nerfaug.scenes.cache`)."""
-    return Path(root) / "datasets" / "cache"
+    return ResultsFolder(Path(root)).dataset_cache
 
 
 def is_captured_set(folder: Path) -> bool:

@@ -1,15 +1,8 @@
 """The study's runs: the study family of selection methods x the engine presets x the scenes,
 each as one resumable sweep per engine into `OUT/<engine>/`, and its plan recorded in study.json.
 The `nerfaug study` command (`nerfaug.study_cli`) runs them, then records every finished run in the
-per-run table and writes the combined summary from it (`nerfaug.report.study`).
-
-    OUT/
-      study.json              the plan: engines run and left out (with the reason), scenes,
-                              methods, trials, the command, the machine
-      datasets/<res>px/<scene>/  each built-in scene rendered once, shared by every engine
-      <engine>/               a results folder as `nerfaug run` writes it (sweep.json, runs/, report)
-      study-table.json        the per-run table (`nerfaug.report.study_table`), or the --table file
-      study.md, figures/      the summary, generated from the table alone
+per-run table and writes the combined summary from it (`nerfaug.report.study`). The study
+folder's layout: `experiment.layout.StudyFolder`.
 
 Re-running the same command skips completed runs (each engine's sweep resumes on its own), and
 runs recorded in the table with the fingerprint they would have now (a study committed beside
@@ -27,9 +20,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
+from nerfaug.experiment.layout import StudyFolder
 
-STUDY_FILE = "study.json"
-TABLE_FILE = "study-table.json"
 DEFAULT_TRIALS = 10
 """Trials per (scene, engine, method): with 10 seed-paired trials a two-sided Wilcoxon signed-rank
 test, Bonferroni over the 7 methods compared with uniform, reaches p < 0.05 when 9 of 10 pairs
@@ -144,7 +136,7 @@ def prepare_datasets(
     for scene in scenes:
         folder = scene_folder(scene)
         if folder is None:
-            folder = render_builtin(scene, Path(out) / "datasets" / f"{config.resolution}px" / scene, config, progress)
+            folder = render_builtin(scene, StudyFolder(Path(out)).dataset(config.resolution, scene), config, progress)
         name = Path(folder).name
         if name in found:
             raise ValueError(f"two scenes are named {name!r} ({found[name]} and {folder}); rename a dataset folder")
@@ -210,15 +202,16 @@ def run_study(
     from nerfaug.experiment.sweep import run_sweep
     from nerfaug.jsonio import atomic_write_json
 
+    study = StudyFolder(plan.out)
     plan.out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(plan.out / STUDY_FILE, merged_record(plan.out / STUDY_FILE, plan.record()))
+    atomic_write_json(study.record, merged_record(study.record, plan.record()))
     outcomes = {}
     for engine in plan.engines:
         if progress:
-            print(f"study: engine {engine} -> {plan.out / engine}", file=sys.stderr)
+            print(f"study: engine {engine} -> {study.engine(engine).root}", file=sys.stderr)
         outcome = run_sweep(
             plan.engine_config(engine),
-            plan.out / engine,
+            study.engine(engine).root,
             workers=workers,
             force=force,
             progress=progress,
@@ -248,7 +241,7 @@ def with_design(record: dict, out: Path) -> dict:
     settings = dict(record.get("engine_settings", {}))
     for engine in record.get("engines", []):
         try:
-            fingerprinted = json.loads((out / engine / "sweep.json").read_text())["fingerprinted"]
+            fingerprinted = json.loads(StudyFolder(out).engine(engine).sweep.read_text())["fingerprinted"]
         except (OSError, ValueError, KeyError, TypeError):
             continue
         found = {k.removeprefix("engine."): v for k, v in fingerprinted.items() if k.startswith("engine.")}
@@ -352,8 +345,6 @@ __all__ = [
     "PROCEDURAL_SCENES",
     "REAL_STUDY_SCENES",
     "prepared_source",
-    "STUDY_FILE",
-    "TABLE_FILE",
     "StudyPlan",
     "default_engines",
     "engine_presets",

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.experiment.runfolder import (
     FILES,
     read_history,
@@ -313,7 +314,7 @@ class Figures:
 
 
 def make_figures(results: Results) -> Figures:
-    folder = results.root / "figures"
+    folder = ResultsFolder(results.root).figures
     figures = Figures()
     for scene in results.scenes:
         name = slug(scene)
