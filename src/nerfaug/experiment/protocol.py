@@ -35,6 +35,7 @@ from nerfaug.experiment.store import (
     write_result,
 )
 from nerfaug.hemisphere import angles_from_pose
+from nerfaug.oracle import PoolOracle
 
 PROGRESS_EVERY = 50
 # Pixels across of the saved FisherRF image of a test view: three backward passes per pixel.
@@ -305,7 +306,9 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
 
     start = time.perf_counter()
     chosen = [int(i) for i in selection.indices]
-    new_views = data.pool.subset(chosen)  # the pool is the oracle: its images of the chosen poses
+    # The experiment's oracle is its pool: asked for the chosen poses, it answers with the pool's
+    # images of them, as a robot's camera would with new ones (`nerfaug.oracle`).
+    new_views = PoolOracle(data.pool).capture(data.pool.cameras.camera_to_world[chosen])
     timing["oracle"] = time.perf_counter() - start
     trainer.add_views(new_views)
 
