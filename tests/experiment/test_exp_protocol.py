@@ -147,11 +147,9 @@ def test_a_sweeps_run_trains_and_selects_on_its_own_thread_count(tmp_path, monke
         cameras = Cameras.from_fov(sample_uniform_poses(n, generator), BLENDER_CAMERA_ANGLE_X, 8, 8)
         images = torch.rand(n, 8, 8, 3, generator=generator)
         write_blender_split(tmp_path / "data", split, Views(cameras, images, [f"./{split}/r_{i}" for i in range(n)]))
-    import nerfaug.selection
-
     seen = []
     train = protocol.train_with_progress
-    original_select = nerfaug.selection.select_views
+    original_select = protocol.select_views
 
     def counting_train(*args, **kwargs):
         seen.append(("train", torch.get_num_threads()))
@@ -162,7 +160,7 @@ def test_a_sweeps_run_trains_and_selects_on_its_own_thread_count(tmp_path, monke
         return original_select(*args, **kwargs)
 
     monkeypatch.setattr(protocol, "train_with_progress", counting_train)
-    monkeypatch.setattr(nerfaug.selection, "select_views", counting_select)
+    monkeypatch.setattr(protocol, "select_views", counting_select)
     config = PROTOCOL_PRESETS.choose("tiny").replace(steps=12, add_at_step=6, n_test=2, n_new=2, view_uncertainty=False)
     before = torch.get_num_threads()
     torch.set_num_threads(2)

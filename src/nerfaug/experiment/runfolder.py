@@ -30,8 +30,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from nerfaug.experiment.store import RESULT_FILE, read_result, write_result
+from nerfaug.hemisphere import angles_from_pose
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
 from nerfaug.registry import check_name
 
@@ -96,10 +98,6 @@ def write_selection(folder: Path, selection: dict, chosen_names: list[str], cand
         candidate_poses: Tensor or array (C, 4, 4), the pool the indices point into.
         train_poses: Tensor or array (T, 4, 4), the views trained on before the selection.
     """
-    import torch
-
-    from nerfaug.hemisphere import angles_from_pose
-
     candidates = torch.as_tensor(
         np.asarray(candidate_poses) if not torch.is_tensor(candidate_poses) else candidate_poses
     )

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nerfaug import owned
+from nerfaug.data import detect_format, find_split
 from nerfaug.errors import FolderRefused, NerfaugError
 from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.jsonio import atomic_write_json
@@ -327,8 +328,6 @@ def dataset_digest(folder: Path) -> str:
     """A short hash of a dataset folder's listings (what its frames and cameras are): every
     `transforms*.json`, and the listing of each split the experiments read in whatever format
     holds it."""
-    from nerfaug.data import detect_format
-
     folder = Path(folder)
     listings = set(folder.glob("transforms*.json"))
     for split in LISTED_SPLITS:
@@ -348,8 +347,6 @@ def dataset_content_digest(folder: Path, splits: tuple[str, ...]) -> str:
     Raises:
         DatasetError: a split or a frame's image is missing, or an image lies outside the folder.
     """
-    from nerfaug.data import find_split
-
     folder = Path(folder)
     root = folder.resolve()
     digest = hashlib.sha256()

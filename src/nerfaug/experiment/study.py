@@ -19,8 +19,20 @@ import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import torch
+
+from nerfaug.data.prepare import PREPARED
+from nerfaug.device import resolve_device
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
 from nerfaug.experiment.layout import StudyFolder
+from nerfaug.experiment.protocol import render_builtin, scene_folder
+from nerfaug.experiment.store import RunKey
+from nerfaug.experiment.sweep import check_config, run_sweep
+from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.nerf.config import PRESETS, NerfConfig
+from nerfaug.nerf.registry import check_names
+from nerfaug.selection.methods import FAMILIES
+from nerfaug.statistics import min_attainable_paired_p
 
 DEFAULT_TRIALS = 10
 """Trials per (scene, engine, method): with 10 seed-paired trials a two-sided Wilcoxon signed-rank
@@ -37,15 +49,11 @@ StudyPreset = STUDY_PRESETS.name_type()
 def study_methods() -> tuple[str, ...]:
     """The study's methods: the registry's "study" family (ours, its authors' variant, the
     batch-aware variants and the baselines)."""
-    from nerfaug.selection.methods import FAMILIES
-
     return tuple(FAMILIES["study"])
 
 
 def engine_presets() -> tuple[str, ...]:
     """Every engine preset that exists (`nerfaug.nerf.config.PRESETS`), in its order."""
-    from nerfaug.nerf.config import PRESETS
-
     return tuple(PRESETS)
 
 
@@ -69,8 +77,6 @@ def default_engines(device: str) -> tuple[list[str], dict[str, str]]:
 def min_trials(n_comparisons: int, alpha: float = 0.05, start: int = DEFAULT_TRIALS) -> int:
     """The smallest n >= `start` (trials per method, paired by seed) at which a two-sided Wilcoxon
     signed-rank test on the pairs, Bonferroni x `n_comparisons`, can reach p < alpha."""
-    from nerfaug.statistics import min_attainable_paired_p
-
     n = start
     while min_attainable_paired_p(n) * max(1, n_comparisons) >= alpha:
         n += 1
@@ -79,8 +85,6 @@ def min_trials(n_comparisons: int, alpha: float = 0.05, start: int = DEFAULT_TRI
 
 def machine() -> dict:
     """What the study ran on, for its summary."""
-    import torch
-
     return {
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
@@ -106,8 +110,6 @@ class StudyPlan:
         return self.config.replace(engine=engine, scenes=tuple(self.datasets[s] for s in self.scenes))
 
     def record(self) -> dict:
-        from nerfaug.nerf.config import NerfConfig
-
         return {
             "engines": self.engines,
             "engine_settings": {e: NerfConfig.preset(e).to_dict() for e in self.engines},
@@ -130,8 +132,6 @@ def prepare_datasets(
     manifest) into OUT/datasets/<res>px/<scene>/, a folder named by the scene so that results and
     per-scene settings (the field learning rate) know it by its name; a dataset folder is used
     as it is, named by its folder."""
-    from nerfaug.experiment.protocol import render_builtin, scene_folder
-
     found = {}
     for scene in scenes:
         folder = scene_folder(scene)
@@ -174,9 +174,6 @@ def merge_records(previous: dict, record: dict) -> dict:
 def prepared_source(folder: Path) -> dict | None:
     """What a dataset folder prepared by `nerfaug scene prepare` was made from: the downloaded
     folder's digest, its format and the width (None for other folders, built-in scenes among them)."""
-    from nerfaug.data.prepare import PREPARED
-    from nerfaug.jsonio import read_json
-
     path = Path(folder) / PREPARED
     if not path.is_file():
         return None
@@ -198,10 +195,6 @@ def run_study(
     """Run every engine's sweep (resuming; runs recorded in `table` with their current fingerprint
     are not run again), writing OUT/study.json first. Returns engine -> {"failed": {run: reason},
     "results": n valid results}."""
-    from nerfaug.experiment.store import RunKey
-    from nerfaug.experiment.sweep import run_sweep
-    from nerfaug.jsonio import atomic_write_json
-
     study = StudyFolder(plan.out)
     plan.out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(study.record, merged_record(study.record, plan.record()))
@@ -297,15 +290,10 @@ def make_plan(
     layouts: int = 1,
 ) -> StudyPlan:
     """The plan from the command's options (None: the default), with the datasets prepared."""
-    from nerfaug.device import resolve_device
-
     try:
         device_type = resolve_device(device).type
     except ValueError as error:
         raise SystemExit(f"--device: {error}") from None
-    from nerfaug.nerf.config import NerfConfig
-    from nerfaug.nerf.registry import check_names
-
     if engines is None:
         chosen, left_out = default_engines(device_type)
     else:
@@ -330,8 +318,6 @@ def make_plan(
     )
     scenes = tuple(scenes) if scenes else PROCEDURAL_SCENES
     # Every setting checked before any dataset is rendered (a bad --trials costs nothing).
-    from nerfaug.experiment.sweep import check_config
-
     for engine in chosen:
         check_config(config.replace(scenes=scenes, engine=engine))
     datasets = prepare_datasets(out, scenes, config, progress=progress)

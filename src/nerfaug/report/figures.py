@@ -19,6 +19,7 @@ from nerfaug.experiment.runfolder import (
     read_selection,
     render_paths,
 )
+from nerfaug.maps import plot_method_maps
 from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_LABELS, METRICS
 from nerfaug.plotting import new_figure, save_figure
 from nerfaug.report.collect import Results, Run
@@ -115,8 +116,6 @@ def plot_uncertainty_maps(results: Results, scene: str, folder: Path) -> tuple[l
     """Fig. 1: per method, its first trial's scores over the hemisphere with the initial (triangles)
     and chosen (stars) views, drawn by `nerfaug.maps.plot_method_maps`, at most
     MAP_PANELS_PER_FIGURE methods per image. Returns the images and notes."""
-    from nerfaug.maps import plot_method_maps
-
     panels, notes = _map_panels(results, scene)
     paths = []
     for part, first in enumerate(range(0, len(panels), MAP_PANELS_PER_FIGURE)):
