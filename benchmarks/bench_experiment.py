@@ -16,7 +16,7 @@ import statistics
 import time
 from pathlib import Path
 
-from nerfaug.experiment.config import preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.sweep import run_sweep
 
 PHASES = ("setup", "train_before", "selection", "oracle", "train_after", "evaluation", "total")
@@ -41,7 +41,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("/tmp/nerfaug_bench_experiment"))
     parser.add_argument("--ray", action="store_true", help="also run the grid on a local Ray instance")
     args = parser.parse_args()
-    config = preset(args.preset)
+    config = PROTOCOL_PRESETS.choose(args.preset)
 
     # Render the scene once so neither backend's time includes Blender.
     scene_cache = args.out / "scene_cache"

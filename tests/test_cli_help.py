@@ -8,7 +8,6 @@ import pytest
 
 from nerfaug.cli import main, reflow
 from nerfaug.experiment.store import fingerprint
-from nerfaug.run_cli import preset_default
 
 
 def help_text(argv: list[str], capsys, monkeypatch) -> str:
@@ -23,13 +22,12 @@ def test_run_help_shows_the_presets_values_not_none(capsys, monkeypatch):
     text = help_text(["run"], capsys, monkeypatch)
     options = text.split("selection options")[0]  # a selection option's None is its real default
     assert "(default: None)" not in options and "{None}" not in options
-    assert "(default: the preset's: quick: 800; paper: 10000; ablation: 2000; tiny: 60)" in text
     assert "--scenes SCENE [SCENE ...]" in text and "--trials INT" in text
-    assert "(default: 0, in every preset)" in text  # --seed
-
-
-def test_a_presets_default_groups_the_presets_that_agree():
-    assert preset_default("trials") == "(default: the preset's: quick, ablation: 5; paper: 10; tiny: 2)"
+    steps = re.compile(r"training steps per run\. \(default: (\d+)\)")
+    assert steps.search(text).group(1) == "800"  # the default preset's, quick
+    paper = help_text(["run", "--preset", "paper"], capsys, monkeypatch)
+    assert steps.search(paper).group(1) == "10000"
+    assert "(default: paper)" in paper and "(default: lego chair materials)" in paper
 
 
 def test_top_level_help_lists_every_command(capsys, monkeypatch):
@@ -130,7 +128,7 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
     planned = []
 
     def make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command, **_):
-        config = study_module.base_config(preset).replace(resolution=resolution, device="cpu")
+        config = study_module.STUDY_PRESETS.choose(preset, resolution=resolution, device="cpu")
         plan = study_module.StudyPlan(out, config, ["test"], command=command)
         planned.append(plan)
         return plan
@@ -144,7 +142,7 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
     main([*base, "--selection.temperature", "1.0", "--selection.entropy-resolution", "40"])
     main([*base, "--selection.sharpness", "0.5"])
     default, same, sharper = (fingerprint(p.config.fingerprinted()) for p in planned)
-    untouched = study_module.base_config("tiny").replace(resolution=100, device="cpu")
+    untouched = study_module.STUDY_PRESETS.choose("tiny", resolution=100, device="cpu")
     assert default == same == fingerprint(untouched.fingerprinted())
     assert sharper != default and planned[2].config.selection.sharpness == 0.5
     assert planned[2].command[-2:] == ["--selection.sharpness", "0.5"]

@@ -1,10 +1,9 @@
-"""`nerfaug run`'s options over its preset: an option given on the command line applies even when
-its value is the default, and one not given keeps the preset's value."""
+"""`nerfaug run`'s options start from its preset: an option given on the command line applies even
+when its value is the dataclass default, and one not given keeps the preset's value."""
 
 import pytest
 
 from nerfaug.cli import main
-from nerfaug.cli_options import given_fields
 from nerfaug.experiment import config as experiment_config
 from nerfaug.experiment.sweep import SweepOutcome
 from nerfaug.selection.methods import SelectionConfig
@@ -25,9 +24,9 @@ def planned(monkeypatch, tmp_path):
         return SweepOutcome([], {})
 
     monkeypatch.setattr(sweep, "run_sweep", run_sweep)
-    tiny = experiment_config.PRESET_SETTINGS["tiny"]
     preset_selection = SelectionConfig(temperature=0.5, entropy_resolution=30, sharpness=0.2)
-    monkeypatch.setitem(experiment_config.PRESET_SETTINGS, "tiny", {**tiny, "selection": preset_selection})
+    tiny = experiment_config.PROTOCOL_PRESETS.choose("tiny", selection=preset_selection)
+    monkeypatch.setitem(experiment_config.PROTOCOL_PRESETS, "tiny", tiny)
 
     def plan(*args: str):
         main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", *args])
@@ -61,39 +60,22 @@ def test_a_protocol_option_given_at_the_dataclass_default_replaces_the_presets_v
     assert config.n_test == 3  # not given: the preset's
 
 
-@pytest.mark.parametrize(
-    "argv, given",
-    [
-        (["run", "--selection.temperature", "1.0"], {"temperature"}),
-        (["run", "--selection.min-polar=0.4", "--selection.scale_m", "2"], {"min_polar", "scale_m"}),
-        (["run", "--out", "selection.temperature", "--seed", "3"], set()),
-        (["propose", "RUN", "--selection.sharpness", "0.5", "--selection.sharpness", "0.6"], {"sharpness"}),
-    ],
-)
-def test_given_fields_are_the_options_on_the_command_line_whatever_their_spelling(argv, given):
-    options = SelectionConfig(min_polar=0.4, scale_m=2.0, sharpness=0.6)
-    found = given_fields(options, "selection", argv)
-    assert set(found) == given
-    assert all(found[name] == getattr(options, name) for name in found)
+def test_the_options_start_from_the_preset_the_command_line_names(monkeypatch, tmp_path):
+    import nerfaug.experiment.sweep as sweep
+
+    configs = []
+    monkeypatch.setattr(sweep, "run_sweep", lambda config, out, **_: configs.append(config) or SweepOutcome([], {}))
+    main(["run", "--out", str(tmp_path / "paper"), "--no-report", "--steps", "5000", "--preset=paper"])
+    paper = experiment_config.PROTOCOL_PRESETS["paper"]
+    assert (configs[-1].steps, configs[-1].trials, configs[-1].resolution) == (5000, paper.trials, paper.resolution)
 
 
-def test_without_a_command_line_the_fields_that_differ_from_the_defaults_are_given():
-    options = SelectionConfig(temperature=0.5, entropy_resolution=DEFAULT.entropy_resolution)
-    assert given_fields(options, "selection", None) == {"temperature": 0.5}
-
-
-def test_a_flag_given_as_its_negation_is_given():
-    from dataclasses import dataclass
-
-    @dataclass(frozen=True)
-    class Options:
-        random_background: bool = False
-        no_cache: bool = False
-
-    found = given_fields(
-        Options(no_cache=True), "engine", ["run", "--engine.no-random-background", "--engine.no-cache"]
-    )
-    assert found == {"random_background": False, "no_cache": True}
+def test_an_unknown_preset_is_refused_by_the_parser_with_the_known_names(capsys):
+    with pytest.raises(SystemExit) as refused:
+        main(["run", "--out", "nowhere", "--preset", "fast"])
+    assert refused.value.code == 2
+    error = capsys.readouterr().err
+    assert "fast" in error and "quick" in error and "paper" in error
 
 
 def test_run_prints_its_size_and_an_estimate_before_it_starts(planned, capsys):

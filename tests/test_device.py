@@ -15,7 +15,7 @@ from nerfaug.cameras import Cameras, image_rays
 from nerfaug.data import Views, write_blender_split
 from nerfaug.device import autocast_dtype, describe_device, device_kind, resolve_device
 from nerfaug.evaluation import evaluate_views
-from nerfaug.experiment.config import preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.store import RunKey, fingerprint
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, sample_uniform_poses
 from nerfaug.nerf.config import NerfConfig
@@ -192,7 +192,7 @@ def test_runs_record_their_device_and_auto_equals_cpu_here(tmp_path):
     from nerfaug.experiment.protocol import run_trial
 
     data = write_dataset(tmp_path / "data")
-    base = preset("tiny").replace(scenes=(str(data),), save_renders=0)
+    base = PROTOCOL_PRESETS.choose("tiny").replace(scenes=(str(data),), save_renders=0)
     key = RunKey("data", "ours", 0)
     results = {}
     for device in ("cpu", "auto"):

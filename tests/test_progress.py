@@ -10,7 +10,7 @@ from rich.progress import Progress
 
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views, write_blender_split
-from nerfaug.experiment.config import preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.sweep import run_sweep
 from nerfaug.hemisphere import sample_uniform_poses
 from nerfaug.progress import LineProgress, duration, progress_bar, track
@@ -71,7 +71,7 @@ def write_dataset(root, size=24):
 
 def test_a_sweep_without_a_terminal_prints_a_line_per_finished_run(tmp_path, capsys):
     data = write_dataset(tmp_path / "data")
-    config = preset("tiny").replace(scenes=(str(data),), methods=("uniform",), trials=2, device="cpu")
+    config = PROTOCOL_PRESETS.choose("tiny").replace(scenes=(str(data),), methods=("uniform",), trials=2, device="cpu")
     outcome = run_sweep(config, tmp_path / "results", progress=True)
     assert not outcome.failed
     lines = [LINE.match(line) for line in capsys.readouterr().err.splitlines()]

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from nerfaug.cli import paper_tables
-from nerfaug.experiment.config import preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.runfolder import (
     FILES,
     read_selection,
@@ -26,6 +25,7 @@ from nerfaug.experiment.sweep import sweep_record
 from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses, sample_uniform_poses
 from nerfaug.jsonio import atomic_write_json
 from nerfaug.report import ReportError, collect_results, history_series, write_report
+from nerfaug.run_cli import paper_tables
 from nerfaug.uncertainty.sparsification import ause, mean_pool
 
 METHODS = ("ours", "uniform", "entropy")
@@ -47,7 +47,7 @@ LPIPS_MISSING = "LPIPS unavailable: AlexNet weights not found at /nowhere/alexne
 
 
 def config():
-    return preset("tiny").replace(scenes=("lego", "chair"), methods=METHODS, trials=3)
+    return PROTOCOL_PRESETS.choose("tiny").replace(scenes=("lego", "chair"), methods=METHODS, trials=3)
 
 
 # A test view's squared error (8x8, rising to the right and down), and each method's uncertainty

@@ -20,27 +20,32 @@ nerfaug serve --root SESSIONS                   the same over HTTP, for a robot 
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import os
 import re
+import signal
 import sys
+import threading
 import warnings
-from pathlib import Path
-from typing import Annotated
+from dataclasses import dataclass
 
 import tyro
 
+# cli_options.COMMAND_LINE: `train` reads which of its options the command line gives.
 from nerfaug.cli_options import COMMAND_LINE
+from nerfaug.errors import NerfaugError
 
-Positional = tyro.conf.Positional
 # Each command's home, "module:function": a command's module is imported only when it runs, so
 # `nerfaug train --help` answers without loading torch (what the experiment commands' options need).
+# A command is a function, or a dataclass whose instance is called; one with a `from_preset` class
+# method starts from the preset `--preset` names (`parse`).
 COMMANDS = {
-    "scene": "nerfaug.cli:scene",
-    "run": "nerfaug.run_cli:run",
-    "report": "nerfaug.cli:report",
-    "methods": "nerfaug.cli:methods",
-    "study": "nerfaug.study_cli:study",
+    "scene": "nerfaug.scene_cli:scene",
+    "run": "nerfaug.run_cli:Run",
+    "report": "nerfaug.run_cli:report",
+    "methods": "nerfaug.run_cli:methods",
+    "study": "nerfaug.study_cli:Study",
     "train": "nerfaug.train_cli:train",
     "propose": "nerfaug.session_cli:propose",
     "add": "nerfaug.train_cli:add",
@@ -75,107 +80,8 @@ def reflow(docstring: str | None) -> str | None:
     return "\n".join(lines)
 
 
-def scene_render(
-    scene: Annotated[str, Positional, tyro.conf.arg(metavar="SCENE")],
-    out: Path,
-    res: int = 200,
-    pool: int = 300,
-    test: int = 200,
-    initial: int = 6,
-    samples: int = 16,
-    seed: int = 0,
-) -> None:
-    """Render a built-in scene (lego, chair, materials, cow) or a .blend file as a Blender-format dataset.
-
-    Writes transforms_train.json (the candidate pool, uniform on the hemisphere),
-    transforms_initial.json (fixed views on one half), transforms_test.json and transforms_val.json.
-    Cached: the same arguments render nothing the second time.
-
-    Args:
-        scene: a built-in scene name or a path to a .blend file.
-        out: the dataset folder to write.
-        res: image width and height in pixels.
-        pool: candidate views, uniform over the hemisphere.
-        test: test views, spread over the hemisphere.
-        initial: initial training views, all on one half of the hemisphere.
-        samples: Cycles samples per pixel.
-        seed: seeds the pool's poses and Cycles' noise.
-    """
-    from nerfaug.scenes import render_scene_dataset
-
-    path = render_scene_dataset(
-        scene, out, resolution=res, pool=pool, test=test, initial=initial, samples=samples, seed=seed, progress=True
-    )
-    print(f"dataset written to {path}")
-
-
-def scene_prepare(
-    source: Annotated[Path, Positional, tyro.conf.arg(metavar="SOURCE")],
-    out: Path,
-    width: int = 100,
-) -> None:
-    """Prepare a downloaded dataset for `nerfaug run` and `nerfaug study`: a copy with images
-    WIDTH px across and masks merged into their alpha.
-
-    SOURCE may be a NeRF-synthetic folder (transforms_{train,val,test}.json), an LLFF capture
-    (poses_bounds.npy, images/, optional masks/), a DTU scan in the IDR/NeuS layout
-    (cameras_sphere.npz, image/ or images/, mask/) or a nerfstudio folder. A capture without a
-    test split is written as one transforms.json; the experiments keep test views apart from it,
-    spread over all directions. prepared.json records the source's digest. Running it again with
-    the same source and width does nothing.
-
-    Args:
-        source: the downloaded dataset folder (it is only read).
-        out: the folder to write (new or empty).
-        width: image width in pixels (any size up to the source's; area-averaged).
-    """
-    from nerfaug.data.prepare import prepare_dataset
-
-    path = prepare_dataset(source, out, width)
-    print(f"dataset prepared in {path}")
-
-
-def paper_tables():
-    """The rows of the paper's ablation tables as the method registry defines them, and its
-    protocol's image side (the experiments' paper preset): what a report compares with the paper,
-    as `nerfaug.report.PaperTables`."""
-    from nerfaug.experiment.config import preset as make_preset
-    from nerfaug.report import PaperTables
-    from nerfaug.selection import TABLE_I_ROWS, TABLE_II_ROWS
-
-    return PaperTables(TABLE_I_ROWS, TABLE_II_ROWS, make_preset("paper").resolution)
-
-
-def report(results: Positional[Path]) -> None:
-    """Write report.md and a self-contained report.html for a results folder.
-
-    Args:
-        results: the folder `nerfaug run --out` wrote.
-    """
-    from nerfaug.report import ReportError, write_report
-
-    try:
-        paths = write_report(results, paper_tables())
-    except ReportError as error:
-        raise SystemExit(str(error)) from None
-    for path in paths:
-        print(path)
-
-
-def methods() -> None:
-    """List the view-selection methods and what each does."""
-    from nerfaug.selection import METHODS
-
-    width = max(len(name) for name in METHODS)
-    for name, spec in METHODS.items():
-        settings = ", ".join(f"{k}={v}" for k, v in spec.settings.items())
-        print(f"{name:<{width}}  {spec.description}" + (f" [settings: {settings}]" if settings else ""))
-
-
 def exit_code(error: BaseException) -> int:
     """2 for bad input (a value, file or folder the user gave), 1 for a failure of the work."""
-    from nerfaug.errors import NerfaugError
-
     if isinstance(error, NerfaugError):
         return error.exit_code
     bad_path = (FileNotFoundError, NotADirectoryError, IsADirectoryError, FileExistsError, PermissionError)
@@ -184,8 +90,6 @@ def exit_code(error: BaseException) -> int:
 
 def one_line(error: BaseException) -> str:
     """The error as one line: its message (the project's errors name file, field and value)."""
-    from nerfaug.errors import NerfaugError
-
     text = " ".join(str(error).split())
     expected = (NerfaugError, ValueError, OSError)
     if not isinstance(error, expected):
@@ -210,9 +114,6 @@ def wants_help(argv: list[str]) -> bool:
 def main(argv: list[str] | None = None) -> None:
     """The `nerfaug` command. Errors end as one line on stderr (exit 2: bad input, 1: failure,
     130: Ctrl-C, 143: SIGTERM); `--debug` or NERFAUG_DEBUG=1 shows the traceback instead."""
-    import signal
-    import threading
-
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("NERFAUG_DEBUG", "") not in ("", "0")
     argv = [arg for arg in argv if arg != "--debug"]
@@ -226,6 +127,7 @@ def main(argv: list[str] | None = None) -> None:
         if wants_help(argv):  # --help imports no torch: it only reads the options
             _dispatch(argv)
         else:
+            # Imported here: both load torch, which `--help` (above) answers without.
             from nerfaug.capture.lock import command_scope
             from nerfaug.device import configure_process
 
@@ -253,14 +155,6 @@ def main(argv: list[str] | None = None) -> None:
             signal.signal(signal.SIGTERM, previous)
 
 
-def scene() -> None:
-    """Scenes: `nerfaug scene render SCENE --out DIR` renders a built-in scene (lego, chair,
-    materials, cow) or a .blend file as a Blender-format dataset; `nerfaug scene prepare SOURCE
-    --out DIR` readies a downloaded dataset (NeRF-synthetic, LLFF, DTU) for experiments (`--help`
-    of each)."""
-    _dispatch(["scene", "--help"])
-
-
 # Options that were renamed so that each name means one thing across commands: (command, old) -> new.
 RENAMED = {("train", "--preset"): "--engine"}
 
@@ -277,28 +171,48 @@ def _check_renamed(argv: list[str]) -> None:
 
 
 def command(name: str):
-    """The function of the command `name` (`COMMANDS`), its module imported now, its docstring
-    reflowed for the help."""
-    import importlib
-
+    """The function or class of the command `name` (`COMMANDS`), its module imported now, its
+    docstring reflowed for the help."""
     module, _, function = COMMANDS[name].partition(":")
     found = getattr(importlib.import_module(module), function)
     found.__doc__ = reflow(found.__doc__)
     return found
 
 
+@dataclass
+class _Preset:
+    """The one option a preset command's first look at the command line reads."""
+
+    preset: str | None = None
+
+
+def parse(target, argv: list[str], prog: str):
+    """tyro's parse of `argv` for the command `target`. A command with presets (a class with
+    `PRESETS` and `from_preset`) is parsed twice: first for `--preset` alone, then in full with
+    that preset's options as the default, so an option given changes the preset's value and one not
+    given keeps it. An unknown preset name starts from the default one, and the full parse refuses it."""
+    if not hasattr(target, "from_preset"):
+        return tyro.cli(target, args=argv, prog=prog)
+    given, _ = tyro.cli(_Preset, args=argv, prog=prog, return_unknown_args=True, add_help=False)
+    name = given.preset if given.preset in target.PRESETS else target.preset
+    return tyro.cli(target, args=argv, prog=prog, default=target.from_preset(name))
+
+
 def _dispatch(argv: list[str]) -> None:
     if argv[:1] == ["scene"]:
-        scene_commands = {"render": scene_render, "prepare": scene_prepare}
-        for function in scene_commands.values():
+        scenes = importlib.import_module("nerfaug.scene_cli").COMMANDS
+        for function in scenes.values():
             function.__doc__ = reflow(function.__doc__)
-        tyro.extras.subcommand_cli_from_dict(scene_commands, args=argv[1:], prog="nerfaug scene")
+        tyro.extras.subcommand_cli_from_dict(scenes, args=argv[1:], prog="nerfaug scene")
         return
     parsing = COMMAND_LINE.set(tuple(argv))
     try:
         if argv and argv[0] in COMMANDS:  # only this command's module is imported
             _check_renamed(argv)
-            tyro.cli(command(argv[0]), args=argv[1:], prog=f"nerfaug {argv[0]}")
+            target = command(argv[0])
+            parsed = parse(target, argv[1:], f"nerfaug {argv[0]}")
+            if isinstance(target, type):  # a command's options as a dataclass: run them
+                parsed()
             return
         if not argv or argv[0] in ("-h", "--help"):
             print(__doc__.strip())

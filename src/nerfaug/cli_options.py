@@ -1,35 +1,13 @@
-"""What the user gave on the command line, shared by the commands that apply options over a
-preset's settings (`run`, `study`): an option given applies even at its default value; one not
-given leaves the preset's."""
+"""What the user gave on the command line, for `nerfaug train` on a session folder: the options
+given are compared with the session's settings, even at their default value."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from contextvars import ContextVar
-from dataclasses import fields
 
 COMMAND_LINE: ContextVar[tuple[str, ...] | None] = ContextVar("command_line", default=None)
-"""The arguments `nerfaug.cli.main` is parsing (None outside it), for `given_fields`."""
-
-
-def given_fields(options, prefix: str, argv: Sequence[str] | None) -> dict:
-    """The fields of the dataclass `options` that `argv` gives as `--PREFIX.FIELD` options, with
-    their values in `options`: what to apply over a preset's settings. A field given applies even
-    at its default value; one not given leaves the preset's. Without a command line (`argv`
-    None: the command was called from Python), the fields that differ from the defaults.
-
-    Example:
-        >>> from nerfaug.selection import SelectionConfig
-        >>> argv = ["run", "--selection.temperature", "1.0", "--selection.entropy_resolution=20"]
-        >>> given_fields(SelectionConfig(entropy_resolution=20), "selection", argv)
-        {'entropy_resolution': 20, 'temperature': 1.0}
-    """
-    names = [f.name for f in fields(options)]
-    if argv is None:
-        defaults = type(options)()
-        return {name: getattr(options, name) for name in names if getattr(options, name) != getattr(defaults, name)}
-    given = given_options([f"{prefix}.{name}" for name in names], argv)
-    return {name: getattr(options, name) for name in names if f"{prefix}.{name}" in given}
+"""The arguments `nerfaug.cli.main` is parsing (None outside it), for `given_options`."""
 
 
 def given_options(names: Sequence[str], argv: Sequence[str]) -> set[str]:

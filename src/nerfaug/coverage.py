@@ -6,6 +6,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import torch
+
+from nerfaug.hemisphere import angles_from_pose, in_azimuth_window
 
 
 def seen_half_start(initial_azimuth) -> float:
@@ -36,10 +39,6 @@ def unseen_half_share(chosen_azimuth, initial_azimuth) -> float:
         >>> round(unseen_half_share([0.1, 3.0], [math.pi, math.pi]), 2)  # initial views at 180 deg
         0.5
     """
-    import torch
-
-    from nerfaug.hemisphere import in_azimuth_window
-
     chosen = torch.as_tensor(np.asarray(chosen_azimuth, dtype=np.float64).reshape(-1))
     start = seen_half_start(initial_azimuth)
     if chosen.numel() == 0 or math.isnan(start):
@@ -75,10 +74,6 @@ def view_coverage(chosen_poses, initial_poses, centre=(0.0, 0.0, 0.0)) -> dict:
         dict with unseen_share (`unseen_half_share`) and spread_deg (`mean_pairwise_angle` of the
         chosen cameras' positions about the centre).
     """
-    import torch
-
-    from nerfaug.hemisphere import angles_from_pose
-
     chosen = torch.as_tensor(np.asarray(chosen_poses, dtype=np.float64)).reshape(-1, 4, 4)
     initial = torch.as_tensor(np.asarray(initial_poses, dtype=np.float64)).reshape(-1, 4, 4)
     chosen_azimuth, _, _ = angles_from_pose(chosen, centre)

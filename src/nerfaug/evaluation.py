@@ -48,6 +48,7 @@ from nerfaug.lpips import (
     lpips_unavailable_reason,
     try_load_lpips,
 )
+from nerfaug.progress import track
 
 
 def psnr(pred: Tensor, target: Tensor) -> Tensor:
@@ -166,8 +167,6 @@ def evaluate_views(
         An `EvaluationResult`. The mean PSNR is the mean of the per-view PSNRs (as nerfstudio
         reports it), not the PSNR of the mean error.
     """
-    from nerfaug.progress import track
-
     if isinstance(lpips, str):
         if lpips != "auto":
             raise ValueError(f'lpips must be an Lpips model, "auto" or None, got {lpips!r}')

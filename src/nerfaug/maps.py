@@ -24,6 +24,7 @@ from scipy.spatial import cKDTree
 
 from nerfaug.hemisphere import angles_from_pose
 from nerfaug.plotting import save_figure
+from nerfaug.registry import check_name
 
 PROJECTIONS = ("equal-area", "equidistant")
 _GRID = 200
@@ -53,8 +54,7 @@ def hemisphere_xy(camera_to_world, projection: str = "equal-area", centre=(0.0, 
     Returns:
         Array with shape (n, 2); views below the horizon land outside the unit disk.
     """
-    if projection not in PROJECTIONS:
-        raise ValueError(f"unknown projection {projection!r}; valid: {', '.join(PROJECTIONS)}")
+    check_name("projection", projection, PROJECTIONS)
     poses = _as_poses(camera_to_world)
     if poses.shape[0] == 0:
         return np.zeros((0, 2))

@@ -8,81 +8,73 @@ imports the other. The methods' labels and definitions come from the method regi
 from __future__ import annotations
 
 import json
-import os
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
 import tyro
 
-from nerfaug.cli_options import COMMAND_LINE, given_fields
 from nerfaug.experiment import study as study_runs
+from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
+from nerfaug.experiment.layout import StudyFolder
+from nerfaug.experiment.store import finished_runs
 from nerfaug.experiment.study import StudyPreset
+from nerfaug.experiment.sweep import default_workers
+from nerfaug.registry import Presets
+from nerfaug.report import study_page, study_table
+from nerfaug.run_size import per_cell, size_line
+from nerfaug.selection import METHODS
 from nerfaug.selection.config import SelectionConfig
 
 
 def method_records() -> dict[str, dict]:
     """name -> its label, description and definition, for every method of the registry (what the
     study's table records of the methods it ran)."""
-    from nerfaug.selection import METHODS
-
     return {
         name: {"label": spec.label, "description": spec.description, "definition": spec.definition()}
         for name, spec in METHODS.items()
     }
 
 
-# The defaults `--selection.*` options start from (read-only use: never mutated).
-DEFAULT_SELECTION = SelectionConfig()
+DEFAULT_PRESET = "study"
+Engines = Annotated[
+    tuple[str, ...] | None,
+    tyro.conf.arg(
+        metavar="ENGINE [ENGINE ...]",
+        help_behavior_hint="(default: every preset but the test one, and the paper's only on a GPU; the reason "
+        "is printed)",
+    ),
+]
+Scenes = Annotated[
+    tuple[str, ...] | None,
+    tyro.conf.arg(
+        metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(study_runs.PROCEDURAL_SCENES)})"
+    ),
+]
+Methods = Annotated[
+    tuple[str, ...] | None,
+    tyro.conf.arg(metavar="METHOD [METHOD ...]", help_behavior_hint='(default: the registry\'s "study" family)'),
+]
+Trials = Annotated[
+    int | None,
+    tyro.conf.arg(
+        metavar="INT",
+        help_behavior_hint="(default: 10, or more when Bonferroni over the comparisons with uniform needs more "
+        "for p < 0.05 to be reachable)",
+    ),
+]
+Workers = Annotated[
+    int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one on a GPU)")
+]
+Table = Annotated[
+    Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint=f"(default: {StudyFolder(Path('OUT')).table})")
+]
+ResultsDoc = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")]
 
 
-def study(
-    out: Path = Path("results/study"),
-    engines: Annotated[
-        tuple[str, ...] | None,
-        tyro.conf.arg(
-            metavar="ENGINE [ENGINE ...]",
-            help_behavior_hint="(default: every preset but the test one, and the paper's only on a GPU; the reason "
-            "is printed)",
-        ),
-    ] = None,
-    scenes: Annotated[
-        tuple[str, ...] | None,
-        tyro.conf.arg(
-            metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(study_runs.PROCEDURAL_SCENES)})"
-        ),
-    ] = None,
-    methods: Annotated[
-        tuple[str, ...] | None,
-        tyro.conf.arg(metavar="METHOD [METHOD ...]", help_behavior_hint='(default: the registry\'s "study" family)'),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        tyro.conf.arg(
-            metavar="INT",
-            help_behavior_hint="(default: 10, or more when Bonferroni over the comparisons with uniform needs more "
-            "for p < 0.05 to be reachable)",
-        ),
-    ] = None,
-    resolution: int = 100,
-    layouts: int = 1,
-    steps: Annotated[
-        int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's: study: 2000; tiny: 60)")
-    ] = None,
-    workers: Annotated[
-        int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one on a GPU)")
-    ] = None,
-    force: bool = False,
-    device: Literal["auto", "cpu", "cuda"] = "auto",
-    preset: StudyPreset = "study",
-    summary_only: bool = False,
-    table: Annotated[
-        Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: OUT/study-table.json)")
-    ] = None,
-    results_doc: Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")] = None,
-    selection: SelectionConfig = DEFAULT_SELECTION,
-) -> None:
+@dataclass
+class Study:
     """The study: which selection method wins where. Runs the study family of methods x engine
     presets x scenes as one resumable sweep per engine into OUT/<engine>/, records every finished
     run in a per-run table, and writes the summary OUT/study.md from that table alone: which method
@@ -99,68 +91,112 @@ def study(
         resolution: image size of the built-in scenes (and the width dataset folders are shrunk to).
         layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
             views come from turned by 1/LAYOUTS of the way round each time.
-        steps: training steps per run.
+        steps: training steps per run (the preset's unless given).
         workers: concurrent runs.
         force: discard existing runs and redo them.
         device: auto (cuda when there is a GPU), cpu or cuda.
-        preset: the study's protocol: study (the paper's at 100x100) or tiny (a smoke test: seconds
-            per run, after the built-in scenes are rendered).
+        preset: the study's protocol, which --steps and --selection.* change: study (the paper's at
+            100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
         table: the per-run table to record runs in and summarise; runs it records with their
             current fingerprint are not run again.
         results_doc: also write this Markdown page (e.g. docs/results.md), figures beside it.
         selection: options of the selection methods (every one is part of the runs' fingerprint;
-            left at their defaults, they change nothing); a method's own settings (e.g.
+            left at the preset's, they change nothing); a method's own settings (e.g.
             ours-authors') apply over them.
     """
-    from nerfaug.report.study_page import write_results_doc, write_study
-    from nerfaug.report.study_table import read_table
 
-    out = Path(out)
-    table_path = Path(table) if table is not None else out / study_runs.TABLE_FILE
-    previous = read_table(table_path) if table_path.exists() else None
-    failed = {}
-    if not summary_only:
+    PRESETS: ClassVar[Presets[ExperimentConfig]] = STUDY_PRESETS
+
+    out: Path = Path("results/study")
+    engines: Engines = None
+    scenes: Scenes = None
+    methods: Methods = None
+    trials: Trials = None
+    resolution: int = 100
+    layouts: int = 1
+    steps: int = STUDY_PRESETS[DEFAULT_PRESET].steps
+    workers: Workers = None
+    force: bool = False
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    preset: StudyPreset = DEFAULT_PRESET
+    summary_only: bool = False
+    table: Table = None
+    results_doc: ResultsDoc = None
+    selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
+
+    @classmethod
+    def from_preset(cls, name: str) -> Study:
+        """The options before the command line changes them: the preset `name`'s steps and
+        selection settings (the protocol's other settings are the preset's, not options)."""
+        protocol = STUDY_PRESETS.choose(name)
+        return cls(preset=name, steps=protocol.steps, selection=protocol.selection)
+
+    def __call__(self) -> None:
+        out = Path(self.out)
+        table_path = Path(self.table) if self.table is not None else StudyFolder(out).table
+        previous = study_table.read_table(table_path) if table_path.exists() else None
+        failed = {} if self.summary_only else self.run(previous)
+        recorded = record_table(out, table_path, previous)
+        print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
+        paths = study_page.write_study(out, recorded)
+        print("study summary: " + ", ".join(str(p) for p in paths))
+        if self.results_doc is not None:
+            print(f"results: {study_page.write_results_doc(recorded, table_path, self.results_doc)}")
+        if failed:
+            print(f"{len(failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
+            for key, why in failed.items():
+                print(f"  {key}: {why}", file=sys.stderr)
+            raise SystemExit(1)
+
+    def run(self, previous: dict | None) -> dict[str, str]:
+        """Plan the study and run its sweeps (runs `previous`, the table, records are not run
+        again); the runs that failed, "engine: run" -> why."""
+        # The command that plans this study again: --steps when it is not the preset's.
+        steps = None if self.steps == STUDY_PRESETS[self.preset].steps else self.steps
         command = study_runs.study_command(
-            out, engines, scenes, methods, trials, resolution, steps, device, preset, table, layouts
+            self.out,
+            self.engines,
+            self.scenes,
+            self.methods,
+            self.trials,
+            self.resolution,
+            steps,
+            self.device,
+            self.preset,
+            self.table,
+            self.layouts,
         )
-        command += selection.flags()
+        command += self.selection.flags()
         plan = study_runs.make_plan(
-            out, engines, scenes, methods, trials, resolution, steps, device, preset, command, layouts=layouts
+            self.out,
+            self.engines,
+            self.scenes,
+            self.methods,
+            self.trials,
+            self.resolution,
+            self.steps,
+            self.device,
+            self.preset,
+            command,
+            layouts=self.layouts,
         )
-        given = given_fields(selection, "selection", COMMAND_LINE.get())
-        plan.config = plan.config.replace(selection=replace(plan.config.selection, **given))
+        plan.config = plan.config.replace(selection=self.selection)
         for engine, why in plan.left_out.items():
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)
-        if workers is None:
-            workers = (
-                1 if plan.config.device == "cuda" else max(1, (os.cpu_count() or 1) // plan.config.threads_per_run)
-            )
+        workers = self.workers if self.workers is not None else default_workers(plan.config)
         print(study_size_line(plan, workers), flush=True)
-        outcomes = study_runs.run_study(plan, workers=workers, force=force, table=previous)
-        failed = {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
-    recorded = record_table(out, table_path, previous)
-    print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
-    paths = write_study(out, recorded)
-    print("study summary: " + ", ".join(str(p) for p in paths))
-    if results_doc is not None:
-        print(f"results: {write_results_doc(recorded, table_path, results_doc)}")
-    if failed:
-        print(f"{len(failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
-        for key, why in failed.items():
-            print(f"  {key}: {why}", file=sys.stderr)
-        raise SystemExit(1)
+        outcomes = study_runs.run_study(plan, workers=workers, force=self.force, table=previous)
+        return {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
 
 
 def study_size_line(plan, workers: int) -> str:
     """How many runs the study makes, how big, and about how long on this device (`nerfaug.run_size`)."""
-    from nerfaug.experiment.store import finished_runs
-    from nerfaug.run_size import per_cell, size_line
-
     config = plan.config
     each = len(plan.scenes) * len(config.methods) * config.trials
-    done = {engine: min(len(finished_runs(Path(plan.out) / engine)), each) for engine in plan.engines}
+    study = StudyFolder(Path(plan.out))
+    done = {engine: min(len(finished_runs(study.engine(engine).root)), each) for engine in plan.engines}
     shape = " x ".join(
         (
             per_cell(len(plan.engines), "engine"),
@@ -190,9 +226,7 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     Raises:
         SystemExit: neither OUT/study.json nor the table exists.
     """
-    from nerfaug.report.study_table import make_table, rows_from_folders, write_table
-
-    path = Path(out) / study_runs.STUDY_FILE
+    path = StudyFolder(Path(out)).record
     if not path.is_file():
         if previous is None:
             raise SystemExit(
@@ -203,13 +237,13 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     record = study_runs.with_design(json.loads(path.read_text()), Path(out))
     if previous is not None:
         record = study_runs.merge_records(previous["plan"], record)
-    rows, scenes = rows_from_folders(Path(out), record["engines"])
+    rows, scenes = study_table.rows_from_folders(Path(out), record["engines"])
     for scene, folder in record.get("datasets", {}).items():
         if scene in scenes and (source := study_runs.prepared_source(Path(folder))) is not None:
             scenes[scene]["source"] = source
-    recorded = make_table(record, rows, scenes, previous, method_records())
-    write_table(table_path, recorded)
+    recorded = study_table.make_table(record, rows, scenes, previous, method_records())
+    study_table.write_table(table_path, recorded)
     return recorded
 
 
-__all__ = ["method_records", "record_table", "study", "study_size_line"]
+__all__ = ["Study", "method_records", "record_table", "study_size_line"]

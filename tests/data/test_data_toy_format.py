@@ -125,12 +125,12 @@ def test_a_session_grows_and_exports_a_dataset_in_a_registered_format(toy, tmp_p
 
 
 def test_an_experiment_runs_on_a_dataset_in_a_registered_format(toy, tmp_path):
-    from nerfaug.experiment.config import preset
+    from nerfaug.experiment.config import PROTOCOL_PRESETS
     from nerfaug.experiment.store import RunKey
     from nerfaug.experiment.sweep import run_sweep
     from nerfaug.hemisphere import sample_uniform_poses
 
-    config = preset("tiny").replace(methods=("ours",), trials=1)
+    config = PROTOCOL_PRESETS.choose("tiny").replace(methods=("ours",), trials=1)
     data = tmp_path / "data"
     poses = sample_uniform_poses(config.pool, torch.Generator().manual_seed(0))
     toy.write(data, "train", toy_views(poses, config.resolution))

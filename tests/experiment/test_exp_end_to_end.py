@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from nerfaug.experiment.config import preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.store import RunKey, read_result
 from nerfaug.experiment.sweep import run_sweep
 
@@ -25,7 +25,7 @@ def tiny_scene(tmp_path_factory) -> Path:
         pytest.skip("bpy is not installed")
     from nerfaug.scenes import render_scene_dataset
 
-    config = preset("tiny")
+    config = PROTOCOL_PRESETS.choose("tiny")
     out = tmp_path_factory.mktemp("scene") / "lego"
     return render_scene_dataset(
         "lego",
@@ -41,12 +41,12 @@ def tiny_scene(tmp_path_factory) -> Path:
 
 
 def tiny_config(scene: Path, **changes):
-    return preset("tiny").replace(scenes=(str(scene),), **changes)
+    return PROTOCOL_PRESETS.choose("tiny").replace(scenes=(str(scene),), **changes)
 
 
 def test_tiny_sweep_writes_every_file_and_a_report(tiny_scene, tmp_path):
-    from nerfaug.cli import paper_tables
     from nerfaug.report import write_report
+    from nerfaug.run_cli import paper_tables
 
     config = tiny_config(tiny_scene)
     outcome = run_sweep(config, tmp_path, progress=False)

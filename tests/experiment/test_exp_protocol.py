@@ -6,7 +6,7 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views
-from nerfaug.experiment.config import ExperimentConfig, preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS, STUDY_PRESETS, ExperimentConfig
 from nerfaug.experiment.scene_views import initial_in_half, layout_halves
 from nerfaug.hemisphere import angles_from_pose, in_azimuth_window, sample_uniform_poses
 
@@ -33,20 +33,21 @@ def test_initial_views_of_a_user_dataset_lie_on_one_half():
 
 def test_presets_are_consistent():
     for name in ("quick", "paper", "ablation", "tiny"):
-        config = preset(name)
+        config = PROTOCOL_PRESETS.choose(name)
         assert 0 < config.add_at_step < config.steps
         assert config.n_new <= config.pool
 
 
-def test_presets_are_settings_over_the_defaults_and_an_unknown_name_lists_the_known_ones():
-    from nerfaug.experiment.config import PRESET_SETTINGS, STUDY_PRESET_SETTINGS
-
-    assert preset("tiny") == dataclasses.replace(ExperimentConfig(), **PRESET_SETTINGS["tiny"])
-    assert preset("tiny") is not preset("tiny")  # a fresh config each time (it is mutable)
-    study_tiny = preset("tiny", STUDY_PRESET_SETTINGS)
-    assert study_tiny == preset("tiny").replace(view_uncertainty=False)
+def test_a_preset_is_a_fresh_copy_of_its_config_and_an_unknown_name_lists_the_known_ones():
+    tiny = PROTOCOL_PRESETS.choose("tiny")
+    assert tiny == PROTOCOL_PRESETS["tiny"] and tiny is not PROTOCOL_PRESETS["tiny"]
+    tiny.field_lr["lego"] = 1.0  # a config is mutable: changing a copy leaves the preset alone
+    assert "lego" not in PROTOCOL_PRESETS.choose("tiny").field_lr
+    assert (tiny.trials, tiny.steps, tiny.engine) == (2, 60, "test")
+    assert PROTOCOL_PRESETS.choose("tiny", trials=3).trials == 3
+    assert STUDY_PRESETS.choose("tiny") == PROTOCOL_PRESETS.choose("tiny").replace(view_uncertainty=False)
     with pytest.raises(ValueError, match="unknown preset 'fast'; choose one of: quick, paper, ablation, tiny"):
-        preset("fast")
+        PROTOCOL_PRESETS.choose("fast")
 
 
 def test_quick_preset_compares_the_main_methods_with_enough_trials_for_significance():
@@ -55,7 +56,7 @@ def test_quick_preset_compares_the_main_methods_with_enough_trials_for_significa
     from nerfaug.evaluation import Lpips
     from nerfaug.experiment.config import MAIN_COMPARISON
 
-    config = preset("quick")
+    config = PROTOCOL_PRESETS.choose("quick")
     assert config.methods == MAIN_COMPARISON and len(config.methods) == 4
     # The smallest p of a two-sided Mann-Whitney test (complete separation), times the 3
     # comparisons of "ours" with the others, must be able to fall below 0.05.
@@ -86,7 +87,7 @@ def test_a_run_saves_its_first_test_view_uncertainty_without_changing_its_result
         images = torch.rand(n, size, size, 3, generator=generator)
         cameras = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, size, size)
         write_blender_split(data, split, Views(cameras, images, [f"./{split}/r_{i}" for i in range(n)]))
-    config = preset("tiny").replace(steps=30, add_at_step=10, n_test=2, threads_per_run=1)
+    config = PROTOCOL_PRESETS.choose("tiny").replace(steps=30, add_at_step=10, n_test=2, threads_per_run=1)
     config = config.replace(
         selection=dataclasses.replace(config.selection, fisher_resolution=4, fisher_train_pixels=64)
     )
@@ -128,7 +129,7 @@ def test_view_uncertainty_of_older_runs_reads_as_absent(tmp_path):
     assert set(found) == {"render", "error", "entropy"}  # a FisherRF image larger than the view is left out
     (tmp_path / FILES.view_uncertainty / "error.npy").write_bytes(b"not an array")
     assert read_view_uncertainty(tmp_path) is None
-    with pytest.raises(ValueError, match="unknown view arrays"):
+    with pytest.raises(ValueError, match="unknown view array 'depth'"):
         write_view_uncertainty(tmp_path, {"depth": np.zeros((4, 4))})
 
 
@@ -146,11 +147,9 @@ def test_a_sweeps_run_trains_and_selects_on_its_own_thread_count(tmp_path, monke
         cameras = Cameras.from_fov(sample_uniform_poses(n, generator), BLENDER_CAMERA_ANGLE_X, 8, 8)
         images = torch.rand(n, 8, 8, 3, generator=generator)
         write_blender_split(tmp_path / "data", split, Views(cameras, images, [f"./{split}/r_{i}" for i in range(n)]))
-    import nerfaug.selection
-
     seen = []
     train = protocol.train_with_progress
-    original_select = nerfaug.selection.select_views
+    original_select = protocol.select_views
 
     def counting_train(*args, **kwargs):
         seen.append(("train", torch.get_num_threads()))
@@ -161,8 +160,8 @@ def test_a_sweeps_run_trains_and_selects_on_its_own_thread_count(tmp_path, monke
         return original_select(*args, **kwargs)
 
     monkeypatch.setattr(protocol, "train_with_progress", counting_train)
-    monkeypatch.setattr(nerfaug.selection, "select_views", counting_select)
-    config = preset("tiny").replace(steps=12, add_at_step=6, n_test=2, n_new=2, view_uncertainty=False)
+    monkeypatch.setattr(protocol, "select_views", counting_select)
+    config = PROTOCOL_PRESETS.choose("tiny").replace(steps=12, add_at_step=6, n_test=2, n_new=2, view_uncertainty=False)
     before = torch.get_num_threads()
     torch.set_num_threads(2)
     try:

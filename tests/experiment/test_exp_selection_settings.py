@@ -11,7 +11,7 @@ import torch
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views
 from nerfaug.data.blender import write_blender_split
-from nerfaug.experiment.config import preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.protocol import builtin_dataset_digest
 from nerfaug.experiment.store import IncompatibleResults, RunKey, fingerprint
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, sample_uniform_poses
@@ -21,7 +21,7 @@ from nerfaug.selection import SelectionConfig
 def test_every_selection_setting_and_the_whole_engine_config_are_fingerprinted(monkeypatch):
     from nerfaug.nerf import config as nerf_config
 
-    config = preset("tiny")
+    config = PROTOCOL_PRESETS.choose("tiny")
     record = config.fingerprinted()
     for field in dataclasses.fields(SelectionConfig):
         assert f"selection.{field.name}" in record
@@ -44,7 +44,7 @@ def test_every_selection_setting_and_the_whole_engine_config_are_fingerprinted(m
 
 
 def test_builtin_dataset_identity_follows_what_is_rendered():
-    config = preset("tiny")
+    config = PROTOCOL_PRESETS.choose("tiny")
     digest = builtin_dataset_digest("lego", config)
     assert digest == builtin_dataset_digest("lego", config)
     assert digest != builtin_dataset_digest("chair", config)
@@ -72,7 +72,7 @@ def toy_dataset(tmp_path_factory) -> Path:
 def test_changed_selection_setting_is_refused_by_name(toy_dataset, tmp_path):
     from nerfaug.experiment.sweep import run_sweep
 
-    config = preset("tiny").replace(scenes=(str(toy_dataset),), methods=("ours",), trials=1)
+    config = PROTOCOL_PRESETS.choose("tiny").replace(scenes=(str(toy_dataset),), methods=("ours",), trials=1)
     outcome = run_sweep(config, tmp_path, progress=False)
     assert not outcome.failed and len(outcome.results) == 1
     saved = json.loads((RunKey(toy_dataset.name, "ours", 0).folder(tmp_path) / "config.json").read_text())
@@ -103,10 +103,11 @@ def test_run_and_propose_help_show_the_selection_options(capsys):
         assert "width in pixels of each candidate's render" in " ".join(text.split())  # the attribute's docstring
 
 
-def test_command_line_selection_applies_over_the_preset():
+def test_a_selection_is_recorded_as_the_options_that_give_it_again():
+    import tyro
+
     given = SelectionConfig(entropy_resolution=20, sharpness=0.3)
     assert given.changes() == {"entropy_resolution": 20, "sharpness": 0.3}
-    assert given.flags() == ["--selection.entropy-resolution", "20", "--selection.sharpness", "0.3"]
-    preset_selection = SelectionConfig(temperature=0.5, entropy_resolution=50)
-    merged = dataclasses.replace(preset_selection, **given.changes())
-    assert (merged.entropy_resolution, merged.sharpness, merged.temperature) == (20, 0.3, 0.5)
+    flags = given.flags()
+    assert flags == ["--selection.entropy-resolution", "20", "--selection.sharpness", "0.3"]
+    assert tyro.cli(SelectionConfig, args=[w.replace("--selection.", "--") for w in flags]) == given

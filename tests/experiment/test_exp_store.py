@@ -4,7 +4,7 @@ import subprocess
 
 import pytest
 
-from nerfaug.experiment.config import ExperimentConfig, preset
+from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig
 from nerfaug.experiment.store import (
     IncompatibleResults,
     RunKey,
@@ -61,12 +61,12 @@ def test_write_result_refuses_incomplete_records(tmp_path):
 
 
 def test_incompatible_sweep_is_refused_with_the_changed_settings(tmp_path):
-    first = sweep_record(preset("tiny"), ["nerfaug"])
+    first = sweep_record(PROTOCOL_PRESETS.choose("tiny"), ["nerfaug"])
     check_sweep(tmp_path, first)
     check_sweep(tmp_path, first)  # same config: fine
-    grown = sweep_record(preset("tiny").replace(trials=5, methods=("ours", "uniform", "entropy")), ["nerfaug"])
+    grown = sweep_record(PROTOCOL_PRESETS.choose("tiny", trials=5, methods=("ours", "uniform", "entropy")), ["nerfaug"])
     check_sweep(tmp_path, grown)  # more trials or methods do not change any run's numbers
-    changed = sweep_record(preset("tiny").replace(steps=999), ["nerfaug"])
+    changed = sweep_record(PROTOCOL_PRESETS.choose("tiny").replace(steps=999), ["nerfaug"])
     with pytest.raises(IncompatibleResults, match=r"steps: 60 -> 999.*--force"):
         check_sweep(tmp_path, changed)
     finished = RunKey("lego", "ours", 0).folder(tmp_path)
@@ -85,7 +85,7 @@ def test_fingerprint_is_stable_and_sensitive():
 
 
 def test_plan_covers_every_cell():
-    config = preset("tiny").replace(scenes=("lego", "chair"), trials=3)
+    config = PROTOCOL_PRESETS.choose("tiny").replace(scenes=("lego", "chair"), trials=3)
     keys = plan_runs(config)
     assert len(keys) == 2 * 2 * 3 and len(set(keys)) == len(keys)
     assert RunKey("chair", "uniform", 2) in keys

@@ -347,9 +347,9 @@ def test_a_new_method_is_one_function_and_one_line(scene, monkeypatch):
 def test_unknown_estimators_and_selectors_are_one_error_listing_the_known_ones():
     from nerfaug.selection.registry import ESTIMATORS, SELECTORS, get_estimator, get_selector
 
-    with pytest.raises(ValueError, match="unknown estimator 'bayes'; valid: combined, entropy"):
+    with pytest.raises(ValueError, match="unknown estimator 'bayes'; choose one of: combined, entropy"):
         get_estimator("bayes")
-    with pytest.raises(ValueError, match="unknown selector 'best'; valid: sampling, top-k"):
+    with pytest.raises(ValueError, match="unknown selector 'best'; choose one of: sampling, top-k"):
         get_selector("best")
     assert set(ESTIMATORS) == {"combined", "entropy", "distance", "none", "fisher"}
     assert set(SELECTORS) == {"sampling", "top-k", "uniform", "farthest", "greedy-fisher", "batch-sampling"}

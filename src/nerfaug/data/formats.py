@@ -20,6 +20,7 @@ from nerfaug.data.idr import IdrFormat
 from nerfaug.data.llff import LlffFormat
 from nerfaug.data.nerfstudio import NerfstudioFormat
 from nerfaug.data.views import Views
+from nerfaug.registry import lookup
 
 FORMATS: dict[str, Format] = {
     # Blender first: a folder holding both kinds of listing is read by its split files. It is also
@@ -56,9 +57,7 @@ def register_format(fmt: Format) -> Iterator[Format]:
 
 def get_format(name: str) -> Format:
     """The format `name`, or a ValueError naming it and the known ones."""
-    if name not in FORMATS:
-        raise ValueError(f"unknown dataset format {name!r}; choose one of: {', '.join(FORMATS)}")
-    return FORMATS[name]
+    return lookup(FORMATS, "dataset format", name)
 
 
 def detect_format(root: str | Path, split: str = "train") -> Format | None:

@@ -6,8 +6,14 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Annotated, Literal
 
+import tyro
+
+from nerfaug.device import device_kind
+from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
@@ -21,9 +27,6 @@ from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
     TABLE_II,
 )
 
-if TYPE_CHECKING:
-    from nerfaug.nerf.config import NerfConfig
-
 # The paper lowers the field's learning rate for these scenes "for model stability when adding data".
 LOW_FIELD_LR_SCENES = {"chair": 0.002, "materials": 0.002}
 
@@ -36,59 +39,66 @@ class ExperimentConfig:
     scene), at `add_at_step` ask the method for `n_new` views among the candidates, add the
     oracle's images of them, train to `steps`, evaluate on the test split. Trials differ only by
     seed (initialisation, ray sampling, and the selector's randomness).
+
+    Its fields are the options of `nerfaug run` (tyro reads each field's docstring as its help,
+    one line each), which start from a preset (`PROTOCOL_PRESETS`).
     """
 
-    scenes: tuple[str, ...] = ("lego",)
-    """Built-in scene names (rendered with Blender) or paths to Blender-format dataset folders."""
-    methods: tuple[str, ...] = MAIN_COMPARISON
-    """Selection methods by name (see `nerfaug methods`); the first is "ours" in comparisons."""
+    scenes: Annotated[tuple[str, ...], tyro.conf.arg(metavar="SCENE [SCENE ...]")] = ("lego",)
+    """built-in scene names (rendered with Blender) or Blender-format dataset folders."""
+    methods: Annotated[tuple[str, ...], tyro.conf.arg(metavar="METHOD [METHOD ...]")] = MAIN_COMPARISON
+    """selection methods (see `nerfaug methods`); the first is compared with the others."""
     trials: int = 3
+    """trials per (scene, method); trial k uses seed + k."""
     seed: int = 0
-    """Trial k uses seed + k."""
-    engine: str = "cpu"
-    """NeRF engine preset: a name in `nerfaug.nerf.config.PRESETS` (cpu, nerfacto-cpu, paper, test)."""
+    """base seed."""
+    engine: Annotated[str, tyro.conf.arg(metavar="{" + ",".join(ENGINE_PRESETS) + "}")] = "cpu"
+    """the NeRF engine preset (the names `nerfaug train --engine` takes), or a variant BASE+FIELD=VALUE."""
     resolution: int = 100
-    """Image size (square) of the built-in scenes, or the width a user dataset is downscaled to."""
+    """image size of built-in scenes (or the width user data is downscaled to)."""
     steps: int = 2000
+    """training steps per run."""
     add_at_step: int = 200
+    """the training step at which each method adds its views."""
     n_new: int = 6
+    """views each method adds."""
     n_initial: int = 6
+    """initial training views, all on one half of the hemisphere."""
     pool: int = 300
-    """Candidate pool size of built-in scenes (uniform on the hemisphere)."""
+    """candidate views of a built-in scene, uniform over the hemisphere."""
+    # The paper evaluates all 200 test views. A captured set without a test split keeps n_test of
+    # its views, at most a quarter, spread over all directions, apart for testing.
     n_test: int = 50
-    """Test views evaluated: n spread evenly over the test split (all of it when it holds no more;
-    the paper uses all 200). A captured set without a test split keeps n of its views, at most a
-    quarter, spread over all directions, apart for testing."""
+    """test views evaluated, spread evenly over the test split (all of it when it holds no more)."""
+    # One layout: a rendered scene's `initial` split as rendered. Each further layout turns the
+    # half the initial views lie on by a `layouts`-th of the way round.
     layouts: int = 1
-    """Initial layouts: trial k starts from layout k mod `layouts`, one half of the views' azimuths
-    turned by a `layouts`-th of the way round per layout. 1: one layout (a rendered scene's
-    `initial` split as rendered)."""
+    """initial layouts: trial k starts from layout k mod LAYOUTS, each turned 1/LAYOUTS of the way round."""
     render_samples: int = 16
-    """Cycles samples per pixel for built-in scenes."""
-    field_lr: dict[str, float] = field(default_factory=lambda: dict(LOW_FIELD_LR_SCENES))
+    """Cycles samples per pixel of built-in scenes."""
+    field_lr: Annotated[dict[str, float], tyro.conf.Suppress] = field(default_factory=lambda: dict(LOW_FIELD_LR_SCENES))
     """Field learning rate by scene name, over the engine preset's `field_lr` (the paper: 0.002 for
     chair and materials); `engine_config` applies it."""
+    # One thread per run, with one run per core, measured faster and far steadier than two threads
+    # per run on a 2-core machine: torch's second thread stalls whenever anything else wants a core.
     threads_per_run: int = 1
-    """torch threads in each run; fixed so local and Ray runs compute identically. One thread per
-    run, with one run per core, measured faster and far steadier than two threads per run on a
-    2-core machine: torch's second thread stalls whenever anything else wants a core."""
+    """torch threads in each run (fixed, so that local and Ray runs compute identically)."""
     save_renders: int = 3
-    """Test renders saved per run (for the report's figures)."""
+    """test renders saved per run (for the report's figures)."""
+    # Off in the study, whose page does not show them: they cost several seconds of a run (FisherRF
+    # per pixel).
     view_uncertainty: bool = True
-    """Save the first test view's uncertainty images after the evaluation (for the report's figure
-    and AUSE; no metric depends on them). Off in the study, whose page does not show them: they
-    cost several seconds of a run (FisherRF per pixel)."""
-    device: str = "auto"
-    """Where runs compute: auto (cuda when a GPU is visible, else cpu), cpu or cuda. Its kind
-    (cpu / cuda) is fingerprinted: the two give different numbers (other kernels and reduction
-    orders, and fp16 autocast on cuda), so a results folder never mixes them."""
+    """save the first test view's uncertainty images (the report's figure and AUSE; no metric needs them)."""
+    # Only the kind (cpu / cuda) is fingerprinted: the two give different numbers (other kernels and
+    # reduction orders, and fp16 autocast on cuda), so a results folder never mixes them.
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    """where runs train, select and evaluate: auto (cuda when there is a GPU, else cpu), cpu or cuda."""
 
     selection: SelectionConfig = field(default_factory=SelectionConfig)
-    """Options of the selection methods' estimators and selectors (each method applies its own
-    settings over them, e.g. ours-authors the authors' code's)."""
-    compile: str | None = None
-    """A torch.compile backend for the engine's networks ("inductor", on a GPU), or None for the
-    pure PyTorch path. Fingerprinted when set: compiled kernels round differently."""
+    """options of the selection methods (every one fingerprinted); a method's own settings apply over them."""
+    # Fingerprinted when set: compiled kernels round differently.
+    compile: Annotated[str | None, tyro.conf.arg(metavar="BACKEND", help_behavior_hint="(default: off)")] = None
+    """a torch.compile backend for the engine's networks ("inductor", on a GPU); off: plain PyTorch."""
 
     def fingerprinted(self) -> dict:
         """The settings that change a run's numbers; results made under others are not mixed.
@@ -99,9 +109,6 @@ class ExperimentConfig:
         are "field_lr"). Values are as JSON stores them (tuples become lists), so a setting read
         back from sweep.json compares equal to the same setting in code.
         """
-        from nerfaug.device import device_kind
-        from nerfaug.nerf.config import NerfConfig
-
         keep = (
             "seed",
             "engine",
@@ -132,73 +139,70 @@ class ExperimentConfig:
         """The `NerfConfig` a run on `scene` (a built-in name or a dataset folder) trains with: the
         engine preset's, with the field learning rate `field_lr` gives the scene's name, if any.
         The one place a run's field learning rate is decided."""
-        from nerfaug.nerf.config import NerfConfig
-
         name = Path(scene).name
         return NerfConfig.preset(self.engine, **({"field_lr": self.field_lr[name]} if name in self.field_lr else {}))
 
 
-PRESET_SETTINGS: dict[str, dict[str, object]] = {
-    "quick": {"trials": 5, "steps": 800, "pool": 100, "n_test": 20},
-    "paper": {
-        "scenes": ("lego", "chair", "materials"),
-        "trials": 10,
-        "engine": "paper",
-        "resolution": 800,
-        "steps": 10_000,
-        "pool": 500,
-        "n_test": 200,
-        "render_samples": 64,
+PROTOCOL_PRESETS: Presets[ExperimentConfig] = Presets(
+    "preset",
+    {
+        "quick": ExperimentConfig(trials=5, steps=800, pool=100, n_test=20),
+        "paper": ExperimentConfig(
+            scenes=("lego", "chair", "materials"),
+            trials=10,
+            engine="paper",
+            resolution=800,
+            steps=10_000,
+            pool=500,
+            n_test=200,
+            render_samples=64,
+        ),
+        "ablation": ExperimentConfig(
+            methods=tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
+            trials=5,
+        ),
+        "tiny": ExperimentConfig(
+            methods=("ours", "uniform"),
+            trials=2,
+            engine="test",
+            resolution=24,
+            steps=60,
+            add_at_step=20,
+            n_new=2,
+            n_initial=3,
+            pool=12,
+            n_test=3,
+            render_samples=4,
+            save_renders=1,
+        ),
     },
-    "ablation": {
-        "methods": tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
-        "trials": 5,
-    },
-    "tiny": {
-        "methods": ("ours", "uniform"),
-        "trials": 2,
-        "engine": "test",
-        "resolution": 24,
-        "steps": 60,
-        "add_at_step": 20,
-        "n_new": 2,
-        "n_initial": 3,
-        "pool": 12,
-        "n_test": 3,
-        "render_samples": 4,
-        "save_renders": 1,
-    },
-}
-"""Each protocol preset as the fields it sets over `ExperimentConfig`'s defaults (`preset`)."""
+)
+"""The protocols of `nerfaug run --preset`:
 
-PresetName = Literal[tuple(PRESET_SETTINGS)]  # type: ignore[valid-type]
+quick: the default (`make demo`); the built-in lego at 100x100 with the CPU engine, the four
+    methods of the main comparison, five trials each (the fewest with which Mann-Whitney with a
+    Bonferroni factor of 3 can reach p < 0.05), 800 steps (views added at 200, as in the paper),
+    100 candidates and 20 test views: about 10 minutes on two cores from a fresh clone
+    (BENCHMARKS.md, "Demo").
+paper: lego/chair/materials at 800x800 (or the data's resolution), 10k steps, 10 trials, the
+    paper's learning rates and its main comparison.
+ablation: the paper's Tables I and II (terms; NBV vs sampling) on lego.
+tiny: seconds-long smoke run for tests.
+"""
+
+PresetName = PROTOCOL_PRESETS.name_type()
 """The protocol presets' names as a type, for a CLI (tyro) to offer and check."""
 
-STUDY_PRESET_SETTINGS: dict[str, dict[str, object]] = {
-    # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page does
-    # not show them, and they cost seconds per run.
-    "study": {"view_uncertainty": False},
-    "tiny": {**PRESET_SETTINGS["tiny"], "view_uncertainty": False},
-}
-"""The protocols a study can run every engine under, in the shape of `PRESET_SETTINGS`."""
-
-
-def preset(name: str, presets: dict[str, dict[str, object]] = PRESET_SETTINGS) -> ExperimentConfig:
-    """The protocol preset `name`: its settings in `presets` over `ExperimentConfig`'s defaults.
-
-    quick: the default (`make demo`); the built-in lego at 100x100 with the CPU engine, the four
-        methods of the main comparison, five trials each (the fewest with which Mann-Whitney with
-        a Bonferroni factor of 3 can reach p < 0.05), 800 steps (views added at 200, as in the
-        paper), 100 candidates and 20 test views: about 10 minutes on two cores from a fresh
-        clone (BENCHMARKS.md, "Demo").
-    paper: lego/chair/materials at 800x800 (or the data's resolution), 10k steps, 10 trials, the
-        paper's learning rates and its main comparison.
-    ablation: the paper's Tables I and II (terms; NBV vs sampling) on lego.
-    tiny: seconds-long smoke run for tests.
-
-    Raises:
-        ValueError: `name` is not in `presets` (the message lists those that are).
-    """
-    if name not in presets:
-        raise ValueError(f"unknown preset {name!r}; choose one of: {', '.join(presets)}")
-    return ExperimentConfig(**presets[name])
+STUDY_PRESETS: Presets[ExperimentConfig] = Presets(
+    "study preset",
+    {
+        # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page
+        # does not show them, and they cost seconds per run.
+        "study": ExperimentConfig(view_uncertainty=False),
+        "tiny": PROTOCOL_PRESETS.choose("tiny", view_uncertainty=False),
+    },
+)
+"""The protocols a study runs every engine under (`nerfaug study --preset`): "study" is the
+paper's protocol at 100x100 (6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50
+test views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are
+rendered first, which takes minutes)."""

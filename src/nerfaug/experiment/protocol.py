@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import functools
+import importlib.metadata
+import inspect
 import platform
 import time
 from dataclasses import asdict, dataclass, field
@@ -13,8 +15,10 @@ import torch
 
 from nerfaug.data import Views, find_split, has_split, load_dataset, require_split
 from nerfaug.data.frame import Hemisphere
-from nerfaug.device import describe_device
+from nerfaug.device import configure_process, describe_device
+from nerfaug.evaluation import evaluate_views, load_lpips
 from nerfaug.experiment.config import ExperimentConfig
+from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.experiment.runfolder import (
     FILES,
     write_config,
@@ -34,6 +38,15 @@ from nerfaug.experiment.store import (
     write_result,
 )
 from nerfaug.hemisphere import angles_from_pose
+from nerfaug.maps import plot_hemisphere_map
+from nerfaug.nerf.trainer import Trainer
+from nerfaug.oracle import PoolOracle
+from nerfaug.scenes import BUILTIN_SCENES
+from nerfaug.scenes.cache import folder_digest, load_split_cached
+from nerfaug.scenes.render import dataset_manifest, render_scene_dataset, scene_spec
+from nerfaug.selection import get_method, select_views
+from nerfaug.selection.estimators import fisher_train_diagonal
+from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
 
 PROGRESS_EVERY = 50
 # Pixels across of the saved FisherRF image of a test view: three backward passes per pixel.
@@ -69,8 +82,6 @@ def scene_folder(scene: str) -> Path | None:
     Raises:
         ValueError: the name is ambiguous, or neither a built-in scene nor a folder.
     """
-    from nerfaug.scenes import BUILTIN_SCENES
-
     explicit = "/" in scene or "\\" in scene or scene.startswith(".") or Path(scene).is_absolute()
     if scene in BUILTIN_SCENES and not explicit:
         if Path(scene).exists():
@@ -91,7 +102,7 @@ def scene_dataset_dir(root: Path, scene: str, config: ExperimentConfig) -> Path:
     folder = scene_folder(scene)
     if folder is not None:
         return folder
-    return Path(root) / "datasets" / f"{scene}-{config.resolution}px"
+    return ResultsFolder(Path(root)).dataset(scene, config.resolution)
 
 
 def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bool = True) -> Path:
@@ -102,7 +113,6 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
         if not is_captured_set(folder):  # a captured set's test views are kept apart by direction
             require_split(folder, "test", "a test split is needed for evaluation")
         return folder
-    from nerfaug.scenes import BUILTIN_SCENES
 
     if scene not in BUILTIN_SCENES:
         raise ValueError(f"unknown scene {scene!r}: not a folder and not one of the built-in scenes {BUILTIN_SCENES}")
@@ -112,8 +122,6 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
 def render_builtin(scene: str, folder: Path, config: ExperimentConfig, progress: bool = True) -> Path:
     """Render built-in `scene` into `folder` as the protocol needs it (its resolution, pool,
     test and initial views); cached by the dataset's manifest, so a second call does nothing."""
-    from nerfaug.scenes import render_scene_dataset
-
     return render_scene_dataset(
         scene,
         folder,
@@ -131,11 +139,6 @@ def builtin_dataset_digest(scene: str, config: ExperimentConfig) -> str:
     """A built-in scene's identity before it is rendered: a digest of the manifest its dataset is
     rendered with (`scenes.render.dataset_manifest`: the scene-building code, the bpy version and
     the render arguments), so results made on other renders are never reused."""
-    import importlib.metadata
-    import inspect
-
-    from nerfaug.scenes.render import dataset_manifest, render_scene_dataset, scene_spec
-
     val = inspect.signature(render_scene_dataset).parameters["val"].default  # what prepare_scene renders
     args = (config.resolution, config.pool, config.n_test, config.n_initial, val, config.render_samples, config.seed)
     try:
@@ -147,7 +150,7 @@ def builtin_dataset_digest(scene: str, config: ExperimentConfig) -> str:
 
 def dataset_cache_dir(root: Path) -> Path:
     """Where a sweep's runs share their downscaled datasets (`nerfaug.scenes.cache`)."""
-    return Path(root) / "datasets" / "cache"
+    return ResultsFolder(Path(root)).dataset_cache
 
 
 def is_captured_set(folder: Path) -> bool:
@@ -165,8 +168,6 @@ def load_scene_data(
     (`nerfaug.scenes.cache`), keyed by the digest of the folder's files: the same images, bit for
     bit, without decoding and shrinking every image in every run.
     """
-    from nerfaug.scenes.cache import folder_digest, load_split_cached
-
     folder = Path(folder)
     probe = load_dataset(folder, "train", lazy=True)
     downscale = max(1, probe.cameras.width // config.resolution)
@@ -213,8 +214,6 @@ def captured_scene_data(views: Views, config: ExperimentConfig, layout: int) -> 
 @functools.lru_cache(maxsize=1)
 def cached_lpips():
     """LPIPS loaded once per process (None, with a reason in each result, when its weights are absent)."""
-    from nerfaug.evaluation import load_lpips
-
     return load_lpips()
 
 
@@ -236,9 +235,6 @@ def save_view_uncertainty(folder: Path, trainer, test: Views, selection_config, 
     views trained on at the end, with a generator of its own; called after the evaluation, so no
     metric and no selection depends on it.
     """
-    from nerfaug.selection.estimators import fisher_train_diagonal
-    from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
-
     model, device = trainer.model, trainer.device
     cameras = test.cameras[[0]].to(device)
     images = view_images(model, cameras, 0)
@@ -266,12 +262,6 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
 
     Returns the result record (also in result.json).
     """
-    from nerfaug.device import configure_process
-    from nerfaug.evaluation import evaluate_views
-    from nerfaug.maps import plot_hemisphere_map
-    from nerfaug.nerf.trainer import Trainer
-    from nerfaug.selection import get_method, select_views
-
     # A sweep worker's entry point (in-process, pool or Ray): its process-wide torch settings.
     configure_process(threads=config.threads_per_run)
     folder = key.folder(root)
@@ -304,7 +294,9 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
 
     start = time.perf_counter()
     chosen = [int(i) for i in selection.indices]
-    new_views = data.pool.subset(chosen)  # the pool is the oracle: its images of the chosen poses
+    # The experiment's oracle is its pool: asked for the chosen poses, it answers with the pool's
+    # images of them, as a robot's camera would with new ones (`nerfaug.oracle`).
+    new_views = PoolOracle(data.pool).capture(data.pool.cameras.camera_to_world[chosen])
     timing["oracle"] = time.perf_counter() - start
     trainer.add_views(new_views)
 

@@ -30,9 +30,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from nerfaug.experiment.store import RESULT_FILE, read_result, write_result
+from nerfaug.hemisphere import angles_from_pose
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
+from nerfaug.registry import check_name
 
 
 @dataclass(frozen=True)
@@ -95,10 +98,6 @@ def write_selection(folder: Path, selection: dict, chosen_names: list[str], cand
         candidate_poses: Tensor or array (C, 4, 4), the pool the indices point into.
         train_poses: Tensor or array (T, 4, 4), the views trained on before the selection.
     """
-    import torch
-
-    from nerfaug.hemisphere import angles_from_pose
-
     candidates = torch.as_tensor(
         np.asarray(candidate_poses) if not torch.is_tensor(candidate_poses) else candidate_poses
     )
@@ -211,9 +210,8 @@ VIEW_ARRAYS = ("render", "error", "entropy", "fisher")
 def write_view_uncertainty(folder: Path, arrays: dict[str, np.ndarray]) -> Path:
     """Write `FILES.view_uncertainty/<name>.npy` for each of `arrays` (names from VIEW_ARRAYS:
     render (H, W, 3), error (H, W), entropy (H, W), fisher (h, w)). Returns the folder."""
-    unknown = sorted(set(arrays) - set(VIEW_ARRAYS))
-    if unknown:
-        raise ValueError(f"unknown view arrays {unknown}; valid: {', '.join(VIEW_ARRAYS)}")
+    for name in arrays:
+        check_name("view array", name, VIEW_ARRAYS)
     target = Path(folder) / FILES.view_uncertainty
     for name, values in arrays.items():
         buffer = io.BytesIO()
@@ -249,8 +247,7 @@ def read_view_uncertainty(folder: Path) -> dict[str, np.ndarray] | None:
 def render_paths(folder: Path, kind: str = "render") -> list[Path]:
     """The saved test renders, sorted by view: kind "render" (the model's image) or "render_vs_gt"
     (render left, ground truth right)."""
-    if kind not in ("render", "render_vs_gt"):
-        raise ValueError(f"unknown render kind {kind!r}; valid: render, render_vs_gt")
+    check_name("render kind", kind, ("render", "render_vs_gt"))
     return sorted((Path(folder) / FILES.renders).glob(f"*_{kind}.png"))
 
 

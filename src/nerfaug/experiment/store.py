@@ -1,16 +1,6 @@
-"""The results folder: one folder per run, written so that a crash never leaves a half-run that
-looks complete.
-
-Layout::
-
-    RESULTS/
-      .nerfaug                         marker: nerfaug made this folder
-      sweep.json                       what produced the results (fingerprint checked on re-runs)
-      superseded/<time>/               runs/ and sweep.json moved aside by --force (never deleted)
-      datasets/<scene>/                the scene's Blender-format dataset (rendered once)
-      runs/<scene>/<method>/trial_<k>/
-        .nerfaug  config.json  selection.json  metrics.json  history.json  renders/*.png
-        result.json                    written last: the run is complete iff it exists and is valid
+"""The results folder (its layout: `experiment.layout.ResultsFolder`): one folder per run,
+written so that a crash never leaves a half-run that looks complete. A run's result.json is
+written last: the run is complete iff it exists and is valid.
 
 Every file is written to a temporary name and renamed into place (atomic on POSIX).
 
@@ -33,13 +23,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nerfaug import owned
+from nerfaug.data import detect_format, find_split
 from nerfaug.errors import FolderRefused, NerfaugError
+from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.jsonio import atomic_write_json
 
 RESULT_FILE = "result.json"
 RESULT_KEYS = ("scene", "method", "trial", "seed", "fingerprint", "metrics", "timing", "code_version")
-SWEEP_FILE = "sweep.json"
-SUPERSEDED_DIR = "superseded"
 RESULTS_KIND, RUN_KIND = "experiment-results", "experiment-run"
 # Files a run folder of an earlier nerfaug (before the marker) may hold; temporary files start with ".".
 _RUN_CONTRACT = (
@@ -67,7 +57,7 @@ class RunKey:
     trial: int
 
     def folder(self, root: Path) -> Path:
-        return Path(root) / "runs" / self.scene / self.method / f"trial_{self.trial:03d}"
+        return ResultsFolder(Path(root)).run(self.scene, self.method, self.trial)
 
     def __str__(self) -> str:
         return f"{self.scene}/{self.method}/trial {self.trial}"
@@ -214,19 +204,13 @@ class IncompatibleResults(NerfaugError, RuntimeError):
 
 def finished_runs(root: Path) -> list[dict]:
     """The results of every finished run under `root/runs`, whatever configuration made them."""
-    runs = Path(root) / "runs"
-    found = (read_result(folder) for folder in sorted(runs.glob("*/*/*")) if folder.is_dir())
+    found = (read_result(folder) for folder in ResultsFolder(Path(root)).run_folders())
     return [r for r in found if r is not None]
-
-
-def run_folders(root: Path) -> list[Path]:
-    """Every folder under `root/runs` at run depth (finished or not)."""
-    return [p for p in sorted((Path(root) / "runs").glob("*/*/*")) if p.is_dir()]
 
 
 def read_sweep(root: Path) -> tuple[dict | None, str | None]:
     """The folder's sweep record, or None and why not ("missing", or what is wrong)."""
-    path = Path(root) / SWEEP_FILE
+    path = ResultsFolder(Path(root)).sweep
     if not path.exists():
         return None, "is missing"
     try:
@@ -240,13 +224,13 @@ def read_sweep(root: Path) -> tuple[dict | None, str | None]:
 
 def move_aside(root: Path) -> Path:
     """Move `root/runs` and `root/sweep.json` into `root/superseded/<UTC time>/`; returns that folder."""
-    root = Path(root)
+    results = ResultsFolder(Path(root))
     stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%S%fZ")
-    target = root / SUPERSEDED_DIR / stamp
+    target = results.superseded / stamp
     target.mkdir(parents=True)
-    for name in ("runs", SWEEP_FILE):
-        if (root / name).exists():
-            (root / name).rename(target / name)
+    for moved in (results.runs, results.sweep):
+        if moved.exists():
+            moved.rename(target / moved.name)
     return target
 
 
@@ -267,14 +251,15 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
         FolderRefused: `root` is not empty and is not a results folder.
     """
     root = Path(root)
+    results = ResultsFolder(root)
     if root.exists() and not root.is_dir():
         raise FolderRefused(f"{root}: not a folder; choose a folder for --out")
-    path = root / SWEEP_FILE
+    path = results.sweep
     previous, problem = read_sweep(root)
-    folders = run_folders(root)
+    folders = results.run_folders()
     if previous is None and not folders and not owned.is_empty(root) and not owned.marked(root, RESULTS_KIND):
         raise FolderRefused(
-            f"{root}: not empty and not a nerfaug results folder (no {SWEEP_FILE}), so nothing is "
+            f"{root}: not empty and not a nerfaug results folder (no {path.name}), so nothing is "
             "written there; choose a new or empty folder for --out"
         )
     moved = None
@@ -286,11 +271,11 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
         # latest for a method run again (whose earlier runs `_check_compatible` then refuses if
         # that definition changed).
         sweep = {**sweep, "methods": {**previous.get("methods", {}), **sweep.get("methods", {})}}
-        _check_compatible(path, previous, sweep, root)
+        _check_compatible(previous, sweep, results)
     elif folders:
         raise IncompatibleResults(
-            f"{path} {problem} but {root / 'runs'} holds {len(folders)} run folder(s), so nerfaug cannot tell "
-            f"what made them; re-run with --force to move them aside into {root / SUPERSEDED_DIR} (nothing is "
+            f"{path} {problem} but {results.runs} holds {len(folders)} run folder(s), so nerfaug cannot tell "
+            f"what made them; re-run with --force to move them aside into {results.superseded} (nothing is "
             "deleted), or use another --out folder"
         )
     owned.mark(root, RESULTS_KIND)
@@ -298,9 +283,10 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
     return moved
 
 
-def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> None:
+def _check_compatible(previous: dict, sweep: dict, results: ResultsFolder) -> None:
+    path = results.sweep
     how = (
-        f"Use another --out folder, or --force to move the existing runs aside into {root / SUPERSEDED_DIR} "
+        f"Use another --out folder, or --force to move the existing runs aside into {results.superseded} "
         "(nothing is deleted)"
     )
     if previous.get("fingerprint") != sweep["fingerprint"]:
@@ -322,14 +308,14 @@ def _check_compatible(path: Path, previous: dict, sweep: dict, root: Path) -> No
     others = sorted(
         {
             r["scene"] + "/" + r["method"]
-            for r in finished_runs(root)
+            for r in finished_runs(results.root)
             if r["method"] in methods
             and r["fingerprint"] != run_fingerprint(sweep["fingerprint"], methods[r["method"]])
         }
     )
     if others:
         raise IncompatibleResults(
-            f"{root / 'runs'}: finished runs of another configuration ({', '.join(others[:4])}) "
+            f"{results.runs}: finished runs of another configuration ({', '.join(others[:4])}) "
             f"although {path} matches. {how}."
         )
 
@@ -342,8 +328,6 @@ def dataset_digest(folder: Path) -> str:
     """A short hash of a dataset folder's listings (what its frames and cameras are): every
     `transforms*.json`, and the listing of each split the experiments read in whatever format
     holds it."""
-    from nerfaug.data import detect_format
-
     folder = Path(folder)
     listings = set(folder.glob("transforms*.json"))
     for split in LISTED_SPLITS:
@@ -363,8 +347,6 @@ def dataset_content_digest(folder: Path, splits: tuple[str, ...]) -> str:
     Raises:
         DatasetError: a split or a frame's image is missing, or an image lies outside the folder.
     """
-    from nerfaug.data import find_split
-
     folder = Path(folder)
     root = folder.resolve()
     digest = hashlib.sha256()

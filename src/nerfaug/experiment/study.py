@@ -1,15 +1,8 @@
 """The study's runs: the study family of selection methods x the engine presets x the scenes,
 each as one resumable sweep per engine into `OUT/<engine>/`, and its plan recorded in study.json.
 The `nerfaug study` command (`nerfaug.study_cli`) runs them, then records every finished run in the
-per-run table and writes the combined summary from it (`nerfaug.report.study`).
-
-    OUT/
-      study.json              the plan: engines run and left out (with the reason), scenes,
-                              methods, trials, the command, the machine
-      datasets/<res>px/<scene>/  each built-in scene rendered once, shared by every engine
-      <engine>/               a results folder as `nerfaug run` writes it (sweep.json, runs/, report)
-      study-table.json        the per-run table (`nerfaug.report.study_table`), or the --table file
-      study.md, figures/      the summary, generated from the table alone
+per-run table and writes the combined summary from it (`nerfaug.report.study`). The study
+folder's layout: `experiment.layout.StudyFolder`.
 
 Re-running the same command skips completed runs (each engine's sweep resumes on its own), and
 runs recorded in the table with the fingerprint they would have now (a study committed beside
@@ -25,12 +18,22 @@ import platform
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Literal
 
-from nerfaug.experiment.config import STUDY_PRESET_SETTINGS, ExperimentConfig, preset
+import torch
 
-STUDY_FILE = "study.json"
-TABLE_FILE = "study-table.json"
+from nerfaug.data.prepare import PREPARED
+from nerfaug.device import resolve_device
+from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
+from nerfaug.experiment.layout import StudyFolder
+from nerfaug.experiment.protocol import render_builtin, scene_folder
+from nerfaug.experiment.store import RunKey
+from nerfaug.experiment.sweep import check_config, run_sweep
+from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.nerf.config import PRESETS, NerfConfig
+from nerfaug.nerf.registry import check_names
+from nerfaug.selection.methods import FAMILIES
+from nerfaug.statistics import min_attainable_paired_p
+
 DEFAULT_TRIALS = 10
 """Trials per (scene, engine, method): with 10 seed-paired trials a two-sided Wilcoxon signed-rank
 test, Bonferroni over the 7 methods compared with uniform, reaches p < 0.05 when 9 of 10 pairs
@@ -40,21 +43,17 @@ SMOKE_ENGINES = ("test",)
 GPU_ENGINES = ("paper",)
 """Engine presets left out of a default study on a CPU: the paper's nerfacto-sized engine is about
 100x slower there than the cpu preset (BENCHMARKS.md), so one study would take weeks."""
-StudyPreset = Literal[tuple(STUDY_PRESET_SETTINGS)]  # type: ignore[valid-type]
+StudyPreset = STUDY_PRESETS.name_type()
 
 
 def study_methods() -> tuple[str, ...]:
     """The study's methods: the registry's "study" family (ours, its authors' variant, the
     batch-aware variants and the baselines)."""
-    from nerfaug.selection.methods import FAMILIES
-
     return tuple(FAMILIES["study"])
 
 
 def engine_presets() -> tuple[str, ...]:
     """Every engine preset that exists (`nerfaug.nerf.config.PRESETS`), in its order."""
-    from nerfaug.nerf.config import PRESETS
-
     return tuple(PRESETS)
 
 
@@ -78,26 +77,14 @@ def default_engines(device: str) -> tuple[list[str], dict[str, str]]:
 def min_trials(n_comparisons: int, alpha: float = 0.05, start: int = DEFAULT_TRIALS) -> int:
     """The smallest n >= `start` (trials per method, paired by seed) at which a two-sided Wilcoxon
     signed-rank test on the pairs, Bonferroni x `n_comparisons`, can reach p < alpha."""
-    from nerfaug.statistics import min_attainable_paired_p
-
     n = start
     while min_attainable_paired_p(n) * max(1, n_comparisons) >= alpha:
         n += 1
     return n
 
 
-def base_config(name: StudyPreset) -> ExperimentConfig:
-    """The protocol every engine runs: "study" is `ExperimentConfig`'s defaults (the paper's
-    protocol at 100x100: 6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50 test
-    views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are rendered
-    first, which takes minutes)."""
-    return preset(name, STUDY_PRESET_SETTINGS)
-
-
 def machine() -> dict:
     """What the study ran on, for its summary."""
-    import torch
-
     return {
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
@@ -123,8 +110,6 @@ class StudyPlan:
         return self.config.replace(engine=engine, scenes=tuple(self.datasets[s] for s in self.scenes))
 
     def record(self) -> dict:
-        from nerfaug.nerf.config import NerfConfig
-
         return {
             "engines": self.engines,
             "engine_settings": {e: NerfConfig.preset(e).to_dict() for e in self.engines},
@@ -147,13 +132,11 @@ def prepare_datasets(
     manifest) into OUT/datasets/<res>px/<scene>/, a folder named by the scene so that results and
     per-scene settings (the field learning rate) know it by its name; a dataset folder is used
     as it is, named by its folder."""
-    from nerfaug.experiment.protocol import render_builtin, scene_folder
-
     found = {}
     for scene in scenes:
         folder = scene_folder(scene)
         if folder is None:
-            folder = render_builtin(scene, Path(out) / "datasets" / f"{config.resolution}px" / scene, config, progress)
+            folder = render_builtin(scene, StudyFolder(Path(out)).dataset(config.resolution, scene), config, progress)
         name = Path(folder).name
         if name in found:
             raise ValueError(f"two scenes are named {name!r} ({found[name]} and {folder}); rename a dataset folder")
@@ -191,9 +174,6 @@ def merge_records(previous: dict, record: dict) -> dict:
 def prepared_source(folder: Path) -> dict | None:
     """What a dataset folder prepared by `nerfaug scene prepare` was made from: the downloaded
     folder's digest, its format and the width (None for other folders, built-in scenes among them)."""
-    from nerfaug.data.prepare import PREPARED
-    from nerfaug.jsonio import read_json
-
     path = Path(folder) / PREPARED
     if not path.is_file():
         return None
@@ -215,19 +195,16 @@ def run_study(
     """Run every engine's sweep (resuming; runs recorded in `table` with their current fingerprint
     are not run again), writing OUT/study.json first. Returns engine -> {"failed": {run: reason},
     "results": n valid results}."""
-    from nerfaug.experiment.store import RunKey
-    from nerfaug.experiment.sweep import run_sweep
-    from nerfaug.jsonio import atomic_write_json
-
+    study = StudyFolder(plan.out)
     plan.out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(plan.out / STUDY_FILE, merged_record(plan.out / STUDY_FILE, plan.record()))
+    atomic_write_json(study.record, merged_record(study.record, plan.record()))
     outcomes = {}
     for engine in plan.engines:
         if progress:
-            print(f"study: engine {engine} -> {plan.out / engine}", file=sys.stderr)
+            print(f"study: engine {engine} -> {study.engine(engine).root}", file=sys.stderr)
         outcome = run_sweep(
             plan.engine_config(engine),
-            plan.out / engine,
+            study.engine(engine).root,
             workers=workers,
             force=force,
             progress=progress,
@@ -257,7 +234,7 @@ def with_design(record: dict, out: Path) -> dict:
     settings = dict(record.get("engine_settings", {}))
     for engine in record.get("engines", []):
         try:
-            fingerprinted = json.loads((out / engine / "sweep.json").read_text())["fingerprinted"]
+            fingerprinted = json.loads(StudyFolder(out).engine(engine).sweep.read_text())["fingerprinted"]
         except (OSError, ValueError, KeyError, TypeError):
             continue
         found = {k.removeprefix("engine."): v for k, v in fingerprinted.items() if k.startswith("engine.")}
@@ -313,15 +290,10 @@ def make_plan(
     layouts: int = 1,
 ) -> StudyPlan:
     """The plan from the command's options (None: the default), with the datasets prepared."""
-    from nerfaug.device import resolve_device
-
     try:
         device_type = resolve_device(device).type
     except ValueError as error:
         raise SystemExit(f"--device: {error}") from None
-    from nerfaug.nerf.config import NerfConfig
-    from nerfaug.nerf.registry import check_names
-
     if engines is None:
         chosen, left_out = default_engines(device_type)
     else:
@@ -335,7 +307,8 @@ def make_plan(
     comparisons = max(1, sum(m != "uniform" for m in methods))
     if trials is None:
         trials = min_trials(comparisons)
-    config = base_config(preset_name).replace(
+    config = STUDY_PRESETS.choose(
+        preset_name,
         methods=methods,
         trials=trials,
         resolution=resolution,
@@ -345,8 +318,6 @@ def make_plan(
     )
     scenes = tuple(scenes) if scenes else PROCEDURAL_SCENES
     # Every setting checked before any dataset is rendered (a bad --trials costs nothing).
-    from nerfaug.experiment.sweep import check_config
-
     for engine in chosen:
         check_config(config.replace(scenes=scenes, engine=engine))
     datasets = prepare_datasets(out, scenes, config, progress=progress)
@@ -360,10 +331,7 @@ __all__ = [
     "PROCEDURAL_SCENES",
     "REAL_STUDY_SCENES",
     "prepared_source",
-    "STUDY_FILE",
-    "TABLE_FILE",
     "StudyPlan",
-    "base_config",
     "default_engines",
     "engine_presets",
     "make_plan",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import concurrent.futures as futures
 import multiprocessing
+import os
 import platform
 import sys
 import traceback
@@ -19,9 +20,13 @@ from typing import Literal
 
 from rich.console import Console
 
+from nerfaug.data import find_split, has_split, require_split
+from nerfaug.device import device_kind
+from nerfaug.experiment import protocol
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
+from nerfaug.experiment.scene_views import split_captured
 from nerfaug.experiment.store import (
     IncompatibleResults,
     RunKey,
@@ -35,7 +40,10 @@ from nerfaug.experiment.store import (
     read_result,
     run_fingerprint,
 )
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
+from nerfaug.selection import METHODS, get_method
 
 Backend = Literal["local", "ray"]
 # Built-in scenes stand in for the NeRF-synthetic scenes, whose images are 800 px across: the most
@@ -52,6 +60,12 @@ class SweepOutcome:
     results: list[dict]
     failed: dict[str, str] = field(default_factory=dict)
     skipped: int = 0
+
+
+def default_workers(config: ExperimentConfig) -> int:
+    """Concurrent runs when none are asked for: one per core on a CPU (each run's threads counted);
+    one at a time on a GPU (each run holds its own CUDA context)."""
+    return 1 if config.device == "cuda" else max(1, (os.cpu_count() or 1) // config.threads_per_run)
 
 
 def plan_runs(config: ExperimentConfig) -> list[RunKey]:
@@ -89,17 +103,19 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         ValueError: naming the setting, its value and what would be accepted.
         DatasetError: a user dataset is missing or malformed.
     """
-    from nerfaug.selection import METHODS
-
     _need(len(config.methods) > 0, "methods", config.methods, "give at least one selection method")
     for method in config.methods:
         _need(
             method in METHODS,
             "methods",
             method,
-            f"unknown selection method; choose from {', '.join(METHODS)} (`nerfaug methods`)",
+            f"unknown selection method; choose one of: {', '.join(METHODS)} (`nerfaug methods`)",
         )
     _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
+    try:
+        check_names(NerfConfig.preset(config.engine))
+    except ValueError as error:
+        raise ValueError(f"--engine {config.engine!r}: {error}") from None
     _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
     for name in (
         "trials",
@@ -147,8 +163,6 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
 
 def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
     """What a user dataset supplies, checked against the config (see `check_config`)."""
-    from nerfaug.data import find_split, has_split, require_split
-
     train_split = find_split(folder, "train")
     train = train_split.load(lazy=True)
     width, height = train.cameras.width, train.cameras.height
@@ -214,8 +228,6 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
 
 def _check_captured_set(split, views, config: ExperimentConfig) -> dict:
     """A captured set's division into test, initial and candidate views, for every layout."""
-    from nerfaug.experiment.scene_views import split_captured
-
     try:
         splits = [
             split_captured(views.cameras.camera_to_world, config.n_test, config.n_initial, k, config.layouts)
@@ -246,8 +258,6 @@ def versions() -> dict[str, str]:
 
 def sweep_record(config: ExperimentConfig, command: list[str] | None = None, datasets: dict | None = None) -> dict:
     """sweep.json: the fingerprint, the config, and what each scene ran on (`check_config`)."""
-    from nerfaug.selection import get_method
-
     fingerprinted = config.fingerprinted()
     return {
         "fingerprint": fingerprint(fingerprinted),
@@ -425,8 +435,6 @@ def _execute_local(todo, datasets, config, root, workers, address, progress):
 
 def _run_in_process(key, dataset_dir, config, root, display: _Display) -> dict:
     # In this process the display is live, so poll it from the run's own progress writes.
-    from nerfaug.experiment import protocol
-
     protocol.on_progress = lambda: display.poll()
     try:
         return run_trial(key, dataset_dir, config, root, progress=False)
@@ -459,7 +467,6 @@ def _execute_ray(todo, datasets, config, root, workers, address, progress):
                 include_dashboard=False,
                 log_to_driver=False,
             )
-    from nerfaug.device import device_kind
 
     # A run asks Ray for a GPU exactly when it will compute on one.
     use_gpu = device_kind(config.device) == "cuda" and ray.cluster_resources().get("GPU", 0) > 0

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Literal
 
+from nerfaug.registry import Presets, lookup, unknown
+
 
 @dataclass(frozen=True)
 class NerfConfig:
@@ -168,7 +170,7 @@ class NerfConfig:
         preset's with those changed, so it is fingerprinted like any preset.
         """
         base, changes = parse_variant(name)
-        return replace(PRESETS[base], **{**changes, **overrides})
+        return PRESETS.choose(base, **{**changes, **overrides})
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -183,73 +185,73 @@ class NerfConfig:
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
-PRESET_SETTINGS: dict[str, dict[str, object]] = {
-    "paper": {
-        "encoding": "hash",
-        "sampler": "proposal",
-        "background_mode": "last_sample",
-        "batch_size": 4096,
-        # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
-        "proposal_update_every": 5,
-        "proposal_warmup_steps": 5000,
+PRESETS: Presets[NerfConfig] = Presets(
+    "engine preset",
+    {
+        "paper": NerfConfig(
+            encoding="hash",
+            sampler="proposal",
+            background_mode="last_sample",
+            batch_size=4096,
+            # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
+            proposal_update_every=5,
+            proposal_warmup_steps=5000,
+        ),
+        "cpu": NerfConfig(
+            encoding="kplanes",
+            plane_resolutions=(64, 128),
+            plane_features=8,
+            color_layers=1,
+            average_init_density=1.0,
+            sampler="occupancy",
+            num_samples=64,
+            occupancy_warmup_steps=64,
+            batch_size=1024,
+            lr_final=1e-3,
+            lr_decay_steps=5000,
+        ),
+        "nerfacto-cpu": NerfConfig(
+            encoding="hash",
+            hash_levels=6,
+            hash_log2_table_size=14,
+            hash_max_resolution=256,
+            hidden_dim=32,
+            color_hidden_dim=32,
+            density_activation="trunc_exp",
+            average_init_density=0.01,
+            sampler="proposal",
+            num_samples=16,
+            proposal_samples=(32, 16),
+            proposal_hash_levels=3,
+            proposal_max_resolutions=(64, 128),
+            proposal_log2_table_size=12,
+            batch_size=512,
+            background_mode="fixed",
+        ),
+        "test": NerfConfig(
+            encoding="kplanes",
+            plane_resolutions=(16, 32),
+            plane_features=4,
+            hidden_dim=16,
+            geo_feat_dim=7,
+            color_hidden_dim=16,
+            color_layers=1,
+            sampler="occupancy",
+            num_samples=16,
+            occupancy_resolution=16,
+            occupancy_update_every=4,
+            occupancy_warmup_steps=8,
+            batch_size=128,
+            render_chunk=4096,
+        ),
     },
-    "cpu": {
-        "encoding": "kplanes",
-        "plane_resolutions": (64, 128),
-        "plane_features": 8,
-        "color_layers": 1,
-        "average_init_density": 1.0,
-        "sampler": "occupancy",
-        "num_samples": 64,
-        "occupancy_warmup_steps": 64,
-        "batch_size": 1024,
-        "lr_final": 1e-3,
-        "lr_decay_steps": 5000,
-    },
-    "nerfacto-cpu": {
-        "encoding": "hash",
-        "hash_levels": 6,
-        "hash_log2_table_size": 14,
-        "hash_max_resolution": 256,
-        "hidden_dim": 32,
-        "color_hidden_dim": 32,
-        "density_activation": "trunc_exp",
-        "average_init_density": 0.01,
-        "sampler": "proposal",
-        "num_samples": 16,
-        "proposal_samples": (32, 16),
-        "proposal_hash_levels": 3,
-        "proposal_max_resolutions": (64, 128),
-        "proposal_log2_table_size": 12,
-        "batch_size": 512,
-        "background_mode": "fixed",
-    },
-    "test": {
-        "encoding": "kplanes",
-        "plane_resolutions": (16, 32),
-        "plane_features": 4,
-        "hidden_dim": 16,
-        "geo_feat_dim": 7,
-        "color_hidden_dim": 16,
-        "color_layers": 1,
-        "sampler": "occupancy",
-        "num_samples": 16,
-        "occupancy_resolution": 16,
-        "occupancy_update_every": 4,
-        "occupancy_warmup_steps": 8,
-        "batch_size": 128,
-        "render_chunk": 4096,
-    },
-}
-"""Each engine preset as the fields it sets over `NerfConfig`'s defaults."""
+)
+"""The engine presets by name (`NerfConfig.preset` describes each)."""
 
-# A named variant is a preset with some settings changed: its base's settings, then its own. Each
-# is pinned by digest like the presets (tests/nerf/test_nerf_presets.py); the study compares a
-# variant with its base cell by cell.
-PRESET_SETTINGS["nerfacto-cpu-last-sample"] = {**PRESET_SETTINGS["nerfacto-cpu"], "background_mode": "last_sample"}
+# A named variant is a preset with some settings changed. Each is pinned by digest like the
+# presets (tests/nerf/test_nerf_presets.py); the study compares a variant with its base cell by cell.
+PRESETS["nerfacto-cpu-last-sample"] = replace(PRESETS["nerfacto-cpu"], background_mode="last_sample")
 
-PRESETS: dict[str, NerfConfig] = {name: replace(NerfConfig(), **settings) for name, settings in PRESET_SETTINGS.items()}
-"""The engine presets by name, each `PRESET_SETTINGS` entry applied over the defaults."""
 VARIANT_SEPARATOR = "+"
 
 
@@ -257,7 +259,7 @@ def _setting(base: NerfConfig, name: str, text: str, where: str):
     """`text` as a value of the field `name`, typed like the base preset's value."""
     known = {f.name for f in fields(NerfConfig)}
     if name not in known:
-        raise ValueError(f"{where}: unknown setting {name!r}; valid: {', '.join(sorted(known))}")
+        raise ValueError(f"{where}: {unknown('setting', name, sorted(known))}")
     current = getattr(base, name)
     try:
         if isinstance(current, bool):
@@ -282,18 +284,17 @@ def parse_variant(name: str) -> tuple[str, dict]:
         ValueError: an unknown preset or setting, a value of the wrong type, or a malformed part.
     """
     base, *parts = name.split(VARIANT_SEPARATOR)
-    if base not in PRESETS:
-        raise ValueError(f"unknown engine preset {base!r}; choose one of {', '.join(PRESETS)}")
+    preset = lookup(PRESETS, PRESETS.kind, base)
     changes = {}
     for part in parts:
         field_name, equals, text = part.partition("=")
         if not equals or not field_name:
             raise ValueError(f"engine {name!r}: {part!r} is not FIELD=VALUE")
-        changes[field_name] = _setting(PRESETS[base], field_name, text, f"engine {name!r}")
+        changes[field_name] = _setting(preset, field_name, text, f"engine {name!r}")
     if changes:
-        replace(PRESETS[base], **changes)  # NerfConfig's own checks (e.g. background_mode's values)
+        replace(preset, **changes)  # NerfConfig's own checks (e.g. background_mode's values)
     return base, changes
 
 
-EnginePreset = Literal[tuple(PRESETS)]  # type: ignore[valid-type]
-"""The preset names as a type, for a CLI (tyro) to offer and check: derived from `PRESETS`."""
+EnginePreset = PRESETS.name_type()
+"""The preset names as a type, for a CLI (tyro) to offer and check."""

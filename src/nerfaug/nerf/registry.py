@@ -8,7 +8,6 @@ that lists the known ones. Adding an encoding is one module defining it (an `nn.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TypeVar
 
 from torch import nn
 
@@ -18,6 +17,7 @@ from nerfaug.nerf.field import NerfField
 from nerfaug.nerf.occupancy import OccupancySampler
 from nerfaug.nerf.proposal import ProposalSampler
 from nerfaug.nerf.sampler import Sampler
+from nerfaug.registry import lookup
 
 ENCODINGS: dict[str, Callable[[NerfConfig], nn.Module]] = {
     "hash": HashEncoding.from_config,
@@ -38,22 +38,6 @@ SAMPLERS: dict[str, Callable[[NerfConfig], Sampler]] = {
 
 DEFAULT_FIELD = "nerfacto"
 
-T = TypeVar("T")
-
-
-def choose(registry: dict[str, T], kind: str, name: str) -> T:
-    """The entry `name` of `registry`, or a ValueError naming the value and the valid choices.
-
-    Example:
-        >>> choose(SAMPLERS, "sampler", "grid")
-        Traceback (most recent call last):
-        ...
-        ValueError: unknown sampler 'grid'; choose one of: occupancy, proposal
-    """
-    if name not in registry:
-        raise ValueError(f"unknown {kind} {name!r}; choose one of: {', '.join(registry)}")
-    return registry[name]
-
 
 def check_names(config: NerfConfig) -> NerfConfig:
     """`config`, once its encoding and sampler are names in the registries; a ValueError naming
@@ -65,22 +49,22 @@ def check_names(config: NerfConfig) -> NerfConfig:
         ...
         ValueError: unknown encoding 'nope'; choose one of: hash, kplanes
     """
-    choose(ENCODINGS, "encoding", config.encoding)
-    choose(SAMPLERS, "sampler", config.sampler)
+    lookup(ENCODINGS, "encoding", config.encoding)
+    lookup(SAMPLERS, "sampler", config.sampler)
     return config
 
 
 def build_encoding(config: NerfConfig, name: str | None = None) -> nn.Module:
     """The position encoding `name` (default: `config.encoding`), sized by `config`."""
-    return choose(ENCODINGS, "encoding", config.encoding if name is None else name)(config)
+    return lookup(ENCODINGS, "encoding", config.encoding if name is None else name)(config)
 
 
 def build_field(config: NerfConfig, name: str = DEFAULT_FIELD, encoding: nn.Module | None = None) -> nn.Module:
     """The field `name` over `encoding` (default: `build_encoding(config)`, built first)."""
-    constructor = choose(FIELDS, "field", name)
+    constructor = lookup(FIELDS, "field", name)
     return constructor(config, build_encoding(config) if encoding is None else encoding)
 
 
 def build_sampler(config: NerfConfig) -> Sampler:
     """The sampler `config.sampler`, sized by `config`."""
-    return choose(SAMPLERS, "sampler", config.sampler)(config)
+    return lookup(SAMPLERS, "sampler", config.sampler)(config)

@@ -24,6 +24,7 @@ from nerfaug.device import autocast_dtype, resolve_device
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.registry import DEFAULT_FIELD, build_field
+from nerfaug.progress import progress_bar
 
 CHECKPOINT_FORMAT = 1
 PROGRESS_EVERY = 10  # steps between updates of the progress display (and the train callback)
@@ -338,6 +339,4 @@ class Trainer:
 
 def _progress_bar(enabled: bool):
     """Training progress showing loss and PSNR (a live bar, or lines where stderr is not a terminal)."""
-    from nerfaug.progress import progress_bar
-
     return progress_bar(fields="loss {loss:.4f}  psnr {psnr:.2f} dB", enabled=enabled)

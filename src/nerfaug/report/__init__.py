@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.report.collect import (
     NotAggregated,
@@ -56,7 +57,7 @@ def write_report(results_dir: Path, paper: PaperTables) -> list[Path]:
     Args:
         results_dir: the folder holding sweep.json and runs/<scene>/<method>/trial_<k>/.
         paper: the paper's ablation tables' rows and its protocol's image side
-            (`nerfaug.cli.paper_tables()` gives the method registry's).
+            (`nerfaug.run_cli.paper_tables()` gives the method registry's).
 
     Returns:
         The paths written: report.md, report.html, then the figures.
@@ -68,7 +69,7 @@ def write_report(results_dir: Path, paper: PaperTables) -> list[Path]:
     figures = make_figures(results)
     blocks = build_report(results, figures, paper)
     root = results.root
-    markdown, page = root / "report.md", root / "report.html"
+    markdown, page = ResultsFolder(root).report
     atomic_write_bytes(markdown, to_markdown(blocks, root).encode())
     atomic_write_bytes(page, to_html(blocks, f"nerfaug report: {root.name}").encode())
     return [markdown, page] + figures.paths()

@@ -9,12 +9,12 @@ are read through the run-folder contract (`nerfaug.experiment.runfolder`).
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from nerfaug.experiment.layout import TRIAL_NAME, ResultsFolder
 from nerfaug.experiment.runfolder import FILES, read_error, read_progress
-from nerfaug.experiment.store import RESULT_KEYS, SWEEP_FILE, read_result, run_fingerprint
+from nerfaug.experiment.store import RESULT_KEYS, read_result, run_fingerprint
 
 
 class ReportError(RuntimeError):
@@ -85,7 +85,7 @@ class Results:
 
 
 def read_sweep(root: Path) -> dict:
-    path = root / "sweep.json"
+    path = ResultsFolder(root).sweep
     if not path.is_file():
         raise ReportError(f"{path} not found: {root} is not a results folder written by `nerfaug run`")
     try:
@@ -124,17 +124,13 @@ def why_not_valid(folder: Path, fingerprint: str) -> str:
     return "result.json has no numeric PSNR"
 
 
-def _run_folders(root: Path) -> list[Path]:
-    return sorted(p for p in (root / "runs").glob("*/*/*") if p.is_dir())
-
-
 def _read_run(folder: Path, sweep: dict) -> Run | NotAggregated:
     scene, method, name = folder.parts[-3:]
-    match = re.fullmatch(r"trial_(\d+)", name)
+    match = TRIAL_NAME.fullmatch(name)
     if match is None:
         return NotAggregated(folder, "folder name is not trial_<k>")
     if method not in sweep.get("methods", {}):
-        return NotAggregated(folder, f"method {method!r} is not in {SWEEP_FILE} (its definition is unknown)")
+        return NotAggregated(folder, f"method {method!r} is not in sweep.json (its definition is unknown)")
     fingerprint = run_fingerprint(sweep["fingerprint"], sweep["methods"][method])
     result = read_result(folder, fingerprint)
     if result is None:
@@ -158,20 +154,20 @@ def collect_results(results_dir: Path) -> Results:
     root = Path(results_dir)
     sweep = read_sweep(root)
     runs, skipped = [], []
-    for folder in _run_folders(root):
+    for folder in ResultsFolder(root).run_folders():
         item = _read_run(folder, sweep)
         (runs if isinstance(item, Run) else skipped).append(item)
     config = sweep.get("config", {})
     # Results name a user dataset by its folder's name (sweep.scene_name).
     planned_scenes = [Path(s).name for s in config.get("scenes", [])]
     planned_methods = list(config.get("methods", []))
-    existing = {tuple(folder.parts[-3:]) for folder in _run_folders(root)}
+    existing = set(ResultsFolder(root).run_folders())
     missing = [
         f"{scene}/{method}/trial {trial}"
         for scene in planned_scenes
         for method in planned_methods
         for trial in range(int(config.get("trials", 0)))
-        if (scene, method, f"trial_{trial:03d}") not in existing
+        if ResultsFolder(root).run(scene, method, trial) not in existing
     ]
     scenes = _ordered(planned_scenes, {r.scene for r in runs} | {f.folder.parts[-3] for f in skipped})
     methods = _ordered(planned_methods, {r.method for r in runs})

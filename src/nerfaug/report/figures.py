@@ -12,12 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.experiment.runfolder import (
     FILES,
     read_history,
     read_selection,
     render_paths,
 )
+from nerfaug.maps import plot_method_maps
 from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_LABELS, METRICS
 from nerfaug.plotting import new_figure, save_figure
 from nerfaug.report.collect import Results, Run
@@ -114,8 +116,6 @@ def plot_uncertainty_maps(results: Results, scene: str, folder: Path) -> tuple[l
     """Fig. 1: per method, its first trial's scores over the hemisphere with the initial (triangles)
     and chosen (stars) views, drawn by `nerfaug.maps.plot_method_maps`, at most
     MAP_PANELS_PER_FIGURE methods per image. Returns the images and notes."""
-    from nerfaug.maps import plot_method_maps
-
     panels, notes = _map_panels(results, scene)
     paths = []
     for part, first in enumerate(range(0, len(panels), MAP_PANELS_PER_FIGURE)):
@@ -313,7 +313,7 @@ class Figures:
 
 
 def make_figures(results: Results) -> Figures:
-    folder = results.root / "figures"
+    folder = ResultsFolder(results.root).figures
     figures = Figures()
     for scene in results.scenes:
         name = slug(scene)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.experiment.layout import StudyFolder
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_DECIMALS, METRIC_LABELS, METRICS
 from nerfaug.plotting import new_figure, save_figure
@@ -434,10 +435,10 @@ def write_study(root: Path, table: dict) -> list[Path]:
     """Write ROOT/study.md and its figures (ROOT/figures/) from the study's table. Returns
     study.md, then the figures."""
     study = collect_study(table)
-    root = Path(root)
-    figures = make_study_figures(study, root / "figures")
-    path = root / "study.md"
-    atomic_write_bytes(path, to_markdown(study_blocks(study, figures), root).encode())
+    folder = StudyFolder(Path(root))
+    figures = make_study_figures(study, folder.figures)
+    path = folder.summary
+    atomic_write_bytes(path, to_markdown(study_blocks(study, figures), folder.root).encode())
     return [path, *figures.values()]
 
 

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.runfolder import read_selection
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.report.collect import ReportError, Results, Run, collect_results
@@ -148,9 +149,10 @@ def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dic
     """
     rows, scenes = [], {}
     for engine in engines:
-        if not (Path(root) / engine / "sweep.json").is_file():
+        results = StudyFolder(Path(root)).engine(engine)
+        if not results.sweep.is_file():
             continue
-        for run in collect_results(Path(root) / engine).runs:
+        for run in collect_results(results.root).runs:
             found = row_of(engine, run)
             if found is None:
                 continue

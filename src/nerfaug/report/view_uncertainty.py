@@ -17,6 +17,7 @@ from nerfaug.plotting import new_figure, save_figure
 from nerfaug.report.collect import Results, Run
 from nerfaug.report.document import Block, Figure, Heading, Paragraph, Table, number
 from nerfaug.statistics import summarise
+from nerfaug.uncertainty.sparsification import ause, mean_pool
 
 KINDS = {"entropy": "ray entropy", "fisher": "FisherRF"}
 AUSE_DECIMALS = 3
@@ -34,8 +35,6 @@ def run_ause(arrays: dict[str, np.ndarray]) -> dict[str, float | None]:
     Returns:
         {"entropy": float, "fisher": float or None when the run has no FisherRF image}.
     """
-    from nerfaug.uncertainty.sparsification import ause, mean_pool
-
     error = arrays["error"]
     fisher = arrays.get("fisher")
     return {

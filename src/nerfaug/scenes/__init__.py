@@ -20,6 +20,7 @@ __all__ = ["BUILTIN_SCENES", *_RENDER_NAMES]
 
 def __getattr__(name: str):
     if name in _RENDER_NAMES:
+        # Imported on first use: the bpy child process imports this package and must not load torch.
         from nerfaug.scenes import render
 
         return getattr(render, name)

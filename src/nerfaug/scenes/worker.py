@@ -44,7 +44,7 @@ def render_frame(scene, camera, pose: list[list[float]], path: Path) -> None:
 def run(job: dict) -> None:
     """Set up the scene described by `job` (see the module docstring) and render its frames."""
     started = time.perf_counter()
-    from nerfaug.scenes import builders  # imports bpy: part of the start-up cost
+    from nerfaug.scenes import builders  # imports bpy (optional): here, and timed as start-up
 
     scene = builders.load_scene(job["scene"])
     builders.configure_render(scene, job["width"], job["height"], job["samples"], job["seed"], job["threads"])

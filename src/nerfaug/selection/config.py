@@ -18,9 +18,9 @@ from types import MappingProxyType
 from typing import Annotated
 
 import numpy as np
+import tyro
 from tyro.constructors import PrimitiveConstructorSpec
 
-from nerfaug.cli_hints import none_means
 from nerfaug.uncertainty.combined import NORMALISATIONS
 from nerfaug.uncertainty.entropy import ENTROPY_MODES
 from nerfaug.uncertainty.fisher import (
@@ -39,6 +39,12 @@ AUTHORS_THRESHOLD = 15.0
 MAX_DRAWS = 1_000_000
 # The rotations the coverage term compares (`estimators.distance_rotations`).
 DISTANCE_ROTATIONS = ("pose", "azimuth")
+
+
+def _unset_means(meaning: str, metavar: str):
+    """`--help` of an option whose default is None: what None does, e.g. "(default: the
+    identity)", and the metavar without "{None}|" (tyro alone prints "(default: None)")."""
+    return tyro.conf.arg(metavar=metavar, help_behavior_hint=f"(default: {meaning})")
 
 
 def _metric_from_words(words: list[str]) -> list[list[float]]:
@@ -217,9 +223,9 @@ class SelectionConfig:
     metric: Annotated[
         list[list[float]] | None,
         METRIC_ON_THE_COMMAND_LINE,
-        none_means("the identity", "M11 M12 M13 M21 M22 M23 M31 M32 M33"),
+        _unset_means("the identity", "M11 M12 M13 M21 M22 M23 M31 M32 M33"),
     ] = None
-    scale_m: Annotated[float | None, none_means("the largest score", "FLOAT")] = None
+    scale_m: Annotated[float | None, _unset_means("the largest score", "FLOAT")] = None
     sampler: str = "paper"
     authors_threshold: float = AUTHORS_THRESHOLD
     max_draws: int = MAX_DRAWS
@@ -232,15 +238,15 @@ class SelectionConfig:
     fisher_lambda: float = FISHER_LAMBDA
     fisher_cache_floats: int = CACHE_FLOATS
     chunk: int = 4096
-    background: Annotated[tuple[float, float, float] | None, none_means("the model's", "R G B")] = None
-    scoring_fov: Annotated[float | None, none_means("the candidates' own", "DEGREES")] = None
+    background: Annotated[tuple[float, float, float] | None, _unset_means("the model's", "R G B")] = None
+    scoring_fov: Annotated[float | None, _unset_means("the candidates' own", "DEGREES")] = None
     scoring_crop: float = 1.0
-    min_polar: Annotated[float | None, none_means("no limit", "RADIANS")] = None
-    entropy_max_polar: Annotated[float | None, none_means("no limit", "RADIANS")] = None
+    min_polar: Annotated[float | None, _unset_means("no limit", "RADIANS")] = None
+    entropy_max_polar: Annotated[float | None, _unset_means("no limit", "RADIANS")] = None
     distance_rotations: str = "pose"
     temperature: float = 1.0
-    sharpness: Annotated[float | None, none_means("unset: --selection.temperature applies", "FLOAT")] = None
-    batch_entropy_sigma: Annotated[float | None, none_means("no discount", "RADIANS")] = None
+    sharpness: Annotated[float | None, _unset_means("unset: --selection.temperature applies", "FLOAT")] = None
+    batch_entropy_sigma: Annotated[float | None, _unset_means("no discount", "RADIANS")] = None
 
     def __post_init__(self) -> None:
         if problem := _type_problem(self):  # before any comparison: "abc" >= 0 would be a TypeError
@@ -295,8 +301,7 @@ class SelectionConfig:
         return asdict(self)
 
     def changes(self) -> dict:
-        """The fields that differ from `SelectionConfig()`'s defaults: what a user set with
-        `--selection.*` options, to apply over a preset's selection settings."""
+        """The fields that differ from `SelectionConfig()`'s defaults."""
         default = SelectionConfig().to_dict()
         return {k: getattr(self, k) for k, v in self.to_dict().items() if v != default[k]}
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields, replace
 from types import MappingProxyType
 
+from nerfaug.registry import lookup
 from nerfaug.selection.config import AUTHORS_SETTINGS, SelectionConfig
 from nerfaug.selection.registry import get_estimator, get_selector
 
@@ -249,6 +250,4 @@ def method_label(name: str) -> str:
 
 def get_method(name: str) -> MethodSpec:
     """The registered method `name`; ValueError listing the valid names otherwise."""
-    if name not in METHODS:
-        raise ValueError(f"unknown selection method {name!r}; valid methods: {', '.join(METHODS)}")
-    return METHODS[name]
+    return lookup(METHODS, "selection method", name)

@@ -10,6 +10,7 @@ An unknown name is a ValueError that lists the known ones.
 
 from __future__ import annotations
 
+from nerfaug.registry import lookup
 from nerfaug.selection import estimators, selectors
 from nerfaug.selection.batch import batch_sample_views
 from nerfaug.selection.interface import Estimator, Selector
@@ -48,11 +49,9 @@ def get_estimator(name: str) -> Estimator:
         >>> get_estimator("bayes")
         Traceback (most recent call last):
         ...
-        ValueError: unknown estimator 'bayes'; valid: combined, entropy, distance, none, fisher
+        ValueError: unknown estimator 'bayes'; choose one of: combined, entropy, distance, none, fisher
     """
-    if name not in ESTIMATORS:
-        raise ValueError(f"unknown estimator {name!r}; valid: {', '.join(ESTIMATORS)}")
-    return ESTIMATORS[name]
+    return lookup(ESTIMATORS, "estimator", name)
 
 
 def get_selector(name: str, estimator: str | None = None) -> Selector:
@@ -65,9 +64,8 @@ def get_selector(name: str, estimator: str | None = None) -> Selector:
         ...
         ValueError: the greedy-fisher selector needs the estimator fisher
     """
-    if name not in SELECTORS:
-        raise ValueError(f"unknown selector {name!r}; valid: {', '.join(SELECTORS)}")
+    selector = lookup(SELECTORS, "selector", name)
     needs = SELECTOR_NEEDS.get(name)
     if estimator is not None and needs is not None and estimator not in needs:
         raise ValueError(f"the {name} selector needs the estimator {' or '.join(needs)}")
-    return SELECTORS[name]
+    return selector

@@ -20,6 +20,7 @@ from dataclasses import replace
 import torch
 from torch import Tensor
 
+from nerfaug.registry import check_name
 from nerfaug.selection.config import AUTHORS_THRESHOLD, MAX_DRAWS, REJECTION_SAMPLERS
 from nerfaug.selection.interface import Estimate, Request
 from nerfaug.selection.posterior import posterior_exponent, sharpen
@@ -139,8 +140,7 @@ def rejection_sample(
         ValueError: fewer than k candidates can ever be accepted (e.g. all scores 0), or bad input.
         RuntimeError: `max_draws` proposals were not enough.
     """
-    if variant not in REJECTION_SAMPLERS:
-        raise ValueError(f"unknown sampler variant {variant!r}; valid: {', '.join(REJECTION_SAMPLERS)}")
+    check_name("sampler variant", variant, REJECTION_SAMPLERS)
     w = _check_scores(scores)
     _check_k(w.numel(), k)
     allowed = _check_eligible(eligible, w.numel(), k)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from torch import Tensor
 
+from nerfaug.registry import check_name
 from nerfaug.uncertainty.entropy import minmax_normalise
 
 NORMALISATIONS = ("minmax", "none", "authors")
@@ -53,8 +54,7 @@ def combined_uncertainty(
 
         (minmax: H' = [0, 0.5, 1] and D' = [0, 1, 0.5], so U = H' + D'.)
     """
-    if normalisation not in NORMALISATIONS:
-        raise ValueError(f"unknown normalisation {normalisation!r}; valid: {', '.join(NORMALISATIONS)}")
+    check_name("normalisation", normalisation, NORMALISATIONS)
     if entropy_weight < 0 or distance_weight < 0:
         raise ValueError(f"weights must be >= 0, got a={entropy_weight}, b={distance_weight}")
     terms = [(t, w) for t, w in ((entropy, entropy_weight), (distance, distance_weight)) if w != 0]

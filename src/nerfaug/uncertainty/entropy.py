@@ -31,6 +31,7 @@ import torch
 from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras
+from nerfaug.registry import check_name, unknown
 from nerfaug.uncertainty.rays import reduced_cameras, render_weights_no_grad, view_batches, views_rays
 
 ENTROPY_MODES = ("escape", "renormalise", "raw", "authors")
@@ -90,7 +91,7 @@ def ray_entropy(weights: Tensor, mode: str = "escape") -> Tensor:
         return _neg_p_log2_p(weights).sum(dim=-1)
     if mode == "authors":
         return _authors_entropy(weights)
-    raise ValueError(f"unknown entropy mode {mode!r}; valid modes: {', '.join(ENTROPY_MODES)}")
+    raise unknown("entropy mode", mode, ENTROPY_MODES)
 
 
 def minmax_normalise(values: Tensor) -> Tensor:
@@ -129,8 +130,7 @@ def mean_view_entropy(
     Returns:
         Tensor with shape (n_views,), on the cameras' device.
     """
-    if mode not in ENTROPY_MODES:
-        raise ValueError(f"unknown entropy mode {mode!r}; valid modes: {', '.join(ENTROPY_MODES)}")
+    check_name("entropy mode", mode, ENTROPY_MODES)
     small = reduced_cameras(cameras, resolution)
     n_pixels = small.width * small.height
     scores = []

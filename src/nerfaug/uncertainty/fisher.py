@@ -51,6 +51,7 @@ from torch import Tensor, nn
 from torch.func import functional_call, jacrev, vmap
 
 from nerfaug.cameras import Cameras, generate_rays
+from nerfaug.registry import check_name
 from nerfaug.uncertainty.rays import model_device
 
 FISHER_METHODS = ("random-sign", "exact")
@@ -218,8 +219,7 @@ def fisher_diagonal_groups(
 def _fisher_groups(
     model, origins, directions, groups, n_groups, method, n_probes, generators, chunk, background, weights
 ) -> Tensor:
-    if method not in FISHER_METHODS:
-        raise ValueError(f"unknown Fisher method {method!r}; valid: {', '.join(FISHER_METHODS)}")
+    check_name("Fisher method", method, FISHER_METHODS)
     if n_probes < 1:
         raise ValueError(f"n_probes must be at least 1, got {n_probes}")
     device = model_device(model)

@@ -1,0 +1,94 @@
+"""Things by name: the one look-up of a name among the known ones (an unknown name is one error
+that lists them), and presets, complete configs by name.
+
+Every registry of the package (engine parts, selection methods, estimators and selectors, dataset
+formats, presets) is looked up here, so an unknown name reads the same wherever it is given.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from collections.abc import Iterable, Mapping
+from typing import Literal, TypeVar
+
+T = TypeVar("T")
+C = TypeVar("C")
+
+
+def unknown(kind: str, name: object, known: Iterable[str]) -> ValueError:
+    """The error for a name that is none of `known`: it names the value and lists the known ones.
+
+    Example:
+        >>> unknown("sampler", "grid", ["occupancy", "proposal"])
+        ValueError("unknown sampler 'grid'; choose one of: occupancy, proposal")
+    """
+    return ValueError(f"unknown {kind} {name!r}; choose one of: {', '.join(known)}")
+
+
+def check_name(kind: str, name: object, known: Iterable[str]) -> None:
+    """Nothing when `name` is one of `known`; else `unknown`'s ValueError.
+
+    Example:
+        >>> check_name("projection", "polar", ("equal-area", "equidistant"))
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown projection 'polar'; choose one of: equal-area, equidistant
+    """
+    known = tuple(known)
+    if name not in known:
+        raise unknown(kind, name, known)
+
+
+def lookup(registry: Mapping[str, T], kind: str, name: str) -> T:
+    """The entry `name` of `registry` (a `kind`, for the error); `unknown`'s ValueError otherwise.
+
+    Example:
+        >>> lookup({"hash": 1, "kplanes": 2}, "encoding", "kplanes")
+        2
+        >>> lookup({"hash": 1, "kplanes": 2}, "encoding", "grid")
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown encoding 'grid'; choose one of: hash, kplanes
+    """
+    check_name(kind, name, registry)
+    return registry[name]
+
+
+class Presets(dict[str, C]):
+    """Complete configs (dataclass instances) by name, in the order a listing shows them.
+
+    A preset is a value: the config a command starts from, handed to its parser (tyro) as the
+    default of its options, so an option given on the command line changes that value and one not
+    given keeps it. `choose` returns a copy, so no caller changes a preset for the next one.
+
+    Args:
+        kind: what a name names, for the error on an unknown one (e.g. "engine preset").
+        presets: name -> config.
+
+    Example:
+        >>> from dataclasses import dataclass
+        >>> @dataclass
+        ... class Protocol:
+        ...     steps: int = 100
+        ...     trials: int = 3
+        >>> presets = Presets("protocol", {"short": Protocol(steps=10), "long": Protocol(steps=1000)})
+        >>> presets.choose("short", trials=5)
+        Protocol(steps=10, trials=5)
+        >>> presets.choose("medium")
+        Traceback (most recent call last):
+        ...
+        ValueError: unknown protocol 'medium'; choose one of: short, long
+    """
+
+    def __init__(self, kind: str, presets: Mapping[str, C]):
+        super().__init__(presets)
+        self.kind = kind
+
+    def choose(self, name: str, **changes) -> C:
+        """A copy of the preset `name`, with `changes` (field -> value) applied."""
+        return dataclasses.replace(copy.deepcopy(lookup(self, self.kind, name)), **changes)
+
+    def name_type(self) -> type:
+        """The names as a `Literal` type, for a command-line parser (tyro) to offer and check."""
+        return Literal[tuple(self)]  # type: ignore[return-value]

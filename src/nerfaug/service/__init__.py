@@ -1,0 +1,1 @@
+"""`nerfaug serve`: the HTTP service over capture sessions (FastAPI; the `serve` extra)."""
