@@ -5,6 +5,7 @@ file on the server holds)."""
 from __future__ import annotations
 
 from nerfaug.capture.lock import SessionBusy
+from nerfaug.capture.requests import RequestError
 from nerfaug.capture.state import SessionError
 from nerfaug.data import DatasetError
 from nerfaug.errors import FolderRefused
@@ -36,6 +37,8 @@ def status_of(error: BaseException) -> tuple[int, str]:
     if isinstance(error, ServiceError):
         return error.status, error.message
     text = " ".join(str(error).split()) or type(error).__name__
+    if isinstance(error, RequestError):  # as the service's request models say it: "field: problem (got value)"
+        text = " ".join(f"{error.argument}: {error.problem} (got {repr(error.value)[:80]})".split())
     if isinstance(error, DatasetError) and error.value is not None:
         # The value may be what a file holds (a dataset's JSON); the file, field and problem say enough.
         field = f", field '{error.field}'" if error.field is not None else ""
