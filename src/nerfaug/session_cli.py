@@ -21,9 +21,9 @@ import tyro
 
 from nerfaug import __version__, owned, serve_cli
 from nerfaug.capture.choose import ProposalRequest
+from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.proposal import check_poses_out, read_poses
 from nerfaug.capture.requests import replaced_by
-from nerfaug.capture.session import SessionFolder
 from nerfaug.capture.state import SessionState
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.errors import FolderRefused

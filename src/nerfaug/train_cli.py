@@ -254,7 +254,7 @@ def _at_step(run: Path, data: Path | None, settings: SessionSettings, split, giv
     """Whether the session in `run` is at step `steps` already (and says so), once the settings
     `given` (every one when None) agree with the session's."""
     from nerfaug.capture.dataset import default_split  # torch (see the module docstring)
-    from nerfaug.capture.session import SessionFolder
+    from nerfaug.capture.folder import SessionFolder
 
     folder = SessionFolder.open(run)  # the captures are checked all the same: a damaged session is never done
     if given is None:

@@ -1,16 +1,18 @@
 """Active capture: a NeRF trained on the views you have proposes where to capture next, and grows
 its dataset with what you captured there.
 
-Rooms (the hemisphere and the engine frame are `nerfaug.data.frame`'s): `proposal` (proposed views, their JSON),
-`images` (captured images from any source, checked), `dataset` (what a session reads of its
-dataset: the default split, frames as the trainer sees them, repeated poses; every read and write
-on disk goes through the dataset's format, `nerfaug.data.formats`), `requests` (what a session is asked:
-settings, intrinsics, poses, ids; typed, light), `state` (session.json, typed, and the run folder's
-names), `runfolder` (which folders may become a run folder), `session`
-(`CaptureSession`: create, open, save, train; it coordinates), and the steps it calls with the
-narrow pieces they need: `choose` (proposing the next views, `ProposalRequest`), `add` (adding
-captured views), `export` (writing the dataset in any format), and, through `model`
-(`SessionModel`: the NeRF seen from the world frame), `evaluate` and `uncertainty_images`.
+Rooms (the hemisphere and the engine frame are `nerfaug.data.frame`'s): `requests` (what a
+session is asked, as typed schemas: settings, intrinsics, poses, ids; light), `proposal` (proposed
+views, their JSON), `images` (captured images from any source, checked), `dataset` (what a session
+reads of its dataset: the default split, frames as the trainer sees them, repeated poses; every
+read and write on disk goes through the dataset's format, `nerfaug.data.formats`), `state`
+(session.json as a typed model, and what a session reports), `runfolder` (the run folder's names,
+and which folders may become one), `folder` (`SessionFolder`: a run folder read without its
+model), `session` (`CaptureSession`: create, open, save, train; it coordinates), and the steps it
+calls with the narrow pieces they need: `choose` (proposing the next views, `ProposalRequest`),
+`constraints` (where views may lie), `add` (adding captured views), `export` (writing the dataset
+in any format), and, through `model` (`SessionModel`: the NeRF seen from the world frame),
+`evaluate` and `uncertainty_images`.
 """
 
 import importlib
@@ -26,7 +28,7 @@ _HOMES = {
     "SessionError": "state",
     "SessionState": "state",
     "CaptureSession": "session",
-    "SessionFolder": "session",
+    "SessionFolder": "folder",
     "Proposal": "proposal",
     "proposal_seed": "proposal",
     "read_poses": "proposal",

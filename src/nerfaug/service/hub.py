@@ -23,9 +23,10 @@ from pathlib import Path
 from time import monotonic, time
 
 from nerfaug.capture import lock as session_lock
+from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.requests import CHECKPOINT_EVERY_S, SESSION_ID, check_session_id
 from nerfaug.capture.runfolder import SESSION_FILE
-from nerfaug.capture.session import CaptureSession, SessionFolder
+from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import SessionSummary
 from nerfaug.data.formats import find_split
 from nerfaug.jsonio import atomic_write_json, read_json
