@@ -27,7 +27,15 @@ from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.capture.requests import CHECKPOINT_EVERY_S, RequestError, SessionSettings, Split, check_steps, replaced_by
+from nerfaug.capture.requests import (
+    CHECKPOINT_EVERY_S,
+    RequestError,
+    SessionSettings,
+    Split,
+    check_steps,
+    replaced_by,
+    words,
+)
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.cli_options import COMMAND_LINE, given_options
 from nerfaug.errors import Interrupted
@@ -58,15 +66,8 @@ def as_options(omitted: tuple[str, ...] = ()):
         name = error.argument
         for prefix in omitted:
             name = name.removeprefix(prefix)
-        value = "" if dataclasses.is_dataclass(error.value) else f" {_words(error.value)}"  # a group of options
+        value = "" if dataclasses.is_dataclass(error.value) else f" {words(error.value)}"  # a group of options
         raise ValueError(f"{option(name.partition('[')[0])}{value}: {error.problem}") from None
-
-
-def _words(value) -> str:
-    """A value as the command line writes it: `60 10`, `1e-300`."""
-    if isinstance(value, (tuple, list)):
-        return " ".join(_words(x) for x in value)
-    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def checked(request):

@@ -319,13 +319,18 @@ class SessionSettings(Schema):
 def _words(value, name: str, settings: SessionSettings) -> str:
     """A setting as the command line writes it; a centre, radius or pole the session estimated
     says so."""
-    if name == "up" and settings.estimate_up:
-        return "estimated"
-    if value is None:
+    if value is None or (name == "up" and settings.estimate_up):
         return "estimated"
     if isinstance(value, bool):
         return "on" if value else "off"
-    return " ".join(f"{x:g}" for x in value) if isinstance(value, tuple) else str(value)
+    return words(value)
+
+
+def words(value) -> str:
+    """A value as the command line writes it: (60.0, 10.0) -> "60 10", 1e-300 -> "1e-300"."""
+    if isinstance(value, (tuple, list)):
+        return " ".join(words(x) for x in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def _close(a, b) -> bool:

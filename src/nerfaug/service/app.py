@@ -43,7 +43,7 @@ from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 from nerfaug.errors import NerfaugError
 from nerfaug.service import models
-from nerfaug.service.errors import ServiceError, status_of
+from nerfaug.service.errors import ServiceError, field_line, status_of
 from nerfaug.service.hub import SessionHub
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
 from nerfaug.service.uploads import form_json, read_uploads
@@ -62,12 +62,10 @@ router = APIRouter()
 def validation_line(errors: list[dict]) -> str:
     """Pydantic's errors as one line: the first error's field, message and value."""
     first = RequestError.of(errors[0])
-    text = f"{first.argument or 'request'}: {first.problem}"
-    if "input" in errors[0] and errors[0].get("type") != "missing":
-        text += f" (got {str(errors[0]['input'])[:80]!r})"
-    if len(errors) > 1:
-        text += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
-    return " ".join(text.split())
+    more = len(errors) - 1
+    return field_line(first.argument, first.problem, first.value) + (
+        f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
+    )
 
 
 def _answer(request: Request, error: Exception) -> JSONResponse:

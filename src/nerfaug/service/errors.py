@@ -26,6 +26,12 @@ def bad_input(message: str) -> ServiceError:
     return ServiceError(422, message)
 
 
+def field_line(field: str, problem: str, value=None) -> str:
+    """A refused value as the service says it, in one line: `n: must be >= 1 (got 0)`."""
+    text = f"{field or 'request'}: {problem}" + ("" if value is None else f" (got {str(value)[:80]!r})")
+    return " ".join(text.split())
+
+
 def status_of(error: BaseException) -> tuple[int, str]:
     """The HTTP status and one-line message for an error raised inside a request.
 
@@ -37,8 +43,8 @@ def status_of(error: BaseException) -> tuple[int, str]:
     if isinstance(error, ServiceError):
         return error.status, error.message
     text = " ".join(str(error).split()) or type(error).__name__
-    if isinstance(error, RequestError):  # as the service's request models say it: "field: problem (got value)"
-        text = " ".join(f"{error.argument}: {error.problem} (got {repr(error.value)[:80]})".split())
+    if isinstance(error, RequestError):
+        text = field_line(error.argument, error.problem, error.value)
     if isinstance(error, DatasetError) and error.value is not None:
         # The value may be what a file holds (a dataset's JSON); the file, field and problem say enough.
         field = f", field '{error.field}'" if error.field is not None else ""
