@@ -49,7 +49,8 @@ def propose(
     azimuth, elevation, score}]}) holds world-frame OpenGL camera-to-world poses, ready for a robot
     or Blender, with azimuth and elevation in radians (printed here in degrees); the hemisphere map of
     every candidate's score is written beside it (same name, .png). Name each captured image after
-    its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`.
+    its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`. Which method to use on which
+    engine, as measured: docs/methods.md.
 
     Args:
         run: the session's run folder.

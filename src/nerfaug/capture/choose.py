@@ -106,7 +106,7 @@ class ProposalRequest(Schema):
     n: Annotated[int, Field(ge=1, le=MAX_VIEWS)] = 6
     """views to propose."""
     method: Annotated[str, Field(max_length=100), AfterValidator(_known_method)] = "ours"
-    """the selection method, "ours" the paper's (`nerfaug methods`; docs/methods.md: which on which engine)."""
+    """the selection method (`nerfaug methods` lists them); "ours" is the paper's."""
     candidates: Annotated[Reachable | None, _FILE, replaced_by("the hemisphere", "PATH")] = None
     """reachable poses (a robot's) to choose from instead of the hemisphere: a transforms JSON, or 4x4 poses."""
     n_candidates: Annotated[int, Field(ge=1, le=MAX_CANDIDATES)] = 500
