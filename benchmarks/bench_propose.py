@@ -25,7 +25,7 @@ import torch
 from nerfaug.device import configure_process
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.selection import SelectionConfig
-from nerfaug.session import CaptureSession
+from nerfaug.session import CaptureSession, ProposalRequest, SessionSettings
 
 
 def main() -> None:
@@ -49,14 +49,8 @@ def main() -> None:
     config = SelectionConfig(entropy_resolution=args.entropy_resolution)
     with tempfile.TemporaryDirectory(prefix="nerfaug-bench-propose-") as run:
         start = time.perf_counter()
-        session = CaptureSession.create(
-            args.data,
-            Path(run) / "run",
-            preset=args.preset,
-            split=args.split,
-            downscale=args.downscale,
-            device=args.device,
-        )
+        settings = SessionSettings(preset=args.preset, downscale=args.downscale)
+        session = CaptureSession.create(args.data, Path(run) / "run", settings, split=args.split, device=args.device)
         create_s = time.perf_counter() - start
         start = time.perf_counter()
         session.train(args.steps)
@@ -64,11 +58,12 @@ def main() -> None:
 
         train = session.trainer.train_views.cameras
         # One untimed call first: imports, allocator and thread pool warm-up.
-        session.propose(args.n, args.method, n_candidates=args.candidates, config=config, map=False)
+        request = ProposalRequest(n=args.n, method=args.method, n_candidates=args.candidates, selection=config)
+        session.propose(request, map=False)
         scoring, scoring_cpu, maps = [], [], []
         for _ in range(args.repeat):
             start, start_cpu = time.perf_counter(), time.process_time()
-            proposal = session.propose(args.n, args.method, n_candidates=args.candidates, config=config, map=False)
+            proposal = session.propose(request, map=False)
             scoring.append(time.perf_counter() - start)
             scoring_cpu.append(time.process_time() - start_cpu)
             start = time.perf_counter()

@@ -54,8 +54,8 @@ def propose_body(args, seed: int) -> dict:
 
 def bench_propose(args, work: Path, data: Path) -> dict:
     """Part 1: the medians of the same proposal over HTTP and in process, and their ratio."""
+    from nerfaug.capture import ProposalRequest
     from nerfaug.device import configure_process
-    from nerfaug.selection import SelectionConfig
     from nerfaug.session import CaptureSession
 
     configure_process(threads=1)  # as `nerfaug serve` (its --threads default)
@@ -72,22 +72,13 @@ def bench_propose(args, work: Path, data: Path) -> dict:
             shutil.copytree(root / SESSION, work / "local")
             local = CaptureSession.open(work / "local")
             assert local.step == state["step"], (local.step, state["step"])
-            config = SelectionConfig(entropy_resolution=args.entropy_resolution)
 
             def over_http() -> list:
                 frames = answer(client.post(f"/sessions/{SESSION}/proposals", json=propose_body(args, args.seed)))
                 return [frame["transform_matrix"] for frame in frames["frames"]]
 
             def in_process() -> list:
-                body = propose_body(args, args.seed)
-                proposal = local.propose(
-                    args.n,
-                    args.method,
-                    n_candidates=args.candidates,
-                    seed=args.seed,
-                    config=config,
-                    constraints=body["constraints"],
-                )
+                proposal = local.propose(ProposalRequest(**propose_body(args, args.seed)))  # as the service reads it
                 local.save()
                 return proposal.transforms()["frames"]
 

@@ -22,7 +22,7 @@ from typing import Literal
 
 import tyro
 
-from nerfaug.capture.state import SESSION_FILE, SessionState
+from nerfaug.capture import SESSION_FILE, ProposalRequest, SessionSettings, SessionState
 from nerfaug.session import CaptureSession
 
 
@@ -48,7 +48,7 @@ def open_or_create(run: Path, data: Path, preset: str, seed: int, split: str) ->
     """A new session in `run`, or the one already there when it was made with these settings;
     refused, naming what differs, when it was not."""
     if not (run / SESSION_FILE).exists():
-        return CaptureSession.create(data, run, preset=preset, seed=seed, split=split, progress=True)
+        return CaptureSession.create(data, run, SessionSettings(preset=preset, seed=seed), split=split, progress=True)
     state = SessionState.read(run)
     wanted = {"--data": str(data.resolve()), "--split": split, "--preset": preset, "--seed": seed}
     source = state.source
@@ -118,7 +118,8 @@ def main(
 
     for _ in range(rounds):
         session.train(steps_per_round)
-        proposal = session.propose(views_per_round, method="ours", candidates=reachable, n_candidates=n_candidates)
+        request = ProposalRequest(n=views_per_round, method="ours", candidates=reachable, n_candidates=n_candidates)
+        proposal = session.propose(request)
         print(f"proposal {proposal.number}: map {proposal.map_path}")
         proposal.write(run / f"poses_{proposal.number:03d}.json")  # what a real robot would get
         images = robot.capture(proposal.poses, proposal.names)  # ... and what it brings back

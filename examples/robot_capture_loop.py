@@ -177,7 +177,7 @@ def dataset(o: Options) -> Path:
 
 def check_existing_session(o: Options) -> None:
     """Refuse to go on with a session in ROOT made with another preset or seed (naming them)."""
-    from nerfaug.capture.state import SESSION_FILE, SessionState
+    from nerfaug.capture import SESSION_FILE, SessionState
 
     folder = o.root / o.session
     if not (folder / SESSION_FILE).exists():

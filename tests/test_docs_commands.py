@@ -47,7 +47,7 @@ PYTHON_SMALL = [
     ),
     ('BlenderOracle("lego", 100, 100)', 'BlenderOracle("lego", 32, 32, samples=4)'),
     ("session.train(500)", "session.train(10)"),
-    ('session.propose(6, method="ours")', 'session.propose(2, method="ours", n_candidates=20)'),
+    ('ProposalRequest(n=6, method="ours")', 'ProposalRequest(n=2, method="ours", n_candidates=20)'),
 ]
 EXAMPLE_SMALL = ["--preset", "test", "--steps-per-round", "10", "--views-per-round", "2", "--n-candidates", "20"]
 

@@ -3,12 +3,16 @@ uncertainty images of any view of a session.
 
     nerfaug serve --root SESSIONS                   the HTTP JSON service (API docs at /docs)
     nerfaug uncertainty RUN --poses POSES.json --out DIR
+
+`--help` answers at once: torch, FastAPI and the capture core's sessions are imported inside the
+commands (the service's packages are optional: `pip install 'nerfaug[serve]'`).
 """
 
 from __future__ import annotations
 
 import gc
 import ipaddress
+import logging
 import os
 import sys
 from pathlib import Path
@@ -16,7 +20,9 @@ from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.cli_hints import none_means
+from nerfaug import owned
+from nerfaug.capture.requests import CHECKPOINT_EVERY_S, replaced_by
+from nerfaug.errors import FolderRefused
 
 TOKEN_ENV = "NERFAUG_TOKEN"
 UNCERTAINTY_KIND = "uncertainty-images"  # the marker of a folder `nerfaug uncertainty` wrote
@@ -36,9 +42,9 @@ def serve(
     root: Path = Path("sessions"),
     host: str = "127.0.0.1",
     port: int = 8000,
-    token: Annotated[str | None, none_means(f"the {TOKEN_ENV} environment variable, if set", "TOKEN")] = None,
+    token: Annotated[str | None, replaced_by(f"the {TOKEN_ENV} environment variable, if set", "TOKEN")] = None,
     device: Literal["auto", "cpu", "cuda"] = "auto",
-    checkpoint_every: float = 60.0,
+    checkpoint_every: float = CHECKPOINT_EVERY_S,
     threads: int = 1,
     max_upload_mb: float = 25.0,
 ) -> None:
@@ -61,36 +67,8 @@ def serve(
         max_upload_mb: the largest image file accepted, in MB.
     """
     token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
-    if not is_loopback(host) and not token:
-        raise SystemExit(
-            f"--host {host}: listening beyond this machine needs a token (--token or the {TOKEN_ENV} "
-            "environment variable), checked on every request"
-        )
-    if not 0 <= port <= 65535:
-        raise ValueError(f"--port {port}: must be in 0-65535")
-    if not checkpoint_every > 0:
-        raise ValueError(f"--checkpoint-every {checkpoint_every}: must be > 0 (seconds between saves)")
-    if not max_upload_mb > 0:
-        raise ValueError(f"--max-upload-mb {max_upload_mb}: must be > 0")
-    if threads < 1:
-        raise ValueError(f"--threads {threads}: must be >= 1")
-    if root.exists() and not root.is_dir():
-        raise ValueError(f"--root {root}: not a folder")
-    try:
-        import uvicorn
-
-        from nerfaug.service.app import create_app
-    except ImportError as error:
-        raise SystemExit(
-            f"nerfaug serve needs the service's packages ({error.name} is missing): pip install 'nerfaug[serve]'"
-        ) from None
-    from nerfaug.device import configure_process, resolve_device
-    from nerfaug.service.hub import SessionHub
-
-    configure_process(threads=threads)
-    _log_to_stderr()
-    hub = SessionHub(root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every)
-    app = create_app(hub, token=token, max_upload_mb=max_upload_mb)
+    _check_serve(root, host, port, token, checkpoint_every, threads, max_upload_mb)
+    uvicorn, app = _service_app(root, device, token, checkpoint_every, threads, max_upload_mb)
     # The event loop answers /health and states while worker threads run torch: it gets the GIL
     # after 1 ms rather than 5, and the cyclic collector skips what was loaded at start (a full
     # pass over those ~375,000 objects took 0.4 s on the 2-core machine, every thread stopped).
@@ -100,11 +78,45 @@ def serve(
     uvicorn.run(app, host=host, port=port, log_level="warning")
 
 
+def _check_serve(root: Path, host: str, port: int, token, checkpoint_every: float, threads: int, max_upload_mb: float):
+    """`nerfaug serve`'s options, checked before anything is loaded."""
+    if not is_loopback(host) and not token:
+        raise SystemExit(
+            f"--host {host}: listening beyond this machine needs a token (--token or the {TOKEN_ENV} "
+            "environment variable), checked on every request"
+        )
+    for name, value, ok, rule in [
+        ("port", port, 0 <= port <= 65535, "must be in 0-65535"),
+        ("checkpoint-every", checkpoint_every, checkpoint_every > 0, "must be > 0 (seconds between saves)"),
+        ("max-upload-mb", max_upload_mb, max_upload_mb > 0, "must be > 0"),
+        ("threads", threads, threads >= 1, "must be >= 1"),
+    ]:
+        if not ok:
+            raise ValueError(f"--{name} {value}: {rule}")
+    if root.exists() and not root.is_dir():
+        raise ValueError(f"--root {root}: not a folder")
+
+
+def _service_app(root: Path, device: str, token, checkpoint_every: float, threads: int, max_upload_mb: float):
+    """(uvicorn, the service's app over the sessions in `root`), torch set up for `threads`."""
+    try:  # the service's packages are optional, and torch is not loaded for `--help`
+        import uvicorn
+
+        from nerfaug.device import configure_process, resolve_device
+        from nerfaug.service.app import create_app
+        from nerfaug.service.hub import SessionHub
+    except ImportError as error:
+        raise SystemExit(
+            f"nerfaug serve needs the service's packages ({error.name} is missing): pip install 'nerfaug[serve]'"
+        ) from None
+    configure_process(threads=threads)
+    _log_to_stderr()
+    hub = SessionHub(root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every)
+    return uvicorn, create_app(hub, token=token, max_upload_mb=max_upload_mb)
+
+
 def _log_to_stderr() -> None:
     """The service's own messages (a training job resumed after a restart, ...) as plain lines on stderr."""
-    import logging
-    import sys
-
     logger = logging.getLogger("nerfaug.service")
     if not logger.handlers:
         handler = logging.StreamHandler(sys.stderr)
@@ -117,7 +129,7 @@ def uncertainty(
     run: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")],
     poses: Path,
     out: Path,
-    width: Annotated[int | None, none_means("the training resolution", "INT")] = None,
+    width: Annotated[int | None, replaced_by("the training resolution", "INT")] = None,
     fisher: bool = True,
     fisher_width: int = 16,
     shared_scale: bool = True,
@@ -143,26 +155,43 @@ def uncertainty(
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
         threads: torch threads (one is the fastest on a machine that runs other work).
     """
-    from nerfaug import owned
-    from nerfaug.capture import CaptureSession, read_poses
-    from nerfaug.capture.uncertainty_images import colour_scales, write_maps
-    from nerfaug.device import configure_process, resolve_device
-    from nerfaug.errors import FolderRefused
+    _check_uncertainty(run, out, width, fisher_width, threads)
+    matrices, names = _poses_of(poses)
+    session = _session_for(run, device, threads)
+    maps = session.uncertainty_maps(matrices, width, fisher, fisher_width, progress=True, names=names)
+    _write_uncertainty(out, names, maps, shared_scale)
 
-    if width is not None and width < 1:
-        raise ValueError(f"--width {width}: must be >= 1")
-    if fisher_width < 1:
-        raise ValueError(f"--fisher-width {fisher_width}: must be >= 1")
-    if threads < 1:
-        raise ValueError(f"--threads {threads}: must be >= 1")
+
+def _check_uncertainty(run: Path, out: Path, width: int | None, fisher_width: int, threads: int) -> None:
+    """`nerfaug uncertainty`'s options, checked before anything is read."""
+    for name, value in (("width", width), ("fisher-width", fisher_width), ("threads", threads)):
+        if value is not None and value < 1:
+            raise ValueError(f"--{name} {value}: must be >= 1")
     if not owned.is_empty(out) and not owned.marked(out, UNCERTAINTY_KIND):
         raise FolderRefused(f"{out}: not empty and not written by `nerfaug uncertainty`; choose a new folder for --out")
     if owned.overlaps(out, run):
         raise FolderRefused(f"{out}: lies inside or holds the session {run}; choose a folder outside it")
-    matrices, names = read_poses(poses)
+
+
+def _poses_of(path: Path):
+    from nerfaug.capture.proposal import read_poses  # torch: not loaded for `--help`
+
+    return read_poses(path)
+
+
+def _session_for(run: Path, device: str, threads: int):
+    """The session in `run` on `device`, torch on `threads` threads."""
+    from nerfaug.capture.session import CaptureSession  # torch: not loaded for `--help`
+    from nerfaug.device import configure_process, resolve_device
+
     configure_process(threads=threads)
-    session = CaptureSession.open(run, device=str(resolve_device(device)))
-    maps = session.uncertainty_maps(matrices, width, fisher, fisher_width, progress=True, names=names)
+    return CaptureSession.open(run, device=str(resolve_device(device)))
+
+
+def _write_uncertainty(out: Path, names: list[str], maps: list, shared_scale: bool) -> None:
+    """Each view's figure and arrays into `out`, one line each."""
+    from nerfaug.capture.uncertainty_images import colour_scales, write_maps  # torch, matplotlib: as above
+
     owned.mark(out, UNCERTAINTY_KIND)
     scales = colour_scales(maps) if shared_scale else None
     for name, view in zip(names, maps):

@@ -12,42 +12,34 @@ are in `nerfaug.train_cli`.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug import serve_cli
-from nerfaug.capture.constraints import ViewConstraints
+from nerfaug import __version__, owned, serve_cli
+from nerfaug.capture.choose import ProposalRequest
+from nerfaug.capture.folder import SessionFolder
+from nerfaug.capture.proposal import check_poses_out, read_poses
+from nerfaug.capture.requests import replaced_by
 from nerfaug.capture.state import SessionState
-from nerfaug.cli_hints import none_means
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
-from nerfaug.selection.config import SelectionConfig
-from nerfaug.train_cli import THREADS, Device, RunFolder, _as_options, _configure, _open, add, train
+from nerfaug.errors import FolderRefused
+from nerfaug.jsonio import atomic_write_json
+from nerfaug.scenes.render import render_poses
+from nerfaug.train_cli import THREADS, Device, RunFolder, _configure, _open, add, checked, train
 
 FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
-# The defaults `--selection.*` options start from (read-only use: never mutated).
-DEFAULT_SELECTION = SelectionConfig()
-DEFAULT_CONSTRAINTS = ViewConstraints()
+Request = Annotated[ProposalRequest, tyro.conf.arg(name="")]
 
 
 def propose(
     run: RunFolder,
-    n: int = 6,
-    method: str = "ours",
+    request: Request = ProposalRequest(),  # noqa: B008 -- read-only: the defaults tyro shows
     out: Path = Path("poses.json"),
-    candidates: Annotated[
-        Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: the hemisphere)")
-    ] = None,
-    n_candidates: int = 500,
-    seed: Annotated[
-        int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the session's, per proposal)")
-    ] = None,
     device: Device = "auto",
-    selection: SelectionConfig = DEFAULT_SELECTION,
-    constraints: Annotated[ViewConstraints, tyro.conf.OmitArgPrefixes] = DEFAULT_CONSTRAINTS,
-    min_separation: float = 0.0,
     force: bool = False,
     threads: int = THREADS,
 ) -> None:
@@ -57,60 +49,22 @@ def propose(
     azimuth, elevation, score}]}) holds world-frame OpenGL camera-to-world poses, ready for a robot
     or Blender, with azimuth and elevation in radians (printed here in degrees); the hemisphere map of
     every candidate's score is written beside it (same name, .png). Name each captured image after
-    its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`.
+    its frame's file_path (e.g. capture_000_00.png) for `nerfaug add`. Which method to use on which
+    engine, as measured: docs/methods.md.
 
     Args:
         run: the session's run folder.
-        n: views to propose.
-        method: the selection method (`nerfaug methods` lists them); "ours" is the paper's: how
-            unsure the NeRF is about a view plus how far it is from the views trained on, then
-            random draws in proportion to that score. Which method to use on which engine, as
-            measured: docs/methods.md.
         out: the poses JSON to write.
-        candidates: a transforms JSON of reachable poses (e.g. a robot's workspace) to choose
-            from instead of the hemisphere.
-        n_candidates: hemisphere candidates to score.
-        seed: seed this proposal explicitly; by default it comes from the session seed and the
-            proposal number, so the same session state always proposes the same views.
         device: where candidates are scored: auto (cuda when available, else cpu), cpu, cuda.
-        selection: options of the selection method (recorded with the proposal in session.json);
-            a method's own settings (e.g. ours-authors') apply over them.
-        constraints: where views may lie (--elevation, --azimuth, --radius, --keep-out), applied
-            to the hemisphere's candidates or to --candidates.
-        min_separation: keep every two proposed views at least this many degrees apart, seen
-            from the hemisphere's centre (0: off, the method's own choice).
         force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited
             (never inside a capture session's folder: its proposals are its own record).
         threads: torch threads for scoring the candidates.
     """
-    from nerfaug.capture.choose import ProposalRequest
-    from nerfaug.capture.proposal import check_poses_out
-
-    request = ProposalRequest(
-        n,
-        method,
-        candidates=candidates,
-        n_candidates=n_candidates,
-        seed=seed,
-        config=selection,
-        constraints=constraints,
-        min_separation=min_separation,
-    )
-    with _as_options():
-        request = request.checked()  # before the session is opened: a refused call loads nothing
+    request = checked(request)  # before the session is opened: a refused call loads nothing
     check_poses_out(out, force)
     _configure(threads)
     session = _open(run, device, changing="propose")
-    proposal = session.propose(
-        request.n,
-        request.method,
-        candidates=request.candidates,
-        n_candidates=request.n_candidates,
-        seed=request.seed,
-        config=request.config,
-        constraints=request.constraints,
-        min_separation=request.min_separation,
-    )
+    proposal = session.propose(request)
     path = proposal.write(out)
     session.save()
     print(
@@ -137,11 +91,9 @@ def export(
         out: the folder to write.
         format: the dataset format to write.
     """
-    from nerfaug.capture import CaptureSession
-
-    session = CaptureSession.open(run, load_model=False)  # exporting reads only the dataset folder
-    path = session.export(out, format)
-    print(f"exported {len(session.cameras)} views to {path}")
+    folder = SessionFolder.open(run)  # exporting reads only the dataset folder
+    path = folder.export(out, format)
+    print(f"exported {folder.summary().views} views to {path}")
 
 
 EVAL_KIND = "session-eval"  # the key marking a JSON `nerfaug eval` wrote (and may overwrite)
@@ -149,11 +101,6 @@ EVAL_KIND = "session-eval"  # the key marking a JSON `nerfaug eval` wrote (and m
 
 def _check_eval_out(out: Path, data: Path) -> None:
     """Refuse an --out inside the dataset, or over a file that `nerfaug eval` did not write."""
-    import json
-
-    from nerfaug import owned
-    from nerfaug.errors import FolderRefused
-
     if owned.overlaps(out, data):
         raise FolderRefused(f"{out}: lies inside the dataset {data}; nothing is written into an input folder")
     if out.exists():
@@ -175,7 +122,7 @@ def evaluate(
     run: RunFolder,
     data: Path,
     split: str = "test",
-    out: Annotated[Path | None, none_means("print only", "PATH")] = None,
+    out: Annotated[Path | None, replaced_by("print only", "PATH")] = None,
     lpips: bool = True,
     device: Device = "auto",
     threads: int = THREADS,
@@ -192,9 +139,6 @@ def evaluate(
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
         threads: torch threads for rendering and scoring.
     """
-    from nerfaug import __version__
-    from nerfaug.jsonio import atomic_write_json
-
     if out is not None:
         _check_eval_out(out, data)
     _configure(threads)
@@ -207,15 +151,9 @@ def evaluate(
     if m["lpips"] is None:
         print(f"  LPIPS {result.lpips_status}")
     if out is not None:
-        record = {
-            "nerfaug": {"kind": EVAL_KIND, "version": __version__},
-            "session": str(run),
-            "step": session.step,
-            "data": str(data),
-            "split": split,
-            **result.to_dict(),
-        }
-        atomic_write_json(out, record)
+        kind = {"kind": EVAL_KIND, "version": __version__}
+        record = {"nerfaug": kind, "session": str(run), "step": session.step, "data": str(data), "split": split}
+        atomic_write_json(out, {**record, **result.to_dict()})
         print(f"  written to {out}")
 
 
@@ -240,9 +178,6 @@ def render_proposals(
         seed: Cycles noise seed.
         threads: CPU threads for Cycles.
     """
-    from nerfaug.capture import read_poses
-    from nerfaug.scenes.render import render_poses
-
     for name, value in (("samples", samples), ("threads", threads)):
         if value < 1:
             raise ValueError(f"--{name} {value}: must be >= 1")

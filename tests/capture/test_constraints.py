@@ -3,13 +3,14 @@ cases, then `CaptureSession.propose` and `nerfaug propose` keeping within them."
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 import torch
 
 from nerfaug.cameras import Cameras
-from nerfaug.capture import CaptureSession, Hemisphere
+from nerfaug.capture import CaptureSession, Hemisphere, ProposalRequest, SessionSettings
 from nerfaug.capture.constraints import (
     TooFewCandidates,
     ViewConstraints,
@@ -18,6 +19,7 @@ from nerfaug.capture.constraints import (
     constrained_indices,
     keep_out_mask,
 )
+from nerfaug.capture.requests import RequestError
 from nerfaug.cli import main
 from nerfaug.data import Views, write_blender_split
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, pose_from_angles, sample_uniform_poses
@@ -107,19 +109,21 @@ def test_too_few_candidates_names_the_numbers():
 @pytest.mark.parametrize(
     ("kwargs", "says"),
     [
-        ({"elevation": (1, 2, 3)}, "elevation [1, 2, 3]: must be two finite numbers"),
-        ({"elevation": (60, 10)}, "elevation [60.0, 10.0]: low must be <= high"),
-        ({"elevation": (-100, 10)}, "elevation [-100.0, 10.0]: degrees must lie in [-90, 90]"),
-        ({"azimuth": (0, float("nan"))}, "azimuth [0, nan]: must be two finite numbers"),
-        ({"radius": (-1, 2)}, "radius [-1.0, 2.0]: distances must be >= 0"),
-        ({"keep_out": ((0, 0, 0, 10),)}, "keep_out[0] [0, 0, 0, 10]: the direction (x, y, z) must not be zero"),
-        ({"keep_out": ((0, 0, 1, 180),)}, "keep_out[0] [0, 0, 1, 180]: the half-angle must lie in (0, 180)"),
-        ({"keep_out": ((0, 0, 1),)}, "keep_out[0] [0, 0, 1]: must be four finite numbers"),
+        ({"elevation": (1, 2, 3)}, "elevation (1, 2, 3): Tuple should have at most 2 items"),
+        ({"elevation": (60, 10)}, "elevation (60, 10): low must be <= high"),
+        ({"elevation": (-100, 10)}, "elevation[0] -100: must be >= -90"),
+        ({"azimuth": (0, float("nan"))}, "azimuth[1] nan: Input should be a finite number"),
+        ({"azimuth": (0, 800)}, "azimuth[1] 800: must be <= 720"),
+        ({"radius": (-1, 2)}, "radius[0] -1: must be >= 0"),
+        ({"keep_out": ((0, 0, 0, 10),)}, "keep_out[0] (0, 0, 0, 10): the direction (x, y, z) must not be zero"),
+        ({"keep_out": ((0, 0, 1, 180),)}, "keep_out[0][3] 180: must be < 180"),
+        ({"keep_out": ((0, 0, 1),)}, "keep_out[0][3] None: Field required"),
+        ({"keep_out": ((0, 0, 1, 10),) * 65}, "keep_out"),
     ],
 )
 def test_bad_constraints_are_one_line_naming_the_field(kwargs, says):
-    with pytest.raises(ValueError) as error:
-        ViewConstraints(**kwargs).check()
+    with pytest.raises(RequestError) as error:
+        ViewConstraints(**kwargs).checked()
     assert str(error.value).startswith(says)
     assert "\n" not in str(error.value)
 
@@ -127,9 +131,9 @@ def test_bad_constraints_are_one_line_naming_the_field(kwargs, says):
 def test_constraints_round_trip_through_a_dict():
     constraints = ViewConstraints(elevation=(10, 60), azimuth=(-45, 45), radius=(1, 3), keep_out=((1, 0, 0, 30),))
     data = json.loads(json.dumps(constraints.to_dict()))
-    assert ViewConstraints.from_dict(data) == constraints
+    assert ViewConstraints.from_dict(data) == constraints.checked()
     assert ViewConstraints.from_dict({}).empty
-    with pytest.raises(ValueError, match="unknown key 'height'"):
+    with pytest.raises(RequestError, match=r"^height \[0, 1\]: Unexpected keyword argument"):
         ViewConstraints.from_dict({"height": [0, 1]})
 
 
@@ -151,7 +155,8 @@ def tiny_dataset(root: Path) -> Path:
 def session_dir(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("constrained")
     data = tiny_dataset(tmp / "data")
-    session = CaptureSession.create(data, tmp / "run", preset="test", seed=1, centre=(0, 0, 0), radius=4.03)
+    settings = SessionSettings(preset="test", seed=1, centre=(0, 0, 0), radius=4.03)
+    session = CaptureSession.create(data, tmp / "run", settings)
     session.train(2)
     session.save()
     return tmp / "run"
@@ -160,13 +165,15 @@ def session_dir(tmp_path_factory) -> Path:
 def test_a_session_proposes_within_the_constraints(session_dir):
     session = CaptureSession.open(session_dir)
     constraints = ViewConstraints(elevation=(30, 70), azimuth=(-90, 45), keep_out=((1, 0, 0.5, 25),))
-    proposal = session.propose(3, n_candidates=80, config=FAST, map=False, constraints=constraints)
+    proposal = session.propose(
+        ProposalRequest(n=3, n_candidates=80, selection=FAST, constraints=constraints), map=False
+    )
     assert len(proposal) == 3
     assert constraints.mask(proposal.poses, session.hemisphere).all()
     assert constraints.mask(proposal.candidates.camera_to_world, session.hemisphere).all()
     elevation = 90 - torch.rad2deg(proposal.polar)
     assert ((elevation >= 30) & (elevation <= 70)).all()
-    assert session.proposals[-1].extra["constraints"] == constraints.to_dict()
+    assert session.proposals[-1].model_extra["constraints"] == constraints.checked().to_dict()
     assert session.proposals[-1].n_candidates == len(proposal.candidates) < 80
 
 
@@ -174,13 +181,14 @@ def test_constraints_apply_to_a_list_of_reachable_poses(session_dir):
     session = CaptureSession.open(session_dir)
     reachable = poses_at([20.0, 40.0, 60.0, 80.0, 35.0], [0.0, 90.0, 180.0, 270.0, 45.0], radius=4.03)
     constraints = ViewConstraints(elevation=(30, 65))
-    proposal = session.propose(2, candidates=reachable, config=FAST, map=False, constraints=constraints)
+    request = ProposalRequest(n=2, candidates=reachable, selection=FAST, constraints=constraints)
+    proposal = session.propose(request, map=False)
     chosen = {tuple(p[:3, 3].round(decimals=3).tolist()) for p in proposal.poses}
     allowed = {tuple(p[:3, 3].round(decimals=3).tolist()) for p in reachable[[1, 2, 4]]}
     assert chosen <= allowed
     with pytest.raises(TooFewCandidates, match=r"^constraints leave 3 of 5 candidates; 4 asked"):
-        session.propose(4, candidates=reachable, config=FAST, map=False, constraints=constraints)
-    as_dict = session.propose(1, candidates=reachable, config=FAST, map=False, constraints={"elevation": [55, 90]})
+        session.propose(replace(request, n=4), map=False)
+    as_dict = session.propose(replace(request, n=1, constraints={"elevation": [55, 90]}), map=False)
     assert any(torch.allclose(as_dict.poses[0], reachable[i], atol=1e-4) for i in (2, 3))
     assert len(as_dict.candidates) == 2
 
@@ -211,4 +219,4 @@ def test_nerfaug_propose_takes_the_constraints(session_dir, tmp_path, capsys):
     with pytest.raises(SystemExit) as done:
         main([*args, "--force", "--elevation", "60", "10"])
     assert done.value.code == 2
-    assert capsys.readouterr().err.strip() == "nerfaug: elevation [60.0, 10.0]: low must be <= high"
+    assert capsys.readouterr().err.strip() == "nerfaug: --elevation 60 10: low must be <= high"

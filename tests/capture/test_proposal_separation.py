@@ -3,12 +3,13 @@ least that far apart about the hemisphere's centre, recorded with the proposal; 
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 import torch
 
-from nerfaug.capture import CaptureSession
+from nerfaug.capture import CaptureSession, ProposalRequest, SessionFolder, SessionSettings
 from nerfaug.cli import main
 from nerfaug.selection import SelectionConfig
 
@@ -20,7 +21,8 @@ FAST = SelectionConfig(entropy_resolution=4)
 @pytest.fixture(scope="module")
 def session_dir(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("separated")
-    session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", preset="test", seed=1, radius=4.03)
+    settings = SessionSettings(preset="test", seed=1, radius=4.03)
+    session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", settings)
     session.train(2)
     session.save()
     return tmp / "run"
@@ -36,20 +38,21 @@ def closest_pair_degrees(poses: torch.Tensor, centre) -> float:
 
 def test_a_separated_proposal_keeps_its_views_apart_and_records_it(session_dir):
     session = CaptureSession.open(session_dir)
-    proposal = session.propose(5, n_candidates=120, config=FAST, map=False, min_separation=35.0)
+    proposal = session.propose(ProposalRequest(n=5, n_candidates=120, selection=FAST, min_separation=35.0), map=False)
     assert closest_pair_degrees(proposal.poses, session.hemisphere.centre) >= 35.0 - 1e-4
-    assert session.proposals[-1].extra["min_separation"] == 35.0
+    assert session.proposals[-1].model_extra["min_separation"] == 35.0
     written = json.loads((session_dir / session.proposals[-1].file).read_text())
     assert written["nerfaug"]["min_separation"] == 35.0
 
 
 def test_the_default_proposes_what_the_method_chooses(session_dir):
     """Off by default: the same views as with the separation 0, and nothing recorded about it."""
-    plain = CaptureSession.open(session_dir).propose(5, n_candidates=120, config=FAST, map=False, seed=7)
+    request = ProposalRequest(n=5, n_candidates=120, selection=FAST, seed=7)
+    plain = CaptureSession.open(session_dir).propose(request, map=False)
     session = CaptureSession.open(session_dir)
-    zero = session.propose(5, n_candidates=120, config=FAST, map=False, seed=7, min_separation=0.0)
+    zero = session.propose(replace(request, min_separation=0.0), map=False)
     assert torch.equal(plain.indices, zero.indices) and torch.equal(plain.poses, zero.poses)
-    assert "min_separation" not in session.proposals[-1].extra
+    assert "min_separation" not in session.proposals[-1].model_extra
     assert "min_separation" not in zero.transforms()["nerfaug"]
 
 
@@ -59,14 +62,14 @@ def test_nerfaug_propose_takes_a_minimum_separation(session_dir, tmp_path, capsy
     main([*args, "--min-separation", "40", "--selection.entropy-resolution", "4"])
     written = json.loads(out.read_text())
     poses = torch.tensor([frame["transform_matrix"] for frame in written["frames"]])
-    centre = CaptureSession.open(session_dir, load_model=False).hemisphere.centre
+    centre = SessionFolder.open(session_dir).hemisphere.centre
     assert closest_pair_degrees(poses, centre) >= 40.0 - 1e-3
     assert written["nerfaug"]["min_separation"] == 40.0
     capsys.readouterr()
     with pytest.raises(SystemExit) as done:
         main([*args, "--force", "--min-separation", "200"])
     assert done.value.code == 2
-    assert capsys.readouterr().err.strip() == "nerfaug: --min-separation 200.0: must be in [0, 180) degrees"
+    assert capsys.readouterr().err.strip() == "nerfaug: --min-separation 200: must be < 180"
     with pytest.raises(SystemExit) as done:
         main([*args, "--force", "--min-separation", "120", "--selection.entropy-resolution", "4"])
     assert done.value.code == 2

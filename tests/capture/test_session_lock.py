@@ -17,7 +17,7 @@ import pytest
 import torch
 
 from nerfaug.cameras import Cameras
-from nerfaug.capture import CaptureSession, SessionState
+from nerfaug.capture import CaptureSession, SessionSettings, SessionState
 from nerfaug.capture.lock import SERVICE, SessionBusy, acquire, describe, holder_of, try_lock
 from nerfaug.data import Views, write_blender_split
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
@@ -34,7 +34,7 @@ def tiny_dataset(root: Path, n: int = 4, size: int = 8) -> Path:
 
 @pytest.fixture
 def run(tmp_path) -> Path:
-    CaptureSession.create(tiny_dataset(tmp_path / "data"), tmp_path / "run", preset="test", seed=2)
+    CaptureSession.create(tiny_dataset(tmp_path / "data"), tmp_path / "run", SessionSettings(preset="test", seed=2))
     return tmp_path / "run"
 
 

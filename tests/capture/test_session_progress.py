@@ -3,7 +3,7 @@ lines when the session was opened with progress=True), and a proposal's scoring 
 
 import pytest
 
-from nerfaug.capture import CaptureSession
+from nerfaug.capture import CaptureSession, ProposalRequest, SessionSettings
 from nerfaug.selection import SelectionConfig
 
 from .test_constraints import tiny_dataset
@@ -12,7 +12,8 @@ from .test_constraints import tiny_dataset
 @pytest.fixture(scope="module")
 def session_dir(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("progress")
-    session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", preset="test", seed=3, radius=4.03)
+    settings = SessionSettings(preset="test", seed=3, radius=4.03)
+    session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", settings)
     session.save()
     return tmp / "run"
 
@@ -28,11 +29,11 @@ def test_train_calls_back_every_ten_steps_and_at_the_last(session_dir):
 def test_a_session_opened_with_progress_shows_training_and_scoring(session_dir, capsys):
     session = CaptureSession.open(session_dir, progress=True)
     session.train(20)
-    session.propose(2, n_candidates=40, config=SelectionConfig(entropy_resolution=4), map=False)
+    session.propose(ProposalRequest(n=2, n_candidates=40, selection=SelectionConfig(entropy_resolution=4)), map=False)
     err = capsys.readouterr().err  # not a terminal here: plain lines
     assert "training: 20/20" in err
     assert "scoring candidates (ours): 40/40" in err
     quiet = CaptureSession.open(session_dir)
     quiet.train(10)
-    quiet.propose(2, n_candidates=40, config=SelectionConfig(entropy_resolution=4), map=False)
+    quiet.propose(ProposalRequest(n=2, n_candidates=40, selection=SelectionConfig(entropy_resolution=4)), map=False)
     assert capsys.readouterr().err == ""

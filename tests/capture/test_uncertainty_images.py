@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from nerfaug.capture import CaptureSession
+from nerfaug.capture import CaptureSession, SessionSettings
 from nerfaug.cli import main
 from nerfaug.hemisphere import pose_from_angles
 
@@ -19,7 +19,8 @@ from .test_constraints import tiny_dataset
 def run(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("uncertainty")
     # Twice NeRF-synthetic's scale: depths in world units are twice the engine's.
-    session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", preset="test", seed=2, radius=8.06)
+    settings = SessionSettings(preset="test", seed=2, radius=8.06)
+    session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", settings)
     session.train(3)
     session.save()
     return tmp / "run"

@@ -14,8 +14,8 @@ import torch
 from cases import TINY
 from harness import copy, run_cli, write_images
 
-from nerfaug import train_cli
 from nerfaug.capture import CaptureSession
+from nerfaug.capture import session as capture_session
 
 
 def _interrupt_at(monkeypatch, step: int, times: int = 1) -> None:
@@ -32,7 +32,7 @@ def _interrupt_at(monkeypatch, step: int, times: int = 1) -> None:
     monkeypatch.setattr(CaptureSession, "train", train_then_interrupt)
     # A clock that advances one second per reading: read once at the start, once after each
     # 10-step chunk and once after each save, so with a 2 s period the session saves every 20 steps.
-    monkeypatch.setattr(train_cli, "monotonic", itertools.count().__next__)
+    monkeypatch.setattr(capture_session, "monotonic", itertools.count().__next__)
 
 
 def _saved_step(run) -> tuple[int, int]:

@@ -169,7 +169,7 @@ def test_a_chunked_body_is_cut_off_at_the_limit(server):
 
 
 def test_too_many_reachable_poses_are_refused_by_the_schema(server):
-    schema = server.client.get("/openapi.json").json()["components"]["schemas"]["ProposeRequest"]["properties"]
+    schema = server.client.get("/openapi.json").json()["components"]["schemas"]["ProposalRequest"]["properties"]
     assert schema["candidates"]["anyOf"][0]["maxItems"] == 10_000
     assert schema["n_candidates"]["maximum"] == 20_000
     pose = poses_at([40.0], [10.0])[0]
@@ -290,9 +290,9 @@ def test_a_session_the_service_holds_is_refused_to_a_command(server, root):
 
 
 def test_state_of_a_session_not_opened_yet_is_read_from_its_files(server, root):
-    from nerfaug.capture import CaptureSession
+    from nerfaug.capture import CaptureSession, SessionSettings
 
-    CaptureSession.create(root / "data", root / "made_here", preset="test")
+    CaptureSession.create(root / "data", root / "made_here", SessionSettings(preset="test"))
     answer = server.client.get("/sessions/made_here")
     assert answer.status_code == 200, answer.text
     assert answer.json()["views"] == 4 and answer.json()["step"] == 0 and not answer.json()["running"]

@@ -1,51 +1,53 @@
 """Active capture: a NeRF trained on the views you have proposes where to capture next, and grows
 its dataset with what you captured there.
 
-Rooms (the hemisphere and the engine frame are `nerfaug.data.frame`'s): `proposal` (proposed views, their JSON),
-`images` (captured images from any source, checked), `dataset` (what a session reads of its
-dataset: the default split, frames as the trainer sees them, repeated poses; every read and write
-on disk goes through the dataset's format, `nerfaug.data.formats`), `state` (session.json, typed,
-and the run folder's names), `runfolder` (which folders may become a run folder), `session`
-(`CaptureSession`: create, open, save, train; it coordinates), and the steps it calls with the
-narrow pieces they need: `choose` (proposing the next views, `ProposalRequest`), `add` (adding
-captured views), `export` (writing the dataset in any format), and, through `model`
-(`SessionModel`: the NeRF seen from the world frame), `evaluate` and `uncertainty_images`.
+Rooms (the hemisphere and the engine frame are `nerfaug.data.frame`'s): `requests` (what a
+session is asked, as typed schemas: settings, intrinsics, poses, ids; light), `proposal` (proposed
+views, their JSON), `images` (captured images from any source, checked), `dataset` (what a session
+reads of its dataset: the default split, frames as the trainer sees them, repeated poses; every
+read and write on disk goes through the dataset's format, `nerfaug.data.formats`), `state`
+(session.json as a typed model, and what a session reports), `runfolder` (the run folder's names,
+and which folders may become one), `folder` (`SessionFolder`: a run folder read without its
+model), `session` (`CaptureSession`: create, open, save, train; it coordinates), and the steps it
+calls with the narrow pieces they need: `choose` (proposing the next views, `ProposalRequest`),
+`constraints` (where views may lie), `add` (adding captured views), `export` (writing the dataset
+in any format), and, through `model` (`SessionModel`: the NeRF seen from the world frame),
+`evaluate` and `uncertainty_images`.
 """
 
-from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.session import CaptureSession
-from nerfaug.capture.state import (
-    CHECKPOINT_FILE,
-    DATASET_DIR,
-    PROPOSALS_DIR,
-    SESSION_FILE,
-    SESSION_FORMAT,
-    SessionError,
-    SessionState,
-)
-from nerfaug.data.frame import (
-    ENGINE_RADIUS,
-    Hemisphere,
-    estimate_centre,
-    estimate_hemisphere,
-    estimate_up,
-)
+import importlib
 
-__all__ = [
-    "CHECKPOINT_FILE",
-    "DATASET_DIR",
-    "ENGINE_RADIUS",
-    "PROPOSALS_DIR",
-    "SESSION_FILE",
-    "SESSION_FORMAT",
-    "CaptureSession",
-    "Hemisphere",
-    "Proposal",
-    "SessionError",
-    "SessionState",
-    "estimate_centre",
-    "estimate_hemisphere",
-    "estimate_up",
-    "proposal_seed",
-    "read_poses",
-]
+# Where each public name lives. They are imported on first use, so that the light rooms
+# (`requests`: what `nerfaug train --help` reads) load without torch.
+_HOMES = {
+    "CHECKPOINT_FILE": "runfolder",
+    "DATASET_DIR": "runfolder",
+    "PROPOSALS_DIR": "runfolder",
+    "SESSION_FILE": "runfolder",
+    "SESSION_FORMAT": "state",
+    "SessionError": "state",
+    "SessionState": "state",
+    "CaptureSession": "session",
+    "SessionFolder": "folder",
+    "Proposal": "proposal",
+    "proposal_seed": "proposal",
+    "read_poses": "proposal",
+    "ProposalRequest": "choose",
+    "ViewConstraints": "constraints",
+    "Intrinsics": "requests",
+    "SessionSettings": "requests",
+    "ENGINE_RADIUS": "nerfaug.data.frame",
+    "Hemisphere": "nerfaug.data.frame",
+    "estimate_centre": "nerfaug.data.frame",
+    "estimate_hemisphere": "nerfaug.data.frame",
+    "estimate_up": "nerfaug.data.frame",
+}
+__all__ = sorted(_HOMES)
+
+
+def __getattr__(name: str):
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'nerfaug.capture' has no attribute {name!r}")
+    module = importlib.import_module(home if "." in home else f"nerfaug.capture.{home}")
+    return getattr(module, name)

@@ -5,113 +5,140 @@ session's NeRF (`SessionModel`), and the proposal's record."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Annotated
 
 import numpy as np
 import torch
+import tyro
+from pydantic import AfterValidator, BeforeValidator, Field, PlainValidator, WithJsonSchema, WrapValidator
+from tyro.constructors import PrimitiveConstructorSpec
 
 from nerfaug.cameras import Cameras
 from nerfaug.capture.constraints import ViewConstraints, constrained_indices
-from nerfaug.capture.images import as_array
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.requests import RequestError, check_seed
+from nerfaug.capture.requests import SCHEMA, Pose, Schema, Seed, as_pose_list, replaced_by
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frame import ENGINE_RADIUS
 from nerfaug.data.frames import check_pose
+from nerfaug.maps import plot_hemisphere_map
 from nerfaug.progress import progress_bar
+from nerfaug.selection import METHODS, SelectionConfig, get_method, hemisphere_candidates, matching_poses, select_views
 from nerfaug.selection.candidates import with_poses
 
-if TYPE_CHECKING:
-    from torch import Tensor
+# What one proposal may ask: views, hemisphere candidates to score, reachable poses to choose from.
+MAX_VIEWS = 1000
+MAX_CANDIDATES = 20_000
+MAX_REACHABLE_POSES = 10_000
+# The selection settings whose value sets the work of a proposal, and their largest values.
+SELECTION_BOUNDS = {
+    "entropy_resolution": 256,
+    "fisher_resolution": 256,
+    "fisher_train_pixels": 65_536,
+    "fisher_train_chunk": 4096,
+    "fisher_train_probes": 64,
+    "fisher_probes": 64,
+    "fisher_cache_floats": 2**28,
+    "chunk": 65_536,
+    "max_draws": 10_000_000,
+}
 
-    from nerfaug.selection import SelectionConfig
 
-
-def check_method(method: str) -> None:
-    """Raise RequestError unless `method` names a selection method."""
-    from nerfaug.selection import METHODS
-
+def _known_method(method: str) -> str:
     if method not in METHODS:
-        raise RequestError(
-            "method",
-            method,
-            f"unknown selection method; choose one of {', '.join(METHODS)} (`nerfaug methods` describes them)",
+        raise ValueError(
+            f"unknown selection method; choose one of {', '.join(METHODS)} (`nerfaug methods` describes them)"
         )
+    return method
 
 
-@dataclass(frozen=True)
-class ProposalRequest:
-    """What to propose; see `CaptureSession.propose` for each argument.
+def _reachable(value, handler):
+    """A transforms JSON of poses (a `Path`: from Python or the command line, never from JSON),
+    or the poses themselves, checked."""
+    return value if isinstance(value, Path) else handler(value)
+
+
+def _selection(value) -> SelectionConfig:
+    """A `SelectionConfig` (or the dict of its fields), within `SELECTION_BOUNDS`."""
+    config = SelectionConfig.from_dict(value) if isinstance(value, dict) else value
+    if not isinstance(config, SelectionConfig):
+        raise ValueError("must be an object of selection settings (`SelectionConfig` fields)")
+    for name, most in SELECTION_BOUNDS.items():
+        given = getattr(config, name)
+        if isinstance(given, (int, float)) and not isinstance(given, bool) and given > most:
+            raise ValueError(f"{name} {given}: at most {most} in one proposal")
+    return config
+
+
+# `--candidates PATH` on the command line: a transforms JSON of reachable poses.
+_FILE = PrimitiveConstructorSpec(
+    nargs=1,
+    metavar="PATH",
+    instance_from_str=lambda words: Path(words[0]),
+    is_instance=lambda value: value is None or isinstance(value, (Path, list)),
+    str_from_instance=lambda value: ["None" if value is None else str(value)],
+)
+Reachable = Annotated[
+    list[Pose],
+    BeforeValidator(as_pose_list),
+    Field(min_length=1, max_length=MAX_REACHABLE_POSES),
+    WrapValidator(_reachable),
+]
+_SELECTION_SCHEMA = {
+    "type": "object",
+    "description": "SelectionConfig fields (`--selection.*`), each of its type; the ones that set the work are "
+    "bounded: " + ", ".join(f"{k} <= {v}" for k, v in SELECTION_BOUNDS.items()),
+}
+
+
+@dataclass(kw_only=True)
+class ProposalRequest(Schema):
+    """What to propose: which views, by which method, from which candidates, where they may lie.
 
     `checked()` is the one place its values are checked: the library, the CLI (before it opens the
-    session) and the service call it.
+    session) and the service (as its request model) call it.
     """
 
-    n: int = 6
-    method: str = "ours"
-    candidates: str | Path | Cameras | Tensor | np.ndarray | None = None
-    n_candidates: int = 500
-    seed: int | None = None
-    config: SelectionConfig | dict | None = None
-    map: bool = True
-    constraints: ViewConstraints | dict | None = None
-    min_separation: float = 0.0
+    __pydantic_config__ = SCHEMA
 
-    def checked(self) -> ProposalRequest:
-        """This request with `config` a `SelectionConfig` (or None) and `constraints` a checked
-        `ViewConstraints` (or None).
-
-        Raises:
-            RequestError: naming the first argument out of range and its value.
-            ValueError: a constraint or selection setting that is not valid (naming it).
-        """
-        from nerfaug.selection import SelectionConfig
-
-        check_method(self.method)
-        if int(self.n) != self.n or int(self.n) < 1:
-            raise RequestError("n", self.n, "must be >= 1 (a whole number of views to propose)")
-        if int(self.n_candidates) < 1:
-            raise RequestError("n_candidates", self.n_candidates, "must be >= 1")
-        seed = None if self.seed is None else check_seed(self.seed)
-        if not 0 <= float(self.min_separation) < 180:
-            raise RequestError("min_separation", self.min_separation, "must be in [0, 180) degrees")
-        config = SelectionConfig.from_dict(self.config) if isinstance(self.config, dict) else self.config
-        constraints = self.constraints
-        if isinstance(constraints, dict):
-            constraints = ViewConstraints.from_dict(constraints)
-        elif constraints is not None:
-            constraints = constraints.check()
-        return replace(
-            self,
-            n=int(self.n),
-            seed=seed,
-            config=config,
-            constraints=constraints,
-            min_separation=float(self.min_separation),
-        )
+    n: Annotated[int, Field(ge=1, le=MAX_VIEWS)] = 6
+    """views to propose."""
+    method: Annotated[str, Field(max_length=100), AfterValidator(_known_method)] = "ours"
+    """the selection method (`nerfaug methods` lists them); "ours" is the paper's."""
+    candidates: Annotated[Reachable | None, _FILE, replaced_by("the hemisphere", "PATH")] = None
+    """reachable poses (a robot's) to choose from instead of the hemisphere: a transforms JSON, or 4x4 poses."""
+    n_candidates: Annotated[int, Field(ge=1, le=MAX_CANDIDATES)] = 500
+    """hemisphere candidates to score."""
+    seed: Annotated[Seed | None, replaced_by("the session's, per proposal", "INT")] = None
+    """seed this proposal (0 to 2^63-1); by default the session's seed and proposal number seed it."""
+    selection: Annotated[SelectionConfig, PlainValidator(_selection), WithJsonSchema(_SELECTION_SCHEMA)] = field(
+        default_factory=SelectionConfig
+    )
+    """options of the selection method (recorded with the proposal); a method's own settings apply over them."""
+    constraints: Annotated[ViewConstraints, tyro.conf.arg(name="")] = field(default_factory=ViewConstraints)
+    """where views may lie, applied to the hemisphere's candidates or to the reachable poses."""
+    min_separation: Annotated[float, Field(ge=0, lt=180)] = 0.0
+    """keep every two proposed views this many degrees apart, seen from the hemisphere's centre (0: off)."""
 
 
 def describe_candidates(candidates) -> str:
-    """How session.json names the candidates of a proposal."""
-    if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
+    """How session.json names the candidates of a proposal: hemisphere, the file, or given."""
+    if candidates is None:
         return "hemisphere"
-    if isinstance(candidates, (str, Path)):
-        return str(candidates)
-    return "given"
+    return str(candidates) if isinstance(candidates, Path) else "given"
 
 
 def candidate_cameras(
     model: SessionModel, candidates=None, n_candidates: int = 500, generator: torch.Generator | None = None
 ) -> Cameras:
-    """World-frame candidate cameras (see `CaptureSession.propose`) minus the poses trained on."""
-    from nerfaug.selection import hemisphere_candidates, matching_poses
-
+    """World-frame candidate cameras minus the poses trained on: `n_candidates` poses uniform on
+    the session's hemisphere (None), or a `ProposalRequest`'s checked reachable poses (a list of
+    4x4, or a transforms JSON `Path`), with the session's intrinsics."""
     template, hemisphere = model.template, model.hemisphere
     engine_train = model.train_cameras.to("cpu")
-    if candidates is None or (isinstance(candidates, str) and candidates == "hemisphere"):
+    if candidates is None:
         engine = hemisphere_candidates(
             template.resized(engine_train.width, engine_train.height),
             n_candidates,
@@ -120,14 +147,10 @@ def candidate_cameras(
             training=engine_train,
         )
         return with_poses(template, hemisphere.to_world(engine.camera_to_world))
-    if isinstance(candidates, Cameras):
-        given = candidates
-    elif isinstance(candidates, (str, Path)):
+    if isinstance(candidates, Path):
         given = with_poses(template, read_poses(candidates)[0])
     else:
-        poses = np.asarray(as_array(candidates), dtype=np.float64)
-        if poses.ndim != 3 or poses.shape[1:] != (4, 4):
-            raise ValueError(f"candidate poses must have shape (n, 4, 4), got {poses.shape}")
+        poses = np.asarray(candidates, dtype=np.float64)
         given = with_poses(
             template, torch.stack([check_pose(p, Path("candidates"), f"candidates[{i}]") for i, p in enumerate(poses)])
         )
@@ -143,6 +166,7 @@ def propose(
     folder: Path,
     generator: torch.Generator | None = None,
     progress: bool = False,
+    map: bool = True,
 ) -> tuple[Proposal, ProposalRecord]:
     """Choose `request.n` views to capture next, and write them (with every candidate's score)
     to `folder/proposal_NNN.json` (and the map beside it).
@@ -154,15 +178,14 @@ def propose(
         generator: random source for the candidates and the selector; None seeds one from the
             request's seed, else from the session seed and the proposal number (`proposal_seed`).
         progress: show how many candidates are scored (a live bar, or lines in a pipe).
+        map: draw the hemisphere map of every candidate's score beside the proposal's JSON.
 
     Returns:
         The proposal, and its record for the session's history.
     """
-    from nerfaug.selection import get_method, select_views
-
     request = request.checked()
     n, method, hemisphere = request.n, request.method, model.hemisphere
-    used_config = get_method(method).effective_config(request.config)
+    used_config = get_method(method).effective_config(request.selection)
     used_seed = None
     if generator is None:
         used_seed = proposal_seed(model.seed, number) if request.seed is None else int(request.seed)
@@ -188,7 +211,7 @@ def propose(
             engine.to(model.device),
             n,
             generator,
-            request.config,
+            request.selection,
             min_separation=math.radians(request.min_separation),
             progress=lambda done: bar.update(task, completed=done),
         )
@@ -198,9 +221,7 @@ def propose(
     azimuth, polar, _ = hemisphere.angles(poses)
     names = [f"capture_{number:03d}_{i:02d}" for i in range(n)]
     map_path = None
-    if request.map:
-        from nerfaug.maps import plot_hemisphere_map
-
+    if map:
         map_path = plot_hemisphere_map(
             engine.camera_to_world,
             selection.scores,
@@ -242,9 +263,9 @@ def propose(
         polar=polar.tolist(),
         file=f"{folder.name}/{record_path.name}",
         created=now(),
-        extra={"selection": used_config.to_dict()}
-        | constraints_record(request.constraints)
-        | separation_record(request.min_separation),
+        selection=used_config.to_dict(),
+        **constraints_record(request.constraints),
+        **separation_record(request.min_separation),
     )
     return proposal, record
 

@@ -15,13 +15,14 @@ them; it is meant for a list of reachable poses.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Annotated
 
 import torch
+from pydantic import AfterValidator, Field
 from torch import Tensor
 
-from nerfaug.cli_hints import empty_means, none_means
+from nerfaug.capture.requests import RADIUS_RANGE, SCHEMA, Schema, replaced_by, validated
 from nerfaug.data.frame import Hemisphere
 
 
@@ -95,61 +96,56 @@ def keep_out_mask(positions: Tensor, centre: Tensor, axes: Tensor, half_angles: 
     return ~inside.any(dim=-1)
 
 
-@dataclass
-class ViewConstraints:
-    """Where proposed views may lie: ranges about the session's hemisphere, and keep-out cones.
+# The ranges a constraint may state: elevation in degrees about the equator, azimuth in degrees
+# (an arc may wrap, up to two turns either way), distances in world units.
+Elevation = Annotated[float, Field(ge=-90, le=90)]
+Azimuth = Annotated[float, Field(ge=-720, le=720)]
+Distance = Annotated[float, Field(ge=0, le=RADIUS_RANGE[1] * 1000)]
+HalfAngle = Annotated[float, Field(gt=0, lt=180)]
+# Keep-out cones one request may state.
+MAX_KEEP_OUT = 64
 
-    Attributes:
-        elevation: (low, high) degrees above the hemisphere's equator, in [-90, 90]; None: any.
-        azimuth: (low, high) degrees about the hemisphere's up, the arc from low counter-clockwise
-            to high (it may wrap: (-45, 45) or (315, 405)); None: any.
-        radius: (low, high) distance from the hemisphere's centre, world units; None: any.
-        keep_out: cones to stay out of, each (x, y, z, half_angle): a world-frame direction from
-            the hemisphere's centre and a half-angle in degrees (0, 180).
-    """
 
-    elevation: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
-    azimuth: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
-    radius: Annotated[tuple[float, float] | None, none_means("any", "LOW HIGH")] = None
+def _ordered(pair: tuple[float, float]) -> tuple[float, float]:
+    if pair[0] > pair[1]:
+        raise ValueError("low must be <= high")
+    return pair
+
+
+def _pointing(cone: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    if math.hypot(*cone[:3]) < 1e-12:
+        raise ValueError("the direction (x, y, z) must not be zero")
+    return cone
+
+
+Cone = Annotated[tuple[float, float, float, HalfAngle], AfterValidator(_pointing)]
+
+
+@dataclass(kw_only=True)
+class ViewConstraints(Schema):
+    """Where proposed views may lie (degrees, world units): ranges about the session's hemisphere,
+    applied to the hemisphere's candidates or to reachable poses, and keep-out cones."""
+
+    __pydantic_config__ = SCHEMA
+
+    elevation: Annotated[
+        Annotated[tuple[Elevation, Elevation], AfterValidator(_ordered)] | None, replaced_by("any", "LOW HIGH")
+    ] = None
+    """(low, high) degrees above the hemisphere's equator, in [-90, 90]."""
+    azimuth: Annotated[
+        Annotated[tuple[Azimuth, Azimuth], AfterValidator(_ordered)] | None, replaced_by("any", "LOW HIGH")
+    ] = None
+    """(low, high) degrees about the hemisphere's up, counter-clockwise, in [-720, 720]; may wrap: 315 405."""
+    radius: Annotated[
+        Annotated[tuple[Distance, Distance], AfterValidator(_ordered)] | None, replaced_by("any", "LOW HIGH")
+    ] = None
+    """(low, high) distance from the hemisphere's centre, world units (for reachable poses)."""
     keep_out: Annotated[
-        tuple[tuple[float, float, float, float], ...],
-        empty_means("no cone", "X Y Z HALF_ANGLE [X Y Z HALF_ANGLE ...]"),
-    ] = field(default_factory=tuple)
-
-    def check(self) -> ViewConstraints:
-        """Validate and normalise the values (floats, tuples) in place; returns self.
-
-        Raises:
-            ValueError: one line naming the field and its value.
-        """
-        for name in ("elevation", "azimuth", "radius"):
-            value = getattr(self, name)
-            if value is None:
-                continue
-            pair = tuple(value)
-            if len(pair) != 2 or not all(_finite(v) for v in pair):
-                raise ValueError(f"{name} {list(pair)}: must be two finite numbers (low, high)")
-            low, high = float(pair[0]), float(pair[1])
-            if low > high:
-                raise ValueError(f"{name} {[low, high]}: low must be <= high")
-            if name == "elevation" and (low < -90 or high > 90):
-                raise ValueError(f"elevation {[low, high]}: degrees must lie in [-90, 90]")
-            if name == "radius" and low < 0:
-                raise ValueError(f"radius {[low, high]}: distances must be >= 0")
-            setattr(self, name, (low, high))
-        cones = []
-        for i, cone in enumerate(self.keep_out):
-            cone = tuple(cone)
-            if len(cone) != 4 or not all(_finite(v) for v in cone):
-                raise ValueError(f"keep_out[{i}] {list(cone)}: must be four finite numbers (x, y, z, half_angle)")
-            x, y, z, half_angle = (float(v) for v in cone)
-            if math.hypot(x, y, z) < 1e-12:
-                raise ValueError(f"keep_out[{i}] {list(cone)}: the direction (x, y, z) must not be zero")
-            if not 0 < half_angle < 180:
-                raise ValueError(f"keep_out[{i}] {list(cone)}: the half-angle must lie in (0, 180) degrees")
-            cones.append((x, y, z, half_angle))
-        self.keep_out = tuple(cones)
-        return self
+        tuple[Cone, ...],
+        Field(max_length=MAX_KEEP_OUT),
+        replaced_by("no cone", "X Y Z HALF_ANGLE [X Y Z HALF_ANGLE ...]"),
+    ] = ()
+    """cones to stay out of: a world-frame direction from the centre and a half-angle (0, 180) degrees each."""
 
     @property
     def empty(self) -> bool:
@@ -191,20 +187,8 @@ class ViewConstraints:
 
     @classmethod
     def from_dict(cls, data: dict | None) -> ViewConstraints:
-        """The inverse of `to_dict`; unknown keys are an error naming them."""
-        data = dict(data or {})
-        unknown = sorted(set(data) - {"elevation", "azimuth", "radius", "keep_out"})
-        if unknown:
-            raise ValueError(f"constraints: unknown key {unknown[0]!r}; known: elevation, azimuth, radius, keep_out")
-        cones = data.get("keep_out") or ()
-        if not isinstance(cones, (list, tuple)) or not all(isinstance(c, (list, tuple)) for c in cones):
-            raise ValueError(f"keep_out {cones!r}: must be a list of [x, y, z, half_angle]")
-        return cls(
-            elevation=data.get("elevation"),
-            azimuth=data.get("azimuth"),
-            radius=data.get("radius"),
-            keep_out=tuple(tuple(c) for c in cones),
-        ).check()
+        """The inverse of `to_dict`, checked (RequestError naming the field otherwise)."""
+        return validated(cls, data or {})
 
 
 class TooFewCandidates(ValueError):
@@ -219,7 +203,7 @@ def constrained_indices(
     Args:
         camera_to_world: Tensor with shape (C, 4, 4), the candidate pool, world frame.
         hemisphere: the session's hemisphere.
-        constraints: None keeps every pose.
+        constraints: checked (`ViewConstraints.checked`); None keeps every pose.
         n: views asked for.
 
     Returns:
@@ -229,7 +213,7 @@ def constrained_indices(
         TooFewCandidates: "constraints leave 4 of 300 candidates; 6 asked".
     """
     total = int(torch.as_tensor(camera_to_world).reshape(-1, 4, 4).shape[0])
-    if constraints is None or constraints.check().empty:
+    if constraints is None or constraints.empty:
         return torch.arange(total)
     kept = torch.nonzero(constraints.mask(camera_to_world, hemisphere)).reshape(-1)
     if kept.numel() < n:
@@ -238,7 +222,3 @@ def constrained_indices(
             "give more candidates, or ask for fewer views)"
         )
     return kept
-
-
-def _finite(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from nerfaug import owned
-from nerfaug.capture.state import DATASET_SPLIT, EXPORT_KIND
+from nerfaug.capture.runfolder import DATASET_SPLIT, EXPORT_KIND
 from nerfaug.data.format import DatasetSplit, Format
 from nerfaug.data.formats import FORMATS, find_split, has_split
 from nerfaug.errors import FolderRefused

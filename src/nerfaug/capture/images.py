@@ -30,6 +30,24 @@ class Capture:
     name: str | None = None  # the stem a folder match found it under
 
 
+@dataclass(frozen=True)
+class ImageFile:
+    """An image file as captured, e.g. uploaded: its name (the new view's), suffix and bytes."""
+
+    name: str
+    suffix: str
+    data: bytes
+
+
+def write_files(files: Sequence[ImageFile], folder: Path) -> list[Path]:
+    """Write the files' bytes, unchanged, into `folder`; returns the files in order."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = [folder / f"{f.name}{f.suffix}" for f in files]
+    for path, f in zip(paths, files):
+        path.write_bytes(f.data)
+    return paths
+
+
 def image_files(folder: Path) -> list[Path]:
     return sorted(
         p

@@ -16,7 +16,8 @@ from pathlib import Path
 
 import torch
 
-from nerfaug.capture.state import SESSION_FILE, Integrity, SessionError, UnverifiedCheckpoint
+from nerfaug.capture.runfolder import SESSION_FILE
+from nerfaug.capture.state import Integrity, SessionError, UnverifiedCheckpoint
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import DatasetSplit
 
@@ -94,7 +95,7 @@ def check_unrecorded_checkpoint(path: Path, trainer, seed: int, engine: dict, fr
         f"{path}: {SESSION_FILE} records no digest of it (saved by an earlier nerfaug), so it is used as found; "
         "its digest is recorded at the next save",
         UnverifiedCheckpoint,
-        stacklevel=3,
+        stacklevel=4,
     )
 
 

@@ -16,7 +16,7 @@ from torch import Tensor
 import nerfaug
 from nerfaug import owned
 from nerfaug.cameras import Cameras
-from nerfaug.capture.state import RUN_KIND, SESSION_FILE
+from nerfaug.capture.runfolder import RUN_KIND, SESSION_FILE
 from nerfaug.data import DatasetError
 from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import check_pose

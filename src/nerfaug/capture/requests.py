@@ -1,17 +1,52 @@
-"""Arguments of a session's steps, checked once for the library, the CLI and the service:
-`RequestError` names the argument and its value (the CLI shows it as its option, `--n 0: ...`)."""
+"""What a capture session is asked, as typed schemas: each class (and each shared type) is the one
+place of its fields, defaults, ranges and error text, used unchanged by the library, the CLI
+(through tyro) and the service (as its request models).
+
+Here: a new session's settings (`SessionSettings`), the camera of captured images (`Intrinsics`),
+world-frame poses (`Pose`, `Poses`), a session's id (`SessionId`), and the bounds the proposal
+request (`nerfaug.capture.choose.ProposalRequest`) and the view constraints
+(`nerfaug.capture.constraints.ViewConstraints`) build on.
+
+The classes tyro reads are dataclasses with one validator each, `checked()` (pydantic, from their
+annotations): tyro builds them from the options without checking, so that a refused value ends
+as one line naming its option (a check raised while tyro builds them would be drawn as tyro's own
+box). A field's docstring is its help on the command line and its description in the service's
+API page. `RequestError` names the first refused field, its value and the problem.
+
+Nothing here imports torch: `nerfaug train --help` reads these classes.
+"""
 
 from __future__ import annotations
 
-import operator
+import math
 import re
+from dataclasses import dataclass, fields
+from functools import cache
+from typing import Annotated
+
+import tyro
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    TypeAdapter,
+    ValidationError,
+    WithJsonSchema,
+    model_validator,
+)
+
+from nerfaug.nerf.config import EnginePreset
 
 
 class RequestError(ValueError):
-    """An argument of a request is out of range: names the argument and its value.
+    """A value of a request is refused: names the field (dotted, items as [i]), its value and why.
 
     Attributes:
-        argument: the argument's name as the library spells it ("n_candidates").
+        argument: the field as the library spells it ("n_candidates", "constraints.elevation",
+            "candidates[3]"); empty for the request as a whole.
         value: the value given.
         problem: what is wrong with it.
     """
@@ -21,47 +56,291 @@ class RequestError(ValueError):
         shown = repr(value) if isinstance(value, str) else value
         super().__init__(f"{argument} {shown}: {problem}")
 
+    @classmethod
+    def of(cls, error: ValidationError | dict) -> RequestError:
+        """The first error pydantic found, as a `RequestError`."""
+        first = error.errors()[0] if isinstance(error, ValidationError) else error
+        value = None if first.get("type") == "missing" else first.get("input")
+        return cls(field_path(first.get("loc", ())), value, problem_text(first))
 
-def check_steps(steps: int) -> int:
-    """`steps` (training steps to run) as an int; RequestError unless >= 0."""
-    if int(steps) < 0:
-        raise RequestError("steps", steps, "must be >= 0 (training steps to run)")
-    return int(steps)
+
+# Where a service's framework puts a field (FastAPI's "body", "query", ...): not part of its name.
+_TRANSPORT = ("body", "query", "path", "form")
+# Pydantic's words for a bound, shorter: "must be >= 1", as the commands have always said it.
+_BOUNDS = {"greater_than_equal": ">=", "greater_than": ">", "less_than_equal": "<=", "less_than": "<"}
 
 
-# A split's name: it becomes part of a file name (`transforms_{split}.json`), so no separators.
-SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+def field_path(loc) -> str:
+    """A pydantic error's location as a field name: ("candidates", 3) -> "candidates[3]"."""
+    text = ""
+    for part in loc:
+        if part in _TRANSPORT:
+            continue
+        text += f"[{part}]" if isinstance(part, int) else f".{part}" if text else str(part)
+    return text
+
+
+def problem_text(error: dict) -> str:
+    """A pydantic error's message, without its "Value error, " prefix and with bounds as ">= 1"."""
+    kind, context = error.get("type", ""), error.get("ctx") or {}
+    if kind in _BOUNDS and context:
+        bound = next(iter(context.values()))
+        return f"must be {_BOUNDS[kind]} {bound:g}" if isinstance(bound, float) else f"must be {_BOUNDS[kind]} {bound}"
+    return str(error.get("msg", "invalid")).removeprefix("Value error, ")
+
+
+@cache
+def _adapter(kind) -> TypeAdapter:
+    return TypeAdapter(kind)
+
+
+def validated(kind, value, field: str = ""):
+    """`value` validated as `kind` (a schema class or type); RequestError naming the first
+    refused field (prefixed with `field`) otherwise."""
+    try:
+        return _adapter(kind).validate_python(value)
+    except ValidationError as error:
+        first = error.errors()[0]
+        loc = (field, *first.get("loc", ())) if field else first.get("loc", ())
+        raise RequestError.of({**first, "loc": loc}) from None
+
+
+# A dataclass tyro reads: unknown fields and non-finite numbers refused, validated again whenever
+# `checked` is called, each field's docstring its description.
+SCHEMA = ConfigDict(extra="forbid", allow_inf_nan=False, revalidate_instances="always", use_attribute_docstrings=True)
+
+
+class Schema:
+    """Base of the dataclasses tyro reads: `checked()` is their one validator."""
+
+    def checked(self):
+        """This request validated: numbers in range, names known, defaults filled in.
+
+        Raises:
+            RequestError: naming the first refused field and its value.
+        """
+        return validated(type(self), self)
+
+
+def replaced_by(default: str, metavar: str):
+    """`--help` for an option whose default (None, or empty) means something: "(default: the
+    hemisphere)" instead of "(default: None)"."""
+    return tyro.conf.arg(metavar=metavar, help_behavior_hint=f"(default: {default})")
+
+
+# ---- numbers and names ------------------------------------------------------------------------
+
 # Seeds reach torch's generators, which take a signed 64-bit integer.
 SEED_MAX = 2**63 - 1
+Seed = Annotated[int, Field(ge=0, le=SEED_MAX)]
+# A split's name: it becomes part of a file name (`transforms_{split}.json`), so no separators.
+SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+Split = Annotated[
+    str, Field(pattern=f"^{SPLIT_NAME.pattern}$", description="a split's name: letters, digits, '.', '_', '-'")
+]
 # A hemisphere radius, world units: beyond these a float32 engine frame loses the scene.
 RADIUS_RANGE = (1e-6, 1e6)
+Radius = Annotated[float, Field(ge=RADIUS_RANGE[0], le=RADIUS_RANGE[1])]
+# Training steps one request may run.
+MAX_STEPS = 10_000_000
+Steps = Annotated[int, Field(ge=0, le=MAX_STEPS)]
+# A session's training saves this often (seconds of training; a killed process loses at most this
+# much), and at the end (`CaptureSession.train_for`).
+CHECKPOINT_EVERY_S = 60.0
+
+# A session's id names its folder directly under the service root.
+SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 
 
-def check_seed(seed, argument: str = "seed") -> int:
-    """`seed` as an int; RequestError unless a whole number in 0..2^63-1 (what torch's generators take)."""
-    try:
-        value = None if isinstance(seed, bool) else operator.index(seed)
-    except TypeError:
-        value = None
-    if value is None or not 0 <= value <= SEED_MAX:
-        raise RequestError(argument, seed, "must be a whole number in 0..2^63-1 (9223372036854775807)")
+def _session_id(value: str) -> str:
+    if not SESSION_ID.fullmatch(value):
+        raise ValueError("must be 1-64 letters, digits, '_' or '-', starting with a letter or digit")
     return value
 
 
-def check_radius(radius, argument: str = "radius") -> float:
-    """`radius` (a hemisphere's, world units) as a float; RequestError unless finite and in `RADIUS_RANGE`."""
-    low, high = RADIUS_RANGE
+SessionId = Annotated[
+    str,
+    AfterValidator(_session_id),
+    Field(description="1-64 letters, digits, '_' or '-'"),
+]
+
+
+def check_session_id(session_id) -> str:
+    """`session_id` if it is a `SessionId`; RequestError ("session id 'a.b': ...") otherwise."""
     try:
-        value = float(radius)
-    except (TypeError, ValueError):
-        value = float("nan")
-    if not low <= value <= high:  # also refuses NaN
-        raise RequestError(argument, radius, f"must be a distance in [{low:g}, {high:g}] (world units)")
+        return _adapter(SessionId).validate_python(session_id)
+    except ValidationError as error:
+        raise RequestError("session id", str(session_id)[:80], problem_text(error.errors()[0])) from None
+
+
+def check_steps(steps: int) -> int:
+    """`steps` (training steps to run) as an int; RequestError unless in 0..`MAX_STEPS`."""
+    return validated(Steps, steps, "steps")
+
+
+# ---- poses ------------------------------------------------------------------------------------
+
+
+def _pose(value) -> list[list[float]]:
+    """A rigid, finite 4x4 camera-to-world matrix as nested lists of floats."""
+    from nerfaug.data.frames import check_pose  # torch: this module is read by `--help`, which loads none
+
+    value = value.tolist() if hasattr(value, "tolist") else value
+    if any(isinstance(x, float) and not math.isfinite(x) for row in _rows(value) for x in row):
+        raise ValueError("not finite (every entry of a pose must be a finite number)")
+    try:
+        check_pose(value, "pose", "pose")
+    except ValueError as error:
+        raise ValueError(getattr(error, "problem", "must be 4 rows of 4 numbers")) from None
+    return [[float(x) for x in row] for row in value]
+
+
+def _rows(value) -> list:
+    """The rows of a would-be matrix (nothing when it has none)."""
+    return [row for row in value if isinstance(row, list)] if isinstance(value, list) else []
+
+
+def as_pose_list(value):
+    """Poses as a list (a tensor or an array of them, or one 4x4 matrix, become one)."""
+    if hasattr(value, "camera_to_world"):  # Cameras
+        value = value.camera_to_world
+    value = value.tolist() if hasattr(value, "tolist") else value
+    one = isinstance(value, list) and len(value) == 4 and all(_rows(row) == [] for row in value)
+    return [value] if one else value
+
+
+_MATRIX = {"type": "array", "minItems": 4, "maxItems": 4, "items": {"type": "number"}}
+Pose = Annotated[
+    list[list[float]],
+    PlainValidator(_pose),
+    WithJsonSchema({"type": "array", "minItems": 4, "maxItems": 4, "items": _MATRIX}),
+    Field(description="a world-frame OpenGL camera-to-world matrix: 4 rows of 4 numbers, rotation rigid"),
+]
+"""A world-frame camera-to-world pose (OpenGL: the camera looks down -z, +y up)."""
+Poses = Annotated[list[Pose], BeforeValidator(as_pose_list), Field(min_length=1)]
+"""World-frame poses, one or more; a tensor or array of shape (n, 4, 4) is taken as a list."""
+
+
+def as_poses(value, field: str = "poses") -> list[list[list[float]]]:
+    """`value` (nested lists, an (n, 4, 4) or (4, 4) tensor or array, or `Cameras`) as checked
+    `Poses`; RequestError naming `field[i]` otherwise."""
+    return validated(Poses, value, field)
+
+
+# ---- the camera -------------------------------------------------------------------------------
+
+
+class Intrinsics(BaseModel):
+    """A camera in pixels, at full resolution: the session's (session.json) or that of uploaded
+    images (fy, cx, cy default to fx, width/2, height/2)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True)
+
+    width: int = Field(ge=1)
+    """image width, pixels"""
+    height: int = Field(ge=1)
+    """image height, pixels"""
+    fx: float = Field(gt=0)
+    """focal length along x, pixels"""
+    fy: float | None = Field(None, gt=0)
+    """focal length along y, pixels (default: fx)"""
+    cx: float | None = None
+    """principal point x, pixels (default: width / 2)"""
+    cy: float | None = None
+    """principal point y, pixels (default: height / 2)"""
+    camera_angle_x: float | None = Field(None, gt=0, lt=math.pi)
+    """horizontal field of view, radians (default: from width and fx)"""
+
+    @model_validator(mode="after")
+    def _defaults(self) -> Intrinsics:
+        self.fy = self.fx if self.fy is None else self.fy
+        self.cx = self.width / 2 if self.cx is None else self.cx
+        self.cy = self.height / 2 if self.cy is None else self.cy
+        if self.camera_angle_x is None:
+            self.camera_angle_x = 2 * math.atan(self.width / (2 * self.fx))
+        return self
+
+
+# ---- a session's settings ---------------------------------------------------------------------
+
+Vector = Annotated[tuple[float, float, float], Field(description="x, y, z, world frame")]
+
+
+def _direction(value: tuple[float, float, float]) -> tuple[float, float, float]:
+    if math.hypot(*value) < 1e-9:
+        raise ValueError("must be a non-zero direction")
     return value
 
 
-def check_split(split, argument: str = "split") -> str:
-    """`split` if it is a split's name (`SPLIT_NAME`: no path separators); RequestError otherwise."""
-    if not isinstance(split, str) or not SPLIT_NAME.fullmatch(split):
-        raise RequestError(argument, split, "must be a split's name: letters, digits, '.', '_', '-' (no separators)")
-    return split
+@dataclass(kw_only=True)
+class SessionSettings(Schema):
+    """What shapes a new session (`nerfaug train DATA --out RUN`); a session keeps its own."""
+
+    __pydantic_config__ = SCHEMA
+
+    preset: Annotated[EnginePreset, tyro.conf.arg(name="engine")] = "cpu"
+    """the NeRF engine preset: cpu (small), nerfacto-cpu[-last-sample] (nerfacto shrunk), paper (a GPU's), test."""
+    seed: Seed = 0
+    """seeds the model, its training and every proposal (0 to 2^63-1)."""
+    downscale: Annotated[int, Field(ge=1, le=256)] = 1
+    """train on images shrunk by this integer factor."""
+    centre: Annotated[Vector | None, replaced_by("the point the cameras look at", "X Y Z")] = None
+    """the hemisphere's centre, world space."""
+    radius: Annotated[Radius | None, replaced_by("the cameras' mean distance to the centre", "FLOAT")] = None
+    """the hemisphere's radius, world units (within 1000x of the cameras' distance to the centre)."""
+    up: Annotated[Vector, AfterValidator(_direction)] = (0.0, 0.0, 1.0)
+    """the hemisphere's pole direction, world space (the world is z-up by default)."""
+    estimate_up: bool = False
+    """take the pole from the cameras' mean up axis instead of --up."""
+
+    def differences(self, ours: SessionSettings, given) -> list[tuple[str, str, str]]:
+        """The settings named in `given` (field names) that differ from a session's `ours`, each
+        as (field, this value, the session's), in words ("0 0 1", "estimated", "on").
+
+        None for the centre or the radius means estimated; an estimated pole is compared as
+        `estimate_up` when that is given too (one difference, not two)."""
+        found = []
+        for f in fields(SessionSettings):
+            if f.name not in given or (f.name == "up" and self._up_skipped(ours, given)):
+                continue
+            mine, theirs = getattr(self, f.name), getattr(ours, f.name)
+            if f.name == "up" and not ours.estimate_up and _close(_unit(mine), _unit(theirs)):
+                continue
+            if f.name != "up" and _close(mine, theirs):
+                continue
+            asked = "not given, so estimated" if mine is None else _words(mine, f.name, self)
+            found.append((f.name, asked, _words(theirs, f.name, ours)))
+        return found
+
+    def _up_skipped(self, ours: SessionSettings, given) -> bool:
+        return self.estimate_up or (ours.estimate_up and "estimate_up" in given)
+
+
+def _words(value, name: str, settings: SessionSettings) -> str:
+    """A setting as the command line writes it; a centre, radius or pole the session estimated
+    says so."""
+    if value is None or (name == "up" and settings.estimate_up):
+        return "estimated"
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return words(value)
+
+
+def words(value) -> str:
+    """A value as the command line writes it: (60.0, 10.0) -> "60 10", 1e-300 -> "1e-300"."""
+    if isinstance(value, (tuple, list)):
+        return " ".join(words(x) for x in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _close(a, b) -> bool:
+    """Two settings equal (numbers to within float noise)."""
+    if a is None or b is None or isinstance(a, (str, bool)) or isinstance(b, (str, bool)):
+        return a == b
+    a, b = (tuple(x) if isinstance(x, (tuple, list)) else (x,) for x in (a, b))
+    return len(a) == len(b) and all(math.isclose(float(x), float(y), rel_tol=1e-6, abs_tol=1e-9) for x, y in zip(a, b))
+
+
+def _unit(v) -> tuple[float, ...]:
+    norm = math.sqrt(sum(float(x) ** 2 for x in v)) or 1.0
+    return tuple(float(x) / norm for x in v)

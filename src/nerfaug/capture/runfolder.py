@@ -1,13 +1,23 @@
-"""Which folders may become a capture session's run folder (`check_new_run`): never one that holds
-or hides the dataset, lies inside it, holds files nerfaug did not write, or is a damaged session."""
+"""A capture session's run folder: the names of what it holds (drawn in `nerfaug.capture.session`),
+and which folders may become one (`check_new_run`): never one that holds or hides the dataset, lies
+inside it, holds files nerfaug did not write, or is a damaged session. Light: the commands' `--help`
+reads these names."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from nerfaug import owned
-from nerfaug.capture.state import DATASET_DIR, RUN_KIND, SESSION_FILE
 from nerfaug.errors import FolderRefused
+
+SESSION_FILE = "session.json"
+CHECKPOINT_FILE = "checkpoint.pt"
+DATASET_DIR = "dataset"
+PROPOSALS_DIR = "proposals"
+# Marker kinds (`nerfaug.owned`): the run folder, its dataset copy, and a folder `export` wrote.
+RUN_KIND, DATASET_KIND, EXPORT_KIND = "capture-session", "capture-dataset", "capture-export"
+# The split the run's dataset copy holds the views in, whatever the source's split was.
+DATASET_SPLIT = "train"
 
 
 def check_new_run(data_dir: Path, run_dir: Path) -> None:

@@ -19,7 +19,11 @@ import torch
 from torch import Tensor
 
 from nerfaug.capture.model import SessionModel
+from nerfaug.jsonio import atomic_write_bytes
+from nerfaug.plotting import figure_png, new_figure, save_figure
 from nerfaug.progress import progress_bar
+from nerfaug.selection import SelectionConfig
+from nerfaug.selection.estimators import fisher_train_diagonal
 from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
 
 ARRAYS = ("rgb", "depth", "opacity", "entropy", "fisher")
@@ -68,8 +72,6 @@ def training_fisher(model: SessionModel, generator: torch.Generator | None = Non
     Returns:
         Tensor with shape (P,).
     """
-    from nerfaug.selection import SelectionConfig
-    from nerfaug.selection.estimators import fisher_train_diagonal
 
     generator = generator if generator is not None else torch.Generator().manual_seed(model.seed)
     train = model.train_cameras.to(model.device)
@@ -189,8 +191,6 @@ def figure(maps: ViewMaps, title: str = "", scales: ColourScales | None = None):
     from matplotlib import colormaps
     from matplotlib.colors import LogNorm
 
-    from nerfaug.plotting import new_figure
-
     scales = scales if scales is not None else colour_scales([maps])
     panels = 4 if maps.fisher is not None else 3
     fig = new_figure(3.3 * panels, 3.2)
@@ -226,7 +226,6 @@ def figure(maps: ViewMaps, title: str = "", scales: ColourScales | None = None):
 
 def figure_bytes(maps: ViewMaps, title: str = "", scales: ColourScales | None = None) -> bytes:
     """`figure` as PNG bytes."""
-    from nerfaug.plotting import figure_png
 
     return figure_png(figure(maps, title, scales))
 
@@ -247,8 +246,6 @@ def npz_bytes(maps: ViewMaps) -> bytes:
 def write_maps(maps: ViewMaps, folder: Path, name: str, scales: ColourScales | None = None) -> list[Path]:
     """Write `name.png` (the figure, with `scales` or its own) and `name_<array>.npy` into
     `folder`; returns the files."""
-    from nerfaug.jsonio import atomic_write_bytes
-    from nerfaug.plotting import save_figure
 
     written = [save_figure(figure(maps, name, scales), Path(folder) / f"{name}.png")]
     for key, value in arrays(maps).items():

@@ -1,6 +1,7 @@
 """The HTTP API over a `SessionHub`: FastAPI routes, thin over the library (the same
-`CaptureSession` calls the CLI makes), the token check, the request limits (`limits`), and every
-error as `{"detail": "one line"}` (`nerfaug.service.errors`).
+`CaptureSession` calls the CLI makes, with the capture core's schemas as request models), the token
+check, the body limits (`limits`), and every error as `{"detail": "one line"}`
+(`nerfaug.service.errors`).
 
 Health and session states are answered on the event loop from snapshots; every other request's
 work runs in the hub's bounded per-session queues (`work`), so a busy session never delays them.
@@ -20,13 +21,11 @@ work runs in the hub's bounded per-session queues (`work`), so a busy session ne
 from __future__ import annotations
 
 import asyncio
-import functools
 import hmac
-import inspect
 from contextlib import asynccontextmanager
-from pathlib import Path
+from typing import Annotated
 
-from fastapi import FastAPI, File, Form, Request, UploadFile
+from fastapi import APIRouter, Depends, FastAPI, File, Form, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import JSONResponse, Response
@@ -37,11 +36,17 @@ from starlette.exceptions import HTTPException
 from swagger_ui_bundle import swagger_ui_path
 
 import nerfaug
+from nerfaug.capture.choose import ProposalRequest
+from nerfaug.capture.lock import SessionBusy
+from nerfaug.capture.requests import Poses, RequestError
+from nerfaug.capture.session import CaptureSession
+from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
+from nerfaug.errors import NerfaugError
 from nerfaug.service import models
-from nerfaug.service.errors import ServiceError, bad_input, status_of
-from nerfaug.service.hub import SessionHub, check_session_id
+from nerfaug.service.errors import ServiceError, field_line, status_of
+from nerfaug.service.hub import SessionHub
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
-from nerfaug.service.uploads import check_names, check_poses, parse_json_field, read_upload, write_uploads
+from nerfaug.service.uploads import form_json, read_uploads
 
 # Kept for clients of earlier versions: images one request may carry.
 MAX_IMAGES_PER_REQUEST = MAX_CAPTURES_PER_REQUEST
@@ -49,50 +54,38 @@ MAX_IMAGES_PER_REQUEST = MAX_CAPTURES_PER_REQUEST
 # `swagger_ui_bundle` ships them, so /docs works on a closed network (FastAPI's own page loads
 # them from a CDN).
 DOCS_ASSETS = "/docs-assets"
+# The library's errors that are answers (a 4xx, `status_of`); anything else is a 500 (also logged).
+ANSWERED = (ServiceError, NerfaugError, SessionBusy, ValueError, FileNotFoundError, Exception)
+router = APIRouter()
 
 
 def validation_line(errors: list[dict]) -> str:
     """Pydantic's errors as one line: the first error's field, message and value."""
-    first = errors[0]
-    where = ".".join(str(part) for part in first.get("loc", ()) if part not in ("body", "query", "path", "form"))
-    text = f"{where or 'request'}: {first.get('msg', 'invalid')}"
-    if "input" in first and first.get("type") != "missing":
-        text += f" (got {str(first['input'])[:80]!r})"
-    if len(errors) > 1:
-        text += f" (and {len(errors) - 1} more problem{'s' if len(errors) > 2 else ''})"
-    return " ".join(text.split())
+    first = RequestError.of(errors[0])
+    more = len(errors) - 1
+    return field_line(first.argument, first.problem, first.value) + (
+        f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
+    )
 
 
-def _as_service_error(error: Exception) -> ServiceError:
-    if isinstance(error, ServiceError):
-        return error
+def _answer(request: Request, error: Exception) -> JSONResponse:
+    """A library error as its HTTP status and one line (`status_of`)."""
     if isinstance(error, ValidationError):
-        return bad_input(validation_line(error.errors()))
-    return ServiceError(*status_of(error))
+        return JSONResponse({"detail": validation_line(error.errors())}, 422)
+    status, message = status_of(error)
+    return JSONResponse({"detail": message}, status, headers=getattr(error, "headers", None))
 
 
-def answers(endpoint):
-    """Turn a library error raised by `endpoint` (or by the work it awaited) into its HTTP status
-    (one place: `status_of`)."""
-    if inspect.iscoroutinefunction(endpoint):
+def _hub(request: Request) -> SessionHub:
+    return request.app.state.hub
 
-        @functools.wraps(endpoint)
-        async def waiting(*args, **kwargs):
-            try:
-                return await endpoint(*args, **kwargs)
-            except Exception as error:  # noqa: BLE001 -- mapped to a status, never a traceback to the client
-                raise _as_service_error(error) from None
 
-        return waiting
+def _upload_limit(request: Request) -> int:
+    return request.app.state.upload_limit
 
-    @functools.wraps(endpoint)
-    def wrapper(*args, **kwargs):
-        try:
-            return endpoint(*args, **kwargs)
-        except Exception as error:  # noqa: BLE001 -- mapped to a status, never a traceback to the client
-            raise _as_service_error(error) from None
 
-    return wrapper
+Hub = Annotated[SessionHub, Depends(_hub)]
+UploadLimit = Annotated[int, Depends(_upload_limit)]
 
 
 async def done(future):
@@ -100,11 +93,125 @@ async def done(future):
     return await asyncio.wrap_future(future)
 
 
-def check_count(images: list, field: str = "images") -> None:
-    if len(images) > MAX_CAPTURES_PER_REQUEST:
-        raise ServiceError(
-            413, f"{field}: {len(images)} files; a request may carry at most {MAX_CAPTURES_PER_REQUEST} images"
+@router.get("/health", response_model=models.Health)
+async def health(hub: Hub):
+    return {"status": "ok", "version": nerfaug.__version__, "sessions": hub.ids()}
+
+
+@router.get("/sessions", response_model=list[str])
+async def sessions(hub: Hub):
+    return hub.ids()
+
+
+@router.post("/sessions/from-dataset", status_code=201, response_model=models.SessionStatus)
+async def create_from_dataset(request: models.FromDataset, hub: Hub):
+    data = hub.dataset_path(request.dataset, request.split)
+
+    def create(folder):
+        return CaptureSession.create(data, folder, request, split=request.split, device=hub.device)
+
+    return await done(hub.submit_create(request.id, create))
+
+
+@router.post("/sessions/from-uploads", status_code=201, response_model=models.SessionStatus)
+async def create_from_uploads(
+    hub: Hub,
+    limit: UploadLimit,
+    settings: str = Form(description="JSON of FromUploads: id, intrinsics, poses, preset, seed, ..."),
+    images: list[UploadFile] = File(
+        description=f"the images, in the order of the poses (at most {MAX_CAPTURES_PER_REQUEST})"
+    ),
+):
+    request = form_json(settings, "settings", models.FromUploads)
+    k = request.intrinsics
+
+    def create(folder):
+        files = read_uploads(images, limit, (k.width, k.height))
+        return CaptureSession.from_files(files, request.poses, k, folder, request, device=hub.device)
+
+    return await done(hub.submit_create(request.id, create))
+
+
+@router.get("/sessions/{session_id}", response_model=models.SessionStatus)
+async def state(session_id: str, hub: Hub):
+    """The session's state from its last snapshot: answered at once, even while it trains."""
+    if hub.has_snapshot(session_id):
+        return hub.state(session_id)
+    return await run_in_threadpool(hub.state, session_id)  # reads its files once
+
+
+@router.post("/sessions/{session_id}/captures", status_code=201, response_model=models.Added)
+async def add_captures(
+    session_id: str,
+    hub: Hub,
+    limit: UploadLimit,
+    poses: str = Form(description="JSON list of 4x4 poses, one per image, in upload order"),
+    images: list[UploadFile] = File(
+        description="captured images (PNG, JPEG, TIFF, BMP or WebP; stored under the suffix of the format their "
+        f"bytes are); their file names name the new views; at most {MAX_CAPTURES_PER_REQUEST}"
+    ),
+):
+    hub.folder(session_id)
+    matrices = form_json(poses, "poses", Poses)
+
+    def add(session):
+        k = session.state.intrinsics
+        names = session.add_files(read_uploads(images, limit, (k.width, k.height)), matrices)
+        session.save()  # the captures are on disk now, and in the checkpoint's count
+        summary = session.summary()
+        return models.Added(
+            names=names, views=summary.views, step=summary.step, warnings=session.additions[-1].warnings
         )
+
+    return await done(hub.submit(session_id, add))
+
+
+@router.post("/sessions/{session_id}/train", status_code=202, response_model=models.Job)
+async def train(session_id: str, request: models.TrainRequest, hub: Hub):
+    return await done(hub.submit_train(session_id, request.steps))
+
+
+@router.post("/sessions/{session_id}/proposals")
+async def propose(session_id: str, request: ProposalRequest, hub: Hub):
+    """The proposal as a Blender-style transforms JSON (world-frame poses, angles, scores)."""
+
+    def choose(session):
+        proposal = session.propose(request)
+        session.save()
+        return proposal.transforms()
+
+    return await done(hub.submit(session_id, choose))
+
+
+@router.post(
+    "/sessions/{session_id}/uncertainty",
+    responses={200: {"content": {"image/png": {}, "application/octet-stream": {}}}},
+    response_class=Response,
+)
+async def uncertainty(session_id: str, request: models.UncertaintyRequest, hub: Hub):
+    """PNG: render, depth, ray entropy and FisherRF panels with colour bars; npz: the arrays."""
+
+    def images(session):
+        maps = session.uncertainty_maps([request.pose], request.width, request.fisher, request.fisher_width)[0]
+        return npz_bytes(maps) if request.format == "npz" else figure_bytes(maps)
+
+    data = await done(hub.submit(session_id, images))
+    return Response(data, media_type="application/octet-stream" if request.format == "npz" else "image/png")
+
+
+@router.post("/sessions/{session_id}/evaluate", response_model=models.Evaluation)
+async def evaluate(session_id: str, request: models.EvaluateRequest, hub: Hub):
+    """The session's NeRF scored on a held-out split at its training resolution (`nerfaug eval`)."""
+    hub.folder(session_id)
+    data = hub.dataset_path(request.dataset, request.split)
+
+    def score(session):
+        views = session.held_out(data, request.split, request.max_views)
+        result = session.evaluate(views, lpips="auto" if request.lpips else None)
+        found = {"views": len(views), **result.mean, "lpips_status": result.lpips_status, "per_view": result.per_view}
+        return {"step": session.step, "dataset": request.dataset, "split": request.split, **found}
+
+    return await done(hub.submit(session_id, score))
 
 
 def _token_ok(request: Request, token: str) -> bool:
@@ -121,7 +228,6 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         max_upload_mb: the largest image file accepted (a request may hold
             `MAX_CAPTURES_PER_REQUEST` of them).
     """
-    limit = int(max_upload_mb * MEGABYTE)
 
     @asynccontextmanager
     async def lifespan(app):
@@ -137,17 +243,31 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
         docs_url=None,  # served below, with its assets from the package
         redoc_url=None,  # ReDoc's page would load its script from a CDN
     )
+    app.state.hub, app.state.upload_limit = hub, int(max_upload_mb * MEGABYTE)
     app.mount(DOCS_ASSETS, StaticFiles(directory=str(swagger_ui_path)), name="docs-assets")
+    app.add_api_route("/docs", _docs_page, include_in_schema=False)
+    _guard(app, token)
+    app.add_middleware(BodyLimit, max_upload_bytes=app.state.upload_limit)  # outermost: before anything reads the body
+    for kind in ANSWERED:
+        app.add_exception_handler(kind, _answer)
+    app.add_exception_handler(RequestValidationError, _invalid)
+    app.add_exception_handler(HTTPException, _http_error)
+    app.include_router(router)
+    return app
 
-    @app.get("/docs", include_in_schema=False)
-    def docs():
-        return get_swagger_ui_html(
-            openapi_url=app.openapi_url,
-            title=f"{app.title} - API",
-            swagger_js_url=f"{DOCS_ASSETS}/swagger-ui-bundle.js",
-            swagger_css_url=f"{DOCS_ASSETS}/swagger-ui.css",
-            swagger_favicon_url=f"{DOCS_ASSETS}/favicon-32x32.png",
-        )
+
+def _docs_page(request: Request):
+    return get_swagger_ui_html(
+        openapi_url=request.app.openapi_url,
+        title=f"{request.app.title} - API",
+        swagger_js_url=f"{DOCS_ASSETS}/swagger-ui-bundle.js",
+        swagger_css_url=f"{DOCS_ASSETS}/swagger-ui.css",
+        swagger_favicon_url=f"{DOCS_ASSETS}/favicon-32x32.png",
+    )
+
+
+def _guard(app: FastAPI, token: str | None) -> None:
+    """Every request sends `Authorization: Bearer TOKEN` when a token is set (401 otherwise)."""
 
     @app.middleware("http")
     async def guard(request: Request, call_next):
@@ -155,183 +275,10 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
             return JSONResponse({"detail": "missing or wrong token: send 'Authorization: Bearer TOKEN'"}, 401)
         return await call_next(request)
 
-    app.add_middleware(BodyLimit, max_upload_bytes=limit)  # outermost: before anything reads the body
 
-    @app.exception_handler(ServiceError)
-    async def service_error(request, error: ServiceError):
-        return JSONResponse({"detail": error.message}, error.status, headers=error.headers)
-
-    @app.exception_handler(RequestValidationError)
-    async def invalid(request, error: RequestValidationError):
-        return JSONResponse({"detail": validation_line(list(error.errors()))}, 422)
-
-    @app.exception_handler(HTTPException)
-    async def http_error(request, error: HTTPException):
-        return JSONResponse({"detail": " ".join(str(error.detail).split())}, error.status_code)
-
-    @app.get("/health", response_model=models.Health)
-    async def health():
-        return {"status": "ok", "version": nerfaug.__version__, "sessions": hub.ids()}
-
-    @app.get("/sessions", response_model=list[str])
-    async def sessions():
-        return hub.ids()
-
-    @app.post("/sessions/from-dataset", status_code=201, response_model=models.SessionState)
-    @answers
-    async def create_from_dataset(request: models.CreateFromDataset):
-        from nerfaug.capture import CaptureSession
-
-        split = request.split or "train"
-        data = hub.dataset_path(request.dataset, split)
-        create = functools.partial(CaptureSession.create, data, split=split, device=hub.device, **_settings(request))
-        return await done(hub.submit_create(request.id, create))
-
-    @app.post("/sessions/from-uploads", status_code=201, response_model=models.SessionState)
-    @answers
-    async def create_from_uploads(
-        settings: str = Form(description="JSON of CreateFromUploads: id, intrinsics, poses, preset, seed, ..."),
-        images: list[UploadFile] = File(
-            description=f"the images, in the order of the poses (at most {MAX_CAPTURES_PER_REQUEST})"
-        ),
-    ):
-        request = models.CreateFromUploads.model_validate(parse_json_field(settings, "settings"))
-        check_session_id(request.id)
-        check_count(images)
-
-        def create(folder: Path):
-            import torch
-
-            from nerfaug.cameras import Cameras
-            from nerfaug.capture import CaptureSession
-            from nerfaug.data import EXCHANGE_FORMAT, DatasetSplit, NewFrame, get_format
-
-            k = request.intrinsics
-            uploads = [read_upload(f, i, limit, (k.width, k.height)) for i, f in enumerate(images)]
-            check_names(uploads)
-            poses = check_poses(request.poses, "poses", len(uploads))
-            cx, cy = k.width / 2 if k.cx is None else k.cx, k.height / 2 if k.cy is None else k.cy
-            camera = Cameras(torch.eye(4), k.fx, k.fy or k.fx, cx, cy, k.width, k.height)
-            frames = [NewFrame(u.name, u.data, u.suffix, pose.double().tolist()) for u, pose in zip(uploads, poses)]
-            with hub.staging() as tmp:
-                data = DatasetSplit(Path(tmp) / "data", get_format(EXCHANGE_FORMAT))
-                data.append(frames, camera)
-                return CaptureSession.create(data.root, folder, device=hub.device, **_settings(request))
-
-        return await done(hub.submit_create(request.id, create))
-
-    @app.get("/sessions/{session_id}", response_model=models.SessionState)
-    @answers
-    async def state(session_id: str):
-        """The session's state from its last snapshot: answered at once, even while it trains."""
-        if hub.has_snapshot(session_id):
-            return hub.state(session_id)
-        return await run_in_threadpool(hub.state, session_id)  # reads its session.json once
-
-    @app.post("/sessions/{session_id}/captures", status_code=201, response_model=models.Added)
-    @answers
-    async def add_captures(
-        session_id: str,
-        poses: str = Form(description="JSON list of 4x4 poses, one per image, in upload order"),
-        images: list[UploadFile] = File(
-            description="captured images (PNG, JPEG, TIFF, BMP or WebP; stored under the suffix of the format "
-            f"their bytes are); their file names name the new views; at most {MAX_CAPTURES_PER_REQUEST}"
-        ),
-    ):
-        check_session_id(session_id)
-        check_count(images)
-
-        def add(session):
-            k = session.state.intrinsics
-            uploads = [read_upload(f, i, limit, (k.width, k.height)) for i, f in enumerate(images)]
-            check_names(uploads)
-            matrices = check_poses(parse_json_field(poses, "poses"), "poses", len(uploads))
-            with hub.staging() as tmp:
-                names = session.add_views(write_uploads(Path(tmp), uploads), matrices)
-            session.save()  # the captures are on disk now, and in the checkpoint's count
-            warned = session.state.additions[-1].extra.get("warnings", [])
-            return {"names": names, "views": len(session.trainer.train_views), "step": session.step, "warnings": warned}
-
-        return await done(hub.submit(session_id, add))
-
-    @app.post("/sessions/{session_id}/train", status_code=202, response_model=models.Job)
-    @answers
-    async def train(session_id: str, request: models.TrainRequest):
-        return await done(hub.submit_train(session_id, request.steps))
-
-    @app.post("/sessions/{session_id}/proposals")
-    @answers
-    async def propose(session_id: str, request: models.ProposeRequest):
-        """The proposal as a Blender-style transforms JSON (world-frame poses, angles, scores)."""
-        constraints = None if request.constraints is None else request.constraints.model_dump()
-
-        def choose(session):
-            candidates = None if request.candidates is None else check_poses(request.candidates, "candidates")
-            proposal = session.propose(
-                request.n,
-                request.method,
-                candidates=candidates,
-                n_candidates=request.n_candidates,
-                seed=request.seed,
-                config=request.selection or None,
-                constraints=constraints,
-                min_separation=request.min_separation,
-            )
-            session.save()
-            return proposal.transforms()
-
-        return await done(hub.submit(session_id, choose))
-
-    @app.post(
-        "/sessions/{session_id}/uncertainty",
-        responses={200: {"content": {"image/png": {}, "application/octet-stream": {}}}},
-        response_class=Response,
-    )
-    @answers
-    async def uncertainty(session_id: str, request: models.UncertaintyRequest):
-        """PNG: render, depth, ray entropy and FisherRF panels with colour bars; npz: the arrays."""
-        from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
-
-        pose = check_poses(request.pose, "pose")
-
-        def images(session):
-            maps = session.uncertainty_maps(pose, request.width, request.fisher, request.fisher_width)[0]
-            return npz_bytes(maps) if request.format == "npz" else figure_bytes(maps)
-
-        data = await done(hub.submit(session_id, images))
-        return Response(data, media_type="application/octet-stream" if request.format == "npz" else "image/png")
-
-    @app.post("/sessions/{session_id}/evaluate", response_model=models.Evaluation)
-    @answers
-    async def evaluate(session_id: str, request: models.EvaluateRequest):
-        """The session's NeRF scored on a held-out split at its training resolution (`nerfaug eval`)."""
-        check_session_id(session_id)
-        data = hub.dataset_path(request.dataset, request.split)
-
-        def score(session):
-            views = session.held_out(data, request.split, request.max_views)
-            result = session.evaluate(views, lpips="auto" if request.lpips else None)
-            return {
-                "step": session.step,
-                "dataset": request.dataset,
-                "split": request.split,
-                "views": len(views),
-                **result.mean,
-                "lpips_status": result.lpips_status,
-                "per_view": result.per_view,
-            }
-
-        return await done(hub.submit(session_id, score))
-
-    return app
+async def _invalid(request: Request, error: RequestValidationError) -> JSONResponse:
+    return JSONResponse({"detail": validation_line(list(error.errors()))}, 422)
 
 
-def _settings(request: models.SessionSettings) -> dict:
-    return {
-        "preset": request.preset,
-        "seed": request.seed,
-        "downscale": request.downscale,
-        "centre": request.centre,
-        "radius": request.radius,
-        "up": request.up,
-    }
+async def _http_error(request: Request, error: HTTPException) -> JSONResponse:
+    return JSONResponse({"detail": " ".join(str(error.detail).split())}, error.status_code)

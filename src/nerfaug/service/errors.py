@@ -5,6 +5,7 @@ file on the server holds)."""
 from __future__ import annotations
 
 from nerfaug.capture.lock import SessionBusy
+from nerfaug.capture.requests import RequestError
 from nerfaug.capture.state import SessionError
 from nerfaug.data import DatasetError
 from nerfaug.errors import FolderRefused
@@ -25,6 +26,12 @@ def bad_input(message: str) -> ServiceError:
     return ServiceError(422, message)
 
 
+def field_line(field: str, problem: str, value=None) -> str:
+    """A refused value as the service says it, in one line: `n: must be >= 1 (got 0)`."""
+    text = f"{field or 'request'}: {problem}" + ("" if value is None else f" (got {str(value)[:80]!r})")
+    return " ".join(text.split())
+
+
 def status_of(error: BaseException) -> tuple[int, str]:
     """The HTTP status and one-line message for an error raised inside a request.
 
@@ -36,6 +43,8 @@ def status_of(error: BaseException) -> tuple[int, str]:
     if isinstance(error, ServiceError):
         return error.status, error.message
     text = " ".join(str(error).split()) or type(error).__name__
+    if isinstance(error, RequestError):
+        text = field_line(error.argument, error.problem, error.value)
     if isinstance(error, DatasetError) and error.value is not None:
         # The value may be what a file holds (a dataset's JSON); the file, field and problem say enough.
         field = f", field '{error.field}'" if error.field is not None else ""

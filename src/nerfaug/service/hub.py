@@ -8,45 +8,37 @@ worker thread per session, and a record of each training job so that a restarted
       <id>/                 a capture session (`nerfaug train/propose/add ROOT/<id>` open it too)
       .service/jobs/<id>.json   the session's training job: target step, state
 
-Training holds the session's lock for a chunk of steps at a time, so other requests to the
-session wait at most one chunk; the state a client polls is a snapshot taken after each chunk (or,
-for a session not opened yet, read from its session.json), never waiting for a lock or a worker.
+Training (`CaptureSession.train_for`, the loop the commands run) holds the session's lock for a
+chunk of steps at a time, so other requests to the session wait at most one chunk; the state a
+client polls is a snapshot taken after each chunk (or, for a session not opened yet, read from its
+files), never waiting for a lock or a worker.
 """
 
 from __future__ import annotations
 
 import logging
-import re
-import tempfile
 import threading
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from time import monotonic, time
 
 from nerfaug.capture import lock as session_lock
-from nerfaug.capture.state import SESSION_FILE
+from nerfaug.capture.folder import SessionFolder
+from nerfaug.capture.requests import CHECKPOINT_EVERY_S, SESSION_ID, check_session_id
+from nerfaug.capture.runfolder import SESSION_FILE
+from nerfaug.capture.session import CaptureSession
+from nerfaug.capture.state import SessionSummary
+from nerfaug.data.formats import find_split
 from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.service.errors import ServiceError, bad_input, status_of
 from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
 
-SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 JOBS_DIR = Path(".service") / "jobs"
-CHUNK_STEPS = 10  # training steps per hold of the session's lock
 MAX_TRAINING = 4  # sessions training at once (each a thread running torch)
 # The job's file records the step it reached at most this often (seconds), so that a restart
 # after a kill knows how many steps beyond the last save are redone.
 RECORD_EVERY_S = 1.0
 log = logging.getLogger("nerfaug.service")
-
-
-def check_session_id(session_id: str) -> str:
-    """`session_id` if it matches `SESSION_ID` (so it names a folder directly under the root)."""
-    if not isinstance(session_id, str) or not SESSION_ID.fullmatch(session_id):
-        raise bad_input(
-            f"session id {str(session_id)[:80]!r}: must be 1-64 letters, digits, '_' or '-', starting "
-            "with a letter or digit"
-        )
-    return session_id
 
 
 @dataclass
@@ -81,7 +73,7 @@ class Slot:
         self.session = None
         self.job: Job | None = None
         self.thread: threading.Thread | None = None
-        self.snapshot: dict = {}
+        self.snapshot: SessionSummary | None = None
         self.folder_lock: session_lock.SessionLock | None = None  # the session folder's, while open here
 
 
@@ -92,7 +84,6 @@ class SessionHub:
         root: the service root folder (created if missing).
         device: torch device sessions train and render on.
         checkpoint_every: seconds of training between saves (and a save at each job's end).
-        chunk_steps: training steps per hold of a session's lock.
         workers, per_session, total: the request queues' bounds (`WorkQueues`).
         max_training: sessions that may train at once (one more: 503).
     """
@@ -101,8 +92,7 @@ class SessionHub:
         self,
         root: Path,
         device: str = "cpu",
-        checkpoint_every: float = 60.0,
-        chunk_steps: int = CHUNK_STEPS,
+        checkpoint_every: float = CHECKPOINT_EVERY_S,
         workers: int = WORKERS,
         per_session: int = PER_SESSION,
         total: int = TOTAL,
@@ -112,7 +102,6 @@ class SessionHub:
         self.root.mkdir(parents=True, exist_ok=True)
         self.device = device
         self.checkpoint_every = float(checkpoint_every)
-        self.chunk_steps = int(chunk_steps)
         self.work = WorkQueues(workers, per_session, total)
         self.max_training = int(max_training)
         self._slots: dict[str, Slot] = {}
@@ -144,8 +133,6 @@ class SessionHub:
         """The slot's session, opened on first use (hold `slot.lock`); its folder's lock is taken
         first and kept (`SessionBusy`, a 409, while a `nerfaug` command is changing it)."""
         if slot.session is None:
-            from nerfaug.capture import CaptureSession
-
             self._lock_folder(slot)
             try:
                 slot.session = CaptureSession.open(self.root / slot.id, device=self.device)
@@ -221,8 +208,6 @@ class SessionHub:
         if not path.is_dir():
             raise ServiceError(404, f"dataset {relative!r}: no such folder under the service root")
         if split is not None:
-            from nerfaug.data.formats import find_split
-
             find_split(path, split)
         return path
 
@@ -236,62 +221,25 @@ class SessionHub:
             finally:
                 self._snapshot(slot)
 
-    def staging(self) -> tempfile.TemporaryDirectory:
-        """A private temporary folder for one request's uploads (removed when it ends)."""
-        return tempfile.TemporaryDirectory(prefix="nerfaug-upload-")
-
     # -- state --
 
     def _snapshot(self, slot: Slot) -> None:
-        session = slot.session
-        if session is None:
-            return
-        history = session.trainer.history
-        slot.snapshot = {
-            "id": slot.id,
-            "step": session.step,
-            "views": len(session.trainer.train_views),
-            "names": [str(n) for n in session.trainer.train_views.names],
-            "last_losses": [dict(h) for h in history[-5:]],
-            "proposals": len(session.state.proposals),
-            "additions": len(session.state.additions),
-            "hemisphere": session.hemisphere.to_dict(),
-            "intrinsics": asdict(session.state.intrinsics),
-        }
+        if slot.session is not None:
+            slot.snapshot = slot.session.summary()
 
     def has_snapshot(self, session_id: str) -> bool:
         """Whether the session's state is in memory (`state` then reads no file)."""
         slot = self._slots.get(session_id)
-        return slot is not None and bool(slot.snapshot)
+        return slot is not None and slot.snapshot is not None
 
     def state(self, session_id: str) -> dict:
         """The session's state, never waiting for a lock or a worker: the last snapshot (or, for a
-        session not opened yet, what its session.json and dataset listing say) and the job."""
+        session not opened yet, what its files say: `SessionFolder.summary`) and the job."""
         slot = self.slot(session_id)
-        snapshot = slot.snapshot or self._stored_snapshot(session_id)
+        summary = slot.snapshot or SessionFolder.open(self.folder(session_id)).summary()
         job = slot.job
-        return {**snapshot, "running": job is not None and job.state == "running", "job": job and job.to_dict()}
-
-    def _stored_snapshot(self, session_id: str) -> dict:
-        """A session's state from its files, without loading its model (no losses: they are in the
-        checkpoint)."""
-        from nerfaug.capture import CaptureSession
-        from nerfaug.capture.state import SessionState
-
-        folder = self.folder(session_id)
-        state = SessionState.read(folder)
-        names = [str(f["file_path"]) for f in CaptureSession(folder, None, state).frames()]
-        return {
-            "id": session_id,
-            "step": state.step,
-            "views": len(names),
-            "names": names,
-            "last_losses": [],
-            "proposals": len(state.proposals),
-            "additions": len(state.additions),
-            "hemisphere": state.hemisphere.to_dict(),
-            "intrinsics": asdict(state.intrinsics),
-        }
+        running = job is not None and job.state == "running"
+        return {**summary.model_dump(), "running": running, "job": job and job.to_dict()}
 
     # -- training --
 
@@ -320,28 +268,24 @@ class SessionHub:
         slot.thread.start()
 
     def _train_worker(self, slot: Slot) -> None:
-        job = slot.job
-        saved_at = recorded_at = monotonic()
+        job, recorded_at = slot.job, [monotonic()]
+
+        def chunk_done(last: dict) -> None:
+            job.step = slot.session.step
+            if monotonic() - recorded_at[0] >= RECORD_EVERY_S:
+                self._record(slot)
+                recorded_at[0] = monotonic()
+            self._snapshot(slot)
+
         try:
-            while not self._stopping.is_set():
-                with slot.lock:
-                    session = self.opened(slot)
-                    if session.step >= job.target:
-                        break
-                    session.train(min(self.chunk_steps, job.target - session.step))
-                    job.step = session.step
-                    if monotonic() - saved_at >= self.checkpoint_every:
-                        session.save()
-                        saved_at = monotonic()
-                    if monotonic() - recorded_at >= RECORD_EVERY_S:
-                        self._record(slot)
-                        recorded_at = monotonic()
-                    self._snapshot(slot)
             with slot.lock:
-                slot.session.save()
+                session = self.opened(slot)
+            stop = self._stopping.is_set
+            session.train_for(job.target - session.step, self.checkpoint_every, stop, hold=slot.lock, each=chunk_done)
+            with slot.lock:
                 self._snapshot(slot)
-                if not self._stopping.is_set():  # stopped by a shutdown: left running, resumed on restart
-                    job.state, job.finished = "done", time()
+                if not stop():  # stopped by a shutdown: left running, resumed on restart
+                    job.step, job.state, job.finished = session.step, "done", time()
                     self._record(slot)
         except Exception as error:  # noqa: BLE001 -- any failure is reported to the client polling the job
             job.state, job.finished, job.error = "failed", time(), status_of(error)[1]

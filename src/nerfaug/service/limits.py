@@ -1,5 +1,6 @@
-"""How much one request may ask of `nerfaug serve` (the numbers the request models state, so they
-show in the API docs), and the body limit that holds for streamed (chunked) bodies too.
+"""How much one request may carry to `nerfaug serve` (images, pixels, bytes; the ranges of what it
+asks are its schema's, `nerfaug.capture.requests`), and the body limit that holds for streamed
+(chunked) bodies too.
 
 A request's body is counted as it arrives: one over its limit is answered 413 at once, whether or
 not it said its length, and nothing more of it is read.
@@ -7,34 +8,16 @@ not it said its length, and nothing more of it is read.
 
 from __future__ import annotations
 
+import json
+
 MEGABYTE = 1024 * 1024
 # Images one request may carry (a batch of captures, or a new session's images).
 MAX_CAPTURES_PER_REQUEST = 64
-# Pixels of one image (its header is read first: a larger one is never decoded); also bounds a
-# session's camera made from uploads.
+# Pixels of one image (its header is read first: a larger one is never decoded); so also of a
+# session's camera made from uploads, whose images must have its size.
 MAX_IMAGE_PIXELS = 40_000_000
-# Poses a client may send as candidates (a robot's reachable set) in one proposal.
-MAX_REACHABLE_POSES = 10_000
-# Hemisphere candidates one proposal may score.
-MAX_CANDIDATES = 20_000
-# Views one proposal may ask for.
-MAX_VIEWS = 1000
-# Keep-out cones of one proposal.
-MAX_KEEP_OUT = 64
 # A JSON body (10,000 poses as JSON take about 3.5 MB).
 MAX_JSON_BYTES = 8 * MEGABYTE
-# The selection settings whose value sets the work of a proposal, and their largest values.
-SELECTION_BOUNDS = {
-    "entropy_resolution": 256,
-    "fisher_resolution": 256,
-    "fisher_train_pixels": 65_536,
-    "fisher_train_chunk": 4096,
-    "fisher_train_probes": 64,
-    "fisher_probes": 64,
-    "fisher_cache_floats": 2**28,
-    "chunk": 65_536,
-    "max_draws": 10_000_000,
-}
 
 
 def multipart_limit(max_upload_bytes: int) -> int:
@@ -100,8 +83,6 @@ def _message(size: int, limit: int, streamed: bool = False) -> str:
 
 
 async def _answer_413(send, detail: str) -> None:
-    import json
-
     body = json.dumps({"detail": detail}).encode()
     headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
     await send({"type": "http.response.start", "status": 413, "headers": headers})

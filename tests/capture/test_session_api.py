@@ -1,0 +1,82 @@
+"""The session's API beyond proposing: the one training loop (`train_for`: chunks, a save every
+`checkpoint_every` seconds and at the end, a clean stop), a session made from image files as
+captured (`from_files`, `add_files`: what the service's uploads become), and `summary()`, the same
+whether the model is loaded or only the folder is read."""
+
+import itertools
+import json
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from nerfaug.capture import CaptureSession, Intrinsics, SessionFolder, SessionSettings
+from nerfaug.capture import session as capture_session
+from nerfaug.capture.images import ImageFile
+from nerfaug.data import load_dataset
+from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
+
+from .test_constraints import SIZE, tiny_dataset
+
+SETTINGS = SessionSettings(preset="test", seed=3, radius=4.03)
+
+
+@pytest.fixture
+def session(tmp_path) -> CaptureSession:
+    return CaptureSession.create(tiny_dataset(tmp_path / "data"), tmp_path / "run", SETTINGS)
+
+
+def saved_step(session) -> int:
+    return json.loads((session.run_dir / "session.json").read_text())["step"]
+
+
+def test_train_for_saves_every_period_and_at_the_end(session, monkeypatch):
+    # A clock that advances one second per reading: once at the start, once after each 10-step
+    # chunk and once after each save, so with a 2 s period the session saves every 20 steps.
+    monkeypatch.setattr(capture_session, "monotonic", itertools.count().__next__)
+    saves = []
+    save = CaptureSession.save
+    monkeypatch.setattr(CaptureSession, "save", lambda self: saves.append(self.step) or save(self))
+    last = session.train_for(45, checkpoint_every=2.0)
+    assert saves == [20, 40, 45]
+    assert last["step"] == 45 == session.step == saved_step(session) == session.saved_step
+
+
+def test_train_for_stops_at_a_chunk_boundary_and_saves(session):
+    chunks = []
+    last = session.train_for(100, checkpoint_every=1e9, stop=lambda: len(chunks) >= 2, each=chunks.append)
+    assert [entry["step"] for entry in chunks] == [10, 20]
+    assert last == chunks[-1] and session.step == 20 == saved_step(session)
+
+
+def png(seed: int) -> bytes:
+    pixels = np.random.default_rng(seed).integers(0, 256, (SIZE, SIZE, 3), dtype=np.uint8)
+    return iio.imwrite("<bytes>", pixels, extension=".png")
+
+
+def test_a_session_from_image_files_and_their_poses(tmp_path):
+    poses = sample_uniform_poses(5, torch.Generator().manual_seed(4), radius=4.03)
+    files = [ImageFile(f"shot_{i}", ".png", png(i)) for i in range(5)]
+    fx = 0.5 * SIZE / np.tan(0.5 * BLENDER_CAMERA_ANGLE_X)
+    k = Intrinsics(width=SIZE, height=SIZE, fx=fx)
+    with pytest.raises(ValueError, match="^poses: 3 poses for 4 images; give one pose per image$"):
+        CaptureSession.from_files(files[:4], poses[:3], k, tmp_path / "refused", SETTINGS)
+    assert not (tmp_path / "refused").exists()
+    session = CaptureSession.from_files(files[:4], poses[:4], k, tmp_path / "run", SETTINGS)
+    assert session.state.intrinsics.fx == pytest.approx(fx) and session.summary().views == 4
+    assert session.add_files(files[4:], poses[4:]) == ["shot_4"]
+    stored = session.dataset_dir / session.state.dataset.folder / "shot_4.png"
+    assert stored.read_bytes() == files[4].data  # byte for byte
+    grown = load_dataset(session.dataset_dir)
+    assert torch.allclose(grown.cameras.camera_to_world, poses, atol=1e-6)
+
+
+def test_the_summary_is_the_same_with_and_without_the_model(session):
+    session.train(3)
+    session.save()
+    loaded, folder = session.summary(), SessionFolder.open(session.run_dir).summary()
+    assert loaded.last_losses and [h["step"] for h in loaded.last_losses] == [1, 2, 3]
+    assert folder.last_losses == []
+    assert loaded.model_dump(exclude={"last_losses"}) == folder.model_dump(exclude={"last_losses"})
+    assert (loaded.id, loaded.step, loaded.views) == ("run", 3, 4)
