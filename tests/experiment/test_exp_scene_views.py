@@ -9,6 +9,7 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views, write_blender_split, write_nerfstudio
+from nerfaug.data.views import spread_over_frames
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import load_scene_data
 from nerfaug.experiment.scene_views import (
@@ -16,7 +17,6 @@ from nerfaug.experiment.scene_views import (
     farthest_directions,
     layout_halves,
     split_captured,
-    spread_over_frames,
 )
 from nerfaug.hemisphere import angles_from_pose, pose_from_angles, sample_uniform_poses
 

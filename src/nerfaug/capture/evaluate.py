@@ -7,7 +7,7 @@ from pathlib import Path
 
 from nerfaug.capture.model import SessionModel
 from nerfaug.data.formats import load_dataset
-from nerfaug.data.views import Views
+from nerfaug.data.views import Views, spread_over_frames
 from nerfaug.evaluation import EvaluationResult, evaluate_views
 
 
@@ -15,13 +15,15 @@ def load_held_out(
     data: str | Path, split: str = "test", downscale: int = 1, background=(1.0, 1.0, 1.0), max_views: int | None = None
 ) -> Views:
     """`split` of the dataset folder `data`, world frame, shrunk by `downscale` (a session's
-    training resolution) and composited over `background` (images loaded on access); its first
-    `max_views` views when given."""
+    training resolution) and composited over `background` (images loaded on access); when
+    `max_views` is given, that many of its views spread evenly over the split's frames (a test
+    split is often an orbit, and its first frames would all look at one side of the object)."""
     views = load_dataset(Path(data), split, lazy=True, downscale=downscale, background=tuple(background))
     if max_views is None or max_views >= len(views):
         return views
-    # The first views keep their indices, so the lazy loader serves them unchanged.
-    return Views(views.cameras[list(range(max_views))], None, views.names[:max_views], loader=views.loader)
+    kept = spread_over_frames(max_views, len(views))
+    source = views.loader
+    return Views(views.cameras[kept], None, [views.names[i] for i in kept], loader=lambda i: source(kept[i]))
 
 
 def evaluate_model(model: SessionModel, views: Views, lpips="auto", progress: bool = False) -> EvaluationResult:

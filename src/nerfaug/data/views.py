@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -74,3 +75,15 @@ class Views:
             [n for p in parts for n in p.names],
             alphas,
         )
+
+
+def spread_over_frames(count: int, total: int) -> list[int]:
+    """`count` frame indices spread evenly over `total` frames (all of them when count >= total).
+
+    Example:
+        >>> spread_over_frames(4, 200)
+        [0, 66, 133, 199]
+    """
+    if count >= total:
+        return list(range(total))
+    return [int(i) for i in np.round(np.linspace(0, total - 1, count)).astype(int)]

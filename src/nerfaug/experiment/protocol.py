@@ -15,6 +15,7 @@ import torch
 
 from nerfaug.data import Views, find_split, has_split, load_dataset, require_split
 from nerfaug.data.frame import Hemisphere
+from nerfaug.data.views import spread_over_frames
 from nerfaug.device import configure_process, describe_device
 from nerfaug.evaluation import evaluate_views, load_lpips
 from nerfaug.experiment.config import ExperimentConfig
@@ -28,7 +29,7 @@ from nerfaug.experiment.runfolder import (
     write_selection,
     write_view_uncertainty,
 )
-from nerfaug.experiment.scene_views import initial_in_half, layout_halves, split_captured, spread_over_frames
+from nerfaug.experiment.scene_views import initial_in_half, layout_halves, split_captured
 from nerfaug.experiment.store import (
     RunKey,
     code_version,

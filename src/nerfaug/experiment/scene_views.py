@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 from torch import Tensor
 
@@ -48,18 +47,6 @@ class Half:
 
     def to_dict(self) -> dict:
         return {"start_deg": round(math.degrees(self.start) % 360, 3), "width_deg": round(math.degrees(self.width), 3)}
-
-
-def spread_over_frames(count: int, total: int) -> list[int]:
-    """`count` frame indices spread evenly over `total` frames (all of them when count >= total).
-
-    Example:
-        >>> spread_over_frames(4, 200)
-        [0, 66, 133, 199]
-    """
-    if count >= total:
-        return list(range(total))
-    return [int(i) for i in np.round(np.linspace(0, total - 1, count)).astype(int)]
 
 
 def directions_of(camera_to_world: Tensor) -> Tensor:

@@ -65,7 +65,11 @@ class EvaluateRequest(BaseModel):
 
     dataset: Dataset
     split: Split = Field("test", description="the split to score")
-    max_views: int | None = Field(None, ge=1, description="score only the split's first views (default: all)")
+    max_views: int | None = Field(
+        None,
+        ge=1,
+        description="score only this many of the split's views, spread evenly over its frames (default: all)",
+    )
     lpips: bool = Field(True, description="also LPIPS (when its weights are installed and images are large enough)")
 
 
