@@ -515,8 +515,8 @@ def protocol(args) -> dict:
         print(f"  finished runs archived in {summary['archive']}: pass it to --resume-from on the next machine")
     summary["report"] = None
     if args.report and results:
+        from nerfaug.cli.run import paper_tables
         from nerfaug.report import write_report
-        from nerfaug.run_cli import paper_tables
 
         try:  # the figures above are the benchmark; a report failure must not hide them
             summary["report"] = [str(p) for p in write_report(args.out, paper_tables())]

@@ -31,8 +31,8 @@ def test_run_help_shows_the_presets_values_not_none(capsys, monkeypatch):
 
 
 def test_top_level_help_lists_every_command(capsys, monkeypatch):
-    from nerfaug import session_cli
     from nerfaug.cli import COMMANDS
+    from nerfaug.cli import session as session_cli
 
     text = help_text([], capsys, monkeypatch)
     usage = re.search(r"usage: nerfaug \[-h\] \{([^}]*)\}", text)
@@ -121,9 +121,9 @@ def test_reflow_joins_paragraphs_and_argument_descriptions_but_keeps_headings():
 
 
 def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_defaults(monkeypatch, tmp_path):
+    import nerfaug.cli.study as study_cli
     import nerfaug.experiment.study as study_module
     import nerfaug.report.study_page as study_page
-    import nerfaug.study_cli as study_cli
 
     planned = []
 

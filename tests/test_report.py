@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from nerfaug.cli.run import paper_tables
 from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.runfolder import (
     FILES,
@@ -25,7 +26,6 @@ from nerfaug.experiment.sweep import sweep_record
 from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses, sample_uniform_poses
 from nerfaug.jsonio import atomic_write_json
 from nerfaug.report import ReportError, collect_results, history_series, write_report
-from nerfaug.run_cli import paper_tables
 from nerfaug.uncertainty.sparsification import ause, mean_pool
 
 METHODS = ("ours", "uniform", "entropy")

@@ -82,7 +82,7 @@ def findings(where: str) -> str:
 
 def test_propose_help_links_to_the_findings_and_states_none_itself():
     """Study findings live in docs (they change with the study), not in `--help`."""
-    from nerfaug import session_cli
+    from nerfaug.cli import session as session_cli
 
     help_text = " ".join(session_cli.propose.__doc__.split())
     assert "docs/methods.md" in help_text

@@ -3,7 +3,7 @@ shape, the image size, and a time estimate whose model agrees with what BENCHMAR
 
 import pytest
 
-from nerfaug.run_size import duration, run_seconds, size_line
+from nerfaug.cli.run_size import duration, run_seconds, size_line
 
 
 def test_the_cost_model_agrees_with_the_measured_runs():

@@ -1,4 +1,4 @@
-"""Active capture (`nerfaug.capture`, `nerfaug.session_cli`) on a tiny analytic scene: a shaded
+"""Active capture (`nerfaug.capture`, `nerfaug.cli.session`) on a tiny analytic scene: a shaded
 sphere, off the origin and at a non-Blender scale, seen by 8 cameras of 16x16 pixels on one half
 of its hemisphere. No Blender needed except for the one test marked `blender`."""
 

@@ -196,8 +196,8 @@ def test_the_same_command_with_other_settings_is_refused_naming_the_command_that
 
 
 def test_train_threads_policy_agrees_with_a_sweeps():
+    from nerfaug.cli.train import THREADS
     from nerfaug.experiment.config import ExperimentConfig
-    from nerfaug.train_cli import THREADS
 
     assert ExperimentConfig().threads_per_run == THREADS
 

@@ -45,8 +45,8 @@ def tiny_config(scene: Path, **changes):
 
 
 def test_tiny_sweep_writes_every_file_and_a_report(tiny_scene, tmp_path):
+    from nerfaug.cli.run import paper_tables
     from nerfaug.report import write_report
-    from nerfaug.run_cli import paper_tables
 
     config = tiny_config(tiny_scene)
     outcome = run_sweep(config, tmp_path, progress=False)

@@ -1,6 +1,6 @@
 """The study's runs: the study family of selection methods x the engine presets x the scenes,
 each as one resumable sweep per engine into `OUT/<engine>/`, and its plan recorded in study.json.
-The `nerfaug study` command (`nerfaug.study_cli`) runs them, then records every finished run in the
+The `nerfaug study` command (`nerfaug.cli.study`) runs them, then records every finished run in the
 per-run table and writes the combined summary from it (`nerfaug.report.study`). The study
 folder's layout: `experiment.layout.StudyFolder`.
 

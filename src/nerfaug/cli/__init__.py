@@ -32,8 +32,8 @@ from dataclasses import dataclass
 
 import tyro
 
-# cli_options.COMMAND_LINE: `train` reads which of its options the command line gives.
-from nerfaug.cli_options import COMMAND_LINE
+# options.COMMAND_LINE: `train` reads which of its options the command line gives.
+from nerfaug.cli.options import COMMAND_LINE
 from nerfaug.errors import NerfaugError
 
 # Each command's home, "module:function": a command's module is imported only when it runs, so
@@ -41,19 +41,19 @@ from nerfaug.errors import NerfaugError
 # A command is a function, or a dataclass whose instance is called; one with a `from_preset` class
 # method starts from the preset `--preset` names (`parse`).
 COMMANDS = {
-    "scene": "nerfaug.scene_cli:scene",
-    "run": "nerfaug.run_cli:Run",
-    "report": "nerfaug.run_cli:report",
-    "methods": "nerfaug.run_cli:methods",
-    "study": "nerfaug.study_cli:Study",
-    "train": "nerfaug.train_cli:train",
-    "propose": "nerfaug.session_cli:propose",
-    "add": "nerfaug.train_cli:add",
-    "export": "nerfaug.session_cli:export",
-    "eval": "nerfaug.session_cli:evaluate",
-    "render-proposals": "nerfaug.session_cli:render_proposals",
-    "uncertainty": "nerfaug.serve_cli:uncertainty",
-    "serve": "nerfaug.serve_cli:serve",
+    "scene": "nerfaug.cli.scene:scene",
+    "run": "nerfaug.cli.run:Run",
+    "report": "nerfaug.cli.run:report",
+    "methods": "nerfaug.cli.run:methods",
+    "study": "nerfaug.cli.study:Study",
+    "train": "nerfaug.cli.train:train",
+    "propose": "nerfaug.cli.session:propose",
+    "add": "nerfaug.cli.train:add",
+    "export": "nerfaug.cli.session:export",
+    "eval": "nerfaug.cli.session:evaluate",
+    "render-proposals": "nerfaug.cli.session:render_proposals",
+    "uncertainty": "nerfaug.cli.serve:uncertainty",
+    "serve": "nerfaug.cli.serve:serve",
 }
 
 
@@ -200,7 +200,7 @@ def parse(target, argv: list[str], prog: str):
 
 def _dispatch(argv: list[str]) -> None:
     if argv[:1] == ["scene"]:
-        scenes = importlib.import_module("nerfaug.scene_cli").COMMANDS
+        scenes = importlib.import_module("nerfaug.cli.scene").COMMANDS
         for function in scenes.values():
             function.__doc__ = reflow(function.__doc__)
         tyro.extras.subcommand_cli_from_dict(scenes, args=argv[1:], prog="nerfaug scene")

@@ -1,6 +1,6 @@
 """CLI commands of the active-capture loop (`nerfaug.capture`): propose, export, eval and
 render-proposals (a simulated capture with Blender); `train` and `add`, the commands that train,
-are in `nerfaug.train_cli`.
+are in `nerfaug.cli.train`.
 
     nerfaug train DATA --out RUN --steps 1000      start a session on the views you have
     nerfaug propose RUN --n 6 --out poses.json     where to capture next (+ poses.png, the map)
@@ -19,17 +19,18 @@ from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug import __version__, owned, serve_cli
+from nerfaug import __version__, owned
 from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.proposal import check_poses_out, read_poses
 from nerfaug.capture.requests import replaced_by
 from nerfaug.capture.state import SessionState
+from nerfaug.cli import serve as serve_cli
+from nerfaug.cli.train import THREADS, Device, RunFolder, _configure, _open, add, checked, train
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.errors import FolderRefused
 from nerfaug.jsonio import atomic_write_json
 from nerfaug.scenes.render import render_poses
-from nerfaug.train_cli import THREADS, Device, RunFolder, _configure, _open, add, checked, train
 
 FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
 Request = Annotated[ProposalRequest, tyro.conf.arg(name="")]

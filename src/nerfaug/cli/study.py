@@ -15,6 +15,7 @@ from typing import Annotated, ClassVar, Literal
 
 import tyro
 
+from nerfaug.cli.run_size import per_cell, size_line
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
 from nerfaug.experiment.layout import StudyFolder
@@ -23,7 +24,6 @@ from nerfaug.experiment.study import StudyPreset
 from nerfaug.experiment.sweep import default_workers
 from nerfaug.registry import Presets
 from nerfaug.report import study_page, study_table
-from nerfaug.run_size import per_cell, size_line
 from nerfaug.selection import METHODS
 from nerfaug.selection.config import SelectionConfig
 
@@ -192,7 +192,7 @@ class Study:
 
 
 def study_size_line(plan, workers: int) -> str:
-    """How many runs the study makes, how big, and about how long on this device (`nerfaug.run_size`)."""
+    """How many runs the study makes, how big, and about how long on this device (`nerfaug.cli.run_size`)."""
     config = plan.config
     each = len(plan.scenes) * len(config.methods) * config.trials
     study = StudyFolder(Path(plan.out))

@@ -18,6 +18,7 @@ from typing import Annotated, ClassVar, Literal
 
 import tyro
 
+from nerfaug.cli.run_size import per_cell, size_line
 from nerfaug.device import resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.experiment import sweep
@@ -25,7 +26,6 @@ from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig, Preset
 from nerfaug.experiment.store import finished_runs
 from nerfaug.registry import Presets
 from nerfaug.report import PaperTables, ReportError, write_report
-from nerfaug.run_size import per_cell, size_line
 from nerfaug.scenes.builtin import BUILTIN_SCENES
 from nerfaug.selection import METHODS, TABLE_I_ROWS, TABLE_II_ROWS
 
@@ -122,7 +122,7 @@ class Run:
 
 
 def run_size_line(config: ExperimentConfig, out: Path, workers: int) -> str:
-    """How many runs `config` makes, how big, and about how long on this device (`nerfaug.run_size`)."""
+    """How many runs `config` makes, how big, and about how long on this device (`nerfaug.cli.run_size`)."""
     total = len(config.scenes) * len(config.methods) * config.trials
     finished = min(len(finished_runs(out)), total) if Path(out).is_dir() else 0
     shape = " x ".join(

@@ -37,7 +37,7 @@ from nerfaug.capture.requests import (
     words,
 )
 from nerfaug.capture.runfolder import SESSION_FILE
-from nerfaug.cli_options import COMMAND_LINE, given_options
+from nerfaug.cli.options import COMMAND_LINE, given_options
 from nerfaug.errors import Interrupted
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
