@@ -61,7 +61,7 @@ def test_session_settings_defaults_and_conversions():
         ({"n_candidates": 0}, "n_candidates 0: must be >= 1"),
         ({"n_candidates": MAX_CANDIDATES + 1}, f"n_candidates {MAX_CANDIDATES + 1}: must be <= {MAX_CANDIDATES}"),
         ({"min_separation": 180}, "min_separation 180: must be < 180"),
-        ({"method": "best"}, "method 'best': unknown selection method; choose one of ours,"),
+        ({"method": "best"}, "method 'best': unknown selection method 'best'; choose one of: ours,"),
         ({"seed": -2}, "seed -2: must be >= 0"),
         ({"selection": {"bogus": 1}}, "selection {'bogus': 1}: unknown SelectionConfig fields ['bogus']"),
         ({"selection": SelectionConfig(entropy_resolution=300)}, "selection SelectionConfig("),

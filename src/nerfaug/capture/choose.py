@@ -25,6 +25,7 @@ from nerfaug.data.frame import ENGINE_RADIUS
 from nerfaug.data.frames import check_pose
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.progress import progress_bar
+from nerfaug.registry import check_name
 from nerfaug.selection import METHODS, SelectionConfig, get_method, hemisphere_candidates, matching_poses, select_views
 from nerfaug.selection.candidates import with_poses
 
@@ -47,10 +48,7 @@ SELECTION_BOUNDS = {
 
 
 def _known_method(method: str) -> str:
-    if method not in METHODS:
-        raise ValueError(
-            f"unknown selection method; choose one of {', '.join(METHODS)} (`nerfaug methods` describes them)"
-        )
+    check_name("selection method", method, METHODS)
     return method
 
 

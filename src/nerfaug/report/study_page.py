@@ -83,11 +83,22 @@ def _header(study: Study) -> list[Block]:
         (
             f"protocol: {config.get('n_initial', '?')} initial views, {config.get('n_new', '?')} added at step "
             f"{config.get('add_at_step', '?')}, {config.get('steps', '?')} steps, {config.get('resolution', '?')} px, "
-            f"pool {config.get('pool', '?')}, {config.get('n_test', '?')} test views"
+            f"{_pool_text(study, config)}, {config.get('n_test', '?')} test views"
         ),
         f"runs in the table: {len(study.table['runs'])}",
     ]
     return [Bullets(items)]
+
+
+def _pool_text(study: Study, config: dict) -> str:
+    """The candidate pool in words: the protocol's `pool` is the number of views rendered for a
+    built-in scene; a dataset folder (a scene recorded with its `source`) offers its own views."""
+    scenes = study.table.get("scenes", {})
+    folders = [name for name, scene in scenes.items() if "source" in scene]
+    own = "a dataset folder's pool: its train split (a captured set's: the views left after its test and initial views)"
+    if folders and len(folders) == len(scenes):
+        return own
+    return f"pool {config.get('pool', '?')}" + (f"; {own}" if folders else "")
 
 
 def _which_method(study: Study) -> list[Block]:
