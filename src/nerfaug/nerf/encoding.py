@@ -192,10 +192,13 @@ class HashEncoding(nn.Module):
         frac = scaled - floor
         # int32 rows: int64 products have no vector instruction on AVX2 CPUs, and the rows are
         # the largest tensor of the encoding, written once and read three times.
-        low = floor.int()
+        # terms (L, 3, 2, n): each axis's low and high vertex coordinate, then its term of the row.
+        terms = scaled.new_empty((levels, 3, 2, n), dtype=torch.int32)
+        low, high = terms.unbind(2)
+        low.copy_(floor)
         # x == 1 lands on vertex res + 1; clamping keeps it on the last cell's far face.
-        high = torch.minimum(low + 1, resolutions)
-        terms = torch.stack([low, high], dim=2) * self.factors[:, :, None, None]  # (L, 3, 2, n)
+        torch.minimum(low + 1, resolutions, out=high)
+        terms *= self.factors[:, :, None, None]
         terms[dense:] &= self.table_size - 1
         terms[:, 2] += self.level_offsets[:, None, None]
         # Vertex order: z slowest, x fastest.
