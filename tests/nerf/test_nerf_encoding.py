@@ -179,3 +179,12 @@ def test_trunc_exp_clamps_the_gradient_and_densities_start_at_the_average():
     zero = torch.zeros(3)
     for kind in ("trunc_exp", "softplus"):
         assert torch.allclose(density_activation(zero, kind, 0.01), torch.full((3,), 0.01), rtol=1e-4)
+
+
+def test_hash_encoding_kernel_is_checked_and_the_cpu_takes_the_pytorch_path():
+    with pytest.raises(ValueError, match=r"kernel must be one of auto, torch, triton, got 'cuda'"):
+        HashEncoding(2, 2, 8, 4, 16, kernel="cuda")
+    x = torch.rand(5, 3)
+    assert not HashEncoding(2, 2, 8, 4, 16).fused(x)  # "auto": Triton on CUDA tensors only
+    assert HashEncoding(2, 2, 8, 4, 16, kernel="triton").fused(x)
+    assert not HashEncoding(2, 2, 8, 4, 16, kernel="triton").fused(x.requires_grad_())  # positions' gradients

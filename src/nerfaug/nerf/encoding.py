@@ -8,6 +8,8 @@ registry (`nerfaug.nerf.registry.ENCODINGS`) names them.
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import math
 
 import torch
@@ -52,6 +54,12 @@ def hash_grid_indices(corners: Tensor, resolutions: Tensor, table_size: int) -> 
     hashed = (x * HASH_PRIMES[0]) ^ (y * HASH_PRIMES[1]) ^ (z * HASH_PRIMES[2])
     hashed = hashed & (table_size - 1)
     return torch.where(side**3 <= table_size, dense, hashed)
+
+
+@functools.cache
+def triton_available() -> bool:
+    """Whether Triton is installed (for `HashEncoding`'s fused kernels)."""
+    return importlib.util.find_spec("triton") is not None
 
 
 # Types as wide as a table row of 1, 2 or 4 float32 features, to gather a row as one element.
@@ -119,7 +127,17 @@ class HashEncoding(nn.Module):
     product and of an XOR depend only on the operands' low bits, so masking each term gives
     Instant-NGP's uint32 rows; the level's offset in the flat table is added to the z term
     alone, which an XOR leaves in place since it lies above the mask.
+
+    `kernel` picks how: "torch" (PyTorch operations, the reference: bit for bit the same on
+    every run), "triton" (`nerfaug.nerf.hash_triton`'s fused kernels: one launch per pass
+    instead of ~20 a level, gradients summed by atomic adds in no fixed order), or "auto" (Triton
+    on CUDA tensors where Triton is installed, else PyTorch; the default, `default_kernel`, which
+    a benchmark may set for the whole process). Points that need gradients of their own always
+    take the PyTorch path.
     """
+
+    KERNELS = ("auto", "torch", "triton")
+    default_kernel = "auto"
 
     def __init__(
         self,
@@ -129,8 +147,13 @@ class HashEncoding(nn.Module):
         base_resolution: int = 16,
         max_resolution: int = 2048,
         init_scale: float = 1e-4,
+        kernel: str | None = None,
     ):
         super().__init__()
+        kernel = self.default_kernel if kernel is None else kernel
+        if kernel not in self.KERNELS:
+            raise ValueError(f"kernel must be one of {', '.join(self.KERNELS)}, got {kernel!r}")
+        self.kernel = kernel
         if (max_resolution + 1) * 2**log2_table_size >= 2**31:
             raise ValueError(
                 f"max_resolution {max_resolution} with a 2^{log2_table_size} table overflows int32 hashing"
@@ -215,8 +238,18 @@ class HashEncoding(nn.Module):
 
         Level-major rows keep the backward's scatter inside one level's table at a time
         (cache-friendly)."""
+        if self.fused(x):
+            from nerfaug.nerf.hash_triton import FusedHashInterpolation
+
+            return FusedHashInterpolation.apply(x, self.table, self)
         rows, weights = self.corners(x)
         return _HashInterpolation.apply(self.table, rows, weights)
+
+    def fused(self, x: Tensor) -> bool:
+        """Whether `forward(x)` runs the Triton kernels (see `kernel`)."""
+        if self.kernel == "torch" or x.requires_grad:
+            return False
+        return self.kernel == "triton" or (x.is_cuda and triton_available())
 
 
 class KPlanesEncoding(nn.Module):
