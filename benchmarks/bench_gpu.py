@@ -341,10 +341,12 @@ def trial(args) -> dict:
     """One protocol run, timed; returns the figures (also printed, and written to --json)."""
     from nerfaug.device import configure_process, peak_memory_mib, resolve_device
     from nerfaug.experiment.sweep import run_sweep
+    from nerfaug.nerf.encoding import HashEncoding, triton_available
 
     device = resolve_device(args.device)
     args.device = device.type
     configure_process(threads=args.threads)
+    HashEncoding.default_kernel = args.hash_kernel  # the trial runs in this process (one worker)
     folder, meta = unpack(args.data, args.unpack_to)
     config = experiment_config(args, folder, meta, (args.method,), 1)
     warm = warm_up(folder, args.engine, device, args.warmup_steps, args.compile) if args.warmup_steps else 0.0
@@ -364,6 +366,10 @@ def trial(args) -> dict:
         **environment(device),
         "engine": config.engine,
         "compile": config.compile,
+        "hash_kernel": args.hash_kernel,
+        "triton_fused": device.type == "cuda" and triton_available()
+        if args.hash_kernel == "auto"
+        else args.hash_kernel == "triton",
         "method": args.method,
         "resolution": f"{meta['width']}x{meta['height']}",
         "train_views": f"{config.n_initial} + {config.n_new}",
@@ -623,6 +629,12 @@ def parser() -> argparse.ArgumentParser:
         )
         if name == "trial":
             s.add_argument("--method", default="ours")
+            s.add_argument(
+                "--hash-kernel",
+                choices=("auto", "torch", "triton"),
+                default="auto",
+                help="the hash encoding's kernels: auto (Triton's fused ones on CUDA where installed), torch or triton",
+            )
             s.add_argument("--warmup-steps", type=int, default=20, help="throwaway steps before timing (0: none)")
         else:
             s.add_argument("--methods", nargs="+", default=list(MAIN_METHODS))

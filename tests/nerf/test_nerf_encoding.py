@@ -86,6 +86,53 @@ def test_hash_encoding_matches_a_per_level_reference_and_passes_gradients(genera
         assert not torch.allclose(encoding(a)[:, 6:], encoding(b)[:, 6:])
 
 
+def _autograd_interpolation(table: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """The interpolation as the engine composed it from autograd operations before it had a
+    backward of its own: the reference its outputs and gradients must equal bit for bit."""
+    n = weights.shape[-1]
+    flat = rows.reshape(-1).long()
+    channels = [
+        (table[:, f].index_select(0, flat).reshape(weights.shape) * weights).sum(dim=1) for f in range(table.shape[1])
+    ]
+    return torch.stack(channels, dim=-1).transpose(0, 1).reshape(n, -1)
+
+
+@pytest.mark.parametrize(
+    "levels, features, log2_size, base, finest",
+    [(6, 2, 14, 16, 256), (3, 2, 12, 16, 64), (4, 3, 10, 4, 64), (2, 1, 12, 8, 2048)],
+)
+def test_hash_encoding_equals_the_autograd_composition_bit_for_bit(
+    levels, features, log2_size, base, finest, generator
+):
+    encoding = HashEncoding(levels, features, log2_size, base, finest)
+    with torch.no_grad():
+        encoding.table.normal_(generator=generator)
+    x = torch.rand(3000, 3, generator=generator)
+    x[:3] = torch.tensor([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0], [1.0, 0.5, 0.0]])
+    grad = torch.randn(3000, levels * features, generator=generator)
+    rows, weights = encoding.corners(x)
+    table = encoding.table.detach().clone().requires_grad_()
+    expected = _autograd_interpolation(table, rows, weights)
+    expected.backward(grad)
+    got = encoding(x)
+    got.backward(grad)
+    assert torch.equal(got, expected)
+    assert torch.equal(encoding.table.grad, table.grad)
+    assert 0 < (table.grad.abs().sum(-1) > 0).sum() < table.shape[0]
+
+
+def test_hash_encoding_passes_gradients_to_the_positions_too():
+    encoding = HashEncoding(2, 2, 8, 4, 16).double()
+    x = torch.rand(20, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    x = (x * 0.98 + 0.01).requires_grad_()  # off the cell faces, where trilinear weights have kinks
+    # d/dx of the features against the autograd composition of the same rows and weights.
+    rows, weights = encoding.corners(x)
+    expected = torch.autograd.grad(_autograd_interpolation(encoding.table, rows, weights).sum(), x)[0]
+    got = torch.autograd.grad(encoding(x).sum(), x)[0]
+    assert torch.allclose(got, expected, rtol=1e-12, atol=1e-12)
+    assert got.abs().sum() > 0
+
+
 def test_hash_encoding_is_exact_at_grid_vertices():
     encoding = HashEncoding(num_levels=1, features_per_level=3, log2_table_size=12, base_resolution=8, max_resolution=8)
     with torch.no_grad():
@@ -132,3 +179,12 @@ def test_trunc_exp_clamps_the_gradient_and_densities_start_at_the_average():
     zero = torch.zeros(3)
     for kind in ("trunc_exp", "softplus"):
         assert torch.allclose(density_activation(zero, kind, 0.01), torch.full((3,), 0.01), rtol=1e-4)
+
+
+def test_hash_encoding_kernel_is_checked_and_the_cpu_takes_the_pytorch_path():
+    with pytest.raises(ValueError, match=r"kernel must be one of auto, torch, triton, got 'cuda'"):
+        HashEncoding(2, 2, 8, 4, 16, kernel="cuda")
+    x = torch.rand(5, 3)
+    assert not HashEncoding(2, 2, 8, 4, 16).fused(x)  # "auto": Triton on CUDA tensors only
+    assert HashEncoding(2, 2, 8, 4, 16, kernel="triton").fused(x)
+    assert not HashEncoding(2, 2, 8, 4, 16, kernel="triton").fused(x.requires_grad_())  # positions' gradients

@@ -8,6 +8,7 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, pose_from_angles
+from nerfaug.nerf import model as model_module
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.occupancy import OccupancyGrid
@@ -84,6 +85,25 @@ def test_chunked_rendering_equals_one_eval_pass(model, generator):
     assert torch.allclose(chunked.rgb, whole.rgb, atol=1e-6)
     assert torch.allclose(chunked.depth, whole.depth, atol=1e-5)
     assert chunked.weights.shape == whole.weights.shape
+
+
+@pytest.mark.parametrize("preset", ["nerfacto-cpu", "cpu"])
+def test_cpu_renders_in_cache_sized_passes_with_the_same_numbers(preset, monkeypatch, generator):
+    torch.manual_seed(0)
+    model = NerfModel(NerfConfig.preset(preset))
+    origins, directions = rays_at_origin(3000, generator)
+    passes = []
+    sample = model.sampler.sample
+    monkeypatch.setattr(model.sampler, "sample", lambda o, *args: passes.append(o.shape[0]) or sample(o, *args))
+    split = model.render_rays(origins, directions)
+    assert max(passes) * model.sampler.samples_per_ray <= model_module.CPU_PASS_SAMPLES < 3000 * 64
+    passes.clear()
+    monkeypatch.setattr(model_module, "CPU_PASS_SAMPLES", 10**9)
+    whole = model.render_rays(origins, directions)
+    assert passes == [3000]
+    for name in ("rgb", "accumulation", "depth", "weights"):
+        assert torch.equal(getattr(split, name), getattr(whole, name)), name
+    assert torch.equal(model.render_weights_only(origins, directions), whole.weights)
 
 
 def test_render_image_gives_rgb_accumulation_and_depth_maps(model):

@@ -8,6 +8,8 @@ registry (`nerfaug.nerf.registry.ENCODINGS`) names them.
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import math
 
 import torch
@@ -54,15 +56,88 @@ def hash_grid_indices(corners: Tensor, resolutions: Tensor, table_size: int) -> 
     return torch.where(side**3 <= table_size, dense, hashed)
 
 
+@functools.cache
+def triton_available() -> bool:
+    """Whether Triton is installed (for `HashEncoding`'s fused kernels)."""
+    return importlib.util.find_spec("triton") is not None
+
+
+# Types as wide as a table row of 1, 2 or 4 float32 features, to gather a row as one element.
+_ROW_TYPES = {4: torch.int32, 8: torch.int64, 16: torch.complex128}
+
+
+def _gather_rows(table: Tensor, rows: Tensor) -> Tensor:
+    """`table[rows]` for a table (m, F) and rows (k,) -> (k, F), bit for bit.
+
+    A row of a few float32 features is gathered as one element of its width: `index_select`
+    moves the 8-byte elements of a 1-D array 5x faster than the rows of an (m, 2) table, and a
+    copy moves the bits unchanged.
+    """
+    row_type = _ROW_TYPES.get(table.shape[1] * table.element_size())
+    if row_type is None or not table.is_contiguous():
+        return table.index_select(0, rows)
+    return table.view(row_type).reshape(-1).index_select(0, rows).view(table.dtype).reshape(-1, table.shape[1])
+
+
+class _HashInterpolation(torch.autograd.Function):
+    """Trilinear interpolation of table rows, with a hand-written backward.
+
+    The values are those of the autograd composition it replaces (per channel: gather, multiply
+    by the weights, sum over the 8 corners), computed by the same arithmetic in the same order,
+    so every output and every table gradient is bit for bit the same. What it saves is layout:
+    autograd's product of the expanded output gradient with the weights ran over a
+    (levels, 8, n) tensor with a zero stride, element by element, then was copied and scattered
+    into a zero table per channel before the channels were added.
+    """
+
+    @staticmethod
+    def forward(ctx, table: Tensor, rows: Tensor, weights: Tensor) -> Tensor:
+        levels, _, n = weights.shape
+        gathered = _gather_rows(table, rows.reshape(-1)).reshape(*weights.shape, -1)  # (L, 8, n, F)
+        channels = [(gathered[..., f] * weights).sum(dim=1) for f in range(table.shape[1])]  # each (L, n)
+        ctx.save_for_backward(table, rows, weights)
+        return torch.stack(channels, dim=-1).transpose(0, 1).reshape(n, -1)
+
+    @staticmethod
+    def backward(ctx, grad: Tensor) -> tuple[Tensor | None, None, Tensor | None]:
+        table, rows, weights = ctx.saved_tensors
+        levels, _, n = weights.shape
+        features = table.shape[1]
+        flat = rows.reshape(-1)
+        per_channel = grad.reshape(n, levels, features)
+        grad_table = torch.zeros_like(table) if ctx.needs_input_grad[0] else None
+        grad_weights = torch.zeros_like(weights) if ctx.needs_input_grad[2] else None
+        for f in range(features):
+            g = per_channel[:, :, f].T.contiguous()[:, None, :]  # (L, 1, n)
+            if grad_table is not None:
+                grad_table[:, f].index_add_(0, flat, (g * weights).reshape(-1))
+            if grad_weights is not None:
+                grad_weights += g * table[:, f].index_select(0, flat).reshape(weights.shape)
+        return grad_table, None, grad_weights
+
+
 class HashEncoding(nn.Module):
     """Multiresolution hash encoding (Mueller et al. 2022), all levels in one vectorised pass.
 
     Output feature of a point: for each level, the trilinear interpolation of the features
     stored at the 8 vertices of its grid cell, concatenated over levels. Rows are those of
-    `hash_grid_indices`, computed per axis in int32 and combined over the 2 x 2 x 2 corners by
-    broadcasting: the low bits of a product and of an XOR depend only on the operands' low bits,
-    so masking each factor keeps every intermediate below 2^31.
+    `hash_grid_indices`: each vertex coordinate is multiplied by its level's factor per axis
+    (row-major strides for dense levels, primes for hashed ones), and the three terms are summed
+    (dense) or XOR-ed (hashed) over the 2 x 2 x 2 corners by broadcasting. The low bits of a
+    product and of an XOR depend only on the operands' low bits, so masking each term gives
+    Instant-NGP's uint32 rows; the level's offset in the flat table is added to the z term
+    alone, which an XOR leaves in place since it lies above the mask.
+
+    `kernel` picks how: "torch" (PyTorch operations, the reference: bit for bit the same on
+    every run), "triton" (`nerfaug.nerf.hash_triton`'s fused kernels: one launch per pass
+    instead of ~20 a level, gradients summed by atomic adds in no fixed order), or "auto" (Triton
+    on CUDA tensors where Triton is installed, else PyTorch; the default, `default_kernel`, which
+    a benchmark may set for the whole process). Points that need gradients of their own always
+    take the PyTorch path.
     """
+
+    KERNELS = ("auto", "torch", "triton")
+    default_kernel = "auto"
 
     def __init__(
         self,
@@ -72,8 +147,13 @@ class HashEncoding(nn.Module):
         base_resolution: int = 16,
         max_resolution: int = 2048,
         init_scale: float = 1e-4,
+        kernel: str | None = None,
     ):
         super().__init__()
+        kernel = self.default_kernel if kernel is None else kernel
+        if kernel not in self.KERNELS:
+            raise ValueError(f"kernel must be one of {', '.join(self.KERNELS)}, got {kernel!r}")
+        self.kernel = kernel
         if (max_resolution + 1) * 2**log2_table_size >= 2**31:
             raise ValueError(
                 f"max_resolution {max_resolution} with a 2^{log2_table_size} table overflows int32 hashing"
@@ -83,15 +163,16 @@ class HashEncoding(nn.Module):
         resolutions = torch.tensor(hash_resolutions(num_levels, base_resolution, max_resolution))
         side = resolutions + 1
         dense = side**3 <= self.table_size
+        # Resolutions grow with the level, so the dense levels are the first ones.
+        self.dense_levels = int(dense.sum())
         # Per level and axis, the factor a vertex coordinate is multiplied by: row-major strides
         # for dense levels (summed), masked primes for hashed ones (XOR-ed).
         strides = torch.stack([torch.ones_like(side), side, side * side], dim=-1)
         primes = torch.tensor(HASH_PRIMES) & (self.table_size - 1)
         factors = torch.where(dense[:, None], strides, primes)
-        self.register_buffer("resolutions", resolutions.to(torch.int32), persistent=False)
-        self.register_buffer("dense", dense, persistent=False)
-        self.register_buffer("factors", factors.to(torch.int32), persistent=False)
-        offsets = (torch.arange(num_levels) * self.table_size).to(torch.int32)
+        self.register_buffer("resolutions", resolutions.int(), persistent=False)
+        self.register_buffer("factors", factors.int(), persistent=False)
+        offsets = torch.arange(num_levels, dtype=torch.int32) * self.table_size
         self.register_buffer("level_offsets", offsets, persistent=False)
         # Small uniform init as Instant-NGP: the field starts almost constant.
         self.table = nn.Parameter(
@@ -124,43 +205,51 @@ class HashEncoding(nn.Module):
             x: Tensor with shape (n, 3) in [0, 1].
 
         Returns:
-            rows: long Tensor with shape (levels, 8, n), rows of the flat table.
+            rows: int32 Tensor with shape (levels, 8, n), rows of the flat table.
             weights: Tensor with shape (levels, 8, n), summing to 1 over the 8 vertices.
         """
-        n, levels = x.shape[0], self.num_levels
+        n, levels, dense = x.shape[0], self.num_levels, self.dense_levels
         resolutions = self.resolutions[:, None, None]
         scaled = resolutions.to(x.dtype) * x.T[None]  # (L, 3, n)
         floor = scaled.floor()
         frac = scaled - floor
-        low = floor.to(torch.int32)
+        # int32 rows: int64 products have no vector instruction on AVX2 CPUs, and the rows are
+        # the largest tensor of the encoding, written once and read three times.
+        # terms (L, 3, 2, n): each axis's low and high vertex coordinate, then its term of the row.
+        terms = scaled.new_empty((levels, 3, 2, n), dtype=torch.int32)
+        low, high = terms.unbind(2)
+        low.copy_(floor)
         # x == 1 lands on vertex res + 1; clamping keeps it on the last cell's far face.
-        high = torch.minimum(low + 1, resolutions)
-        terms = torch.stack([low, high], dim=2) * self.factors[:, :, None, None]  # (L, 3, 2, n)
+        torch.minimum(low + 1, resolutions, out=high)
+        terms *= self.factors[:, :, None, None]
+        terms[dense:] &= self.table_size - 1
+        terms[:, 2] += self.level_offsets[:, None, None]
         # Vertex order: z slowest, x fastest.
         tx, ty, tz = terms[:, 0, None, None], terms[:, 1, None, :, None], terms[:, 2, :, None, None]
-        mask = self.table_size - 1
-        hashed = (tx & mask) ^ (ty & mask) ^ (tz & mask)
-        rows = torch.where(self.dense[:, None, None, None, None], tx + ty + tz, hashed)  # (L, 2, 2, 2, n)
-        # int64 rows: index_select's backward (index_add) with int32 rows falls back to a 3x
-        # slower single-threaded path on CPU.
-        rows = (rows + self.level_offsets[:, None, None, None, None]).reshape(levels, 8, n).long()
+        rows = terms.new_empty((levels, 2, 2, 2, n))
+        torch.add(tx[:dense] + ty[:dense], tz[:dense], out=rows[:dense])
+        torch.bitwise_xor(tx[dense:] ^ ty[dense:], tz[dense:], out=rows[dense:])
         w = torch.stack([1.0 - frac, frac], dim=2)  # (L, 3, 2, n)
         weights = w[:, 0, None, None] * w[:, 1, None, :, None] * w[:, 2, :, None, None]
-        return rows, weights.reshape(levels, 8, n)
+        return rows.reshape(levels, 8, n), weights.reshape(levels, 8, n)
 
     def forward(self, x: Tensor) -> Tensor:
-        """Args: x: Tensor with shape (n, 3) in [0, 1]. Returns: Tensor with shape (n, output_dim)."""
-        n = x.shape[0]
+        """Args: x: Tensor with shape (n, 3) in [0, 1]. Returns: Tensor with shape (n, output_dim).
+
+        Level-major rows keep the backward's scatter inside one level's table at a time
+        (cache-friendly)."""
+        if self.fused(x):
+            from nerfaug.nerf.hash_triton import FusedHashInterpolation
+
+            return FusedHashInterpolation.apply(x, self.table, self)
         rows, weights = self.corners(x)
-        rows = rows.reshape(-1)
-        # One gather per feature channel from a strided column keeps every product and sum
-        # over long contiguous rows; level-major rows keep the backward's scatter inside one
-        # level's table at a time (cache-friendly).
-        channels = [
-            (self.table[:, f].index_select(0, rows).reshape(weights.shape) * weights).sum(dim=1)
-            for f in range(self.features_per_level)
-        ]  # each (L, n)
-        return torch.stack(channels, dim=-1).transpose(0, 1).reshape(n, -1)
+        return _HashInterpolation.apply(self.table, rows, weights)
+
+    def fused(self, x: Tensor) -> bool:
+        """Whether `forward(x)` runs the Triton kernels (see `kernel`)."""
+        if self.kernel == "torch" or x.requires_grad:
+            return False
+        return self.kernel == "triton" or (x.is_cuda and triton_available())
 
 
 class KPlanesEncoding(nn.Module):

@@ -19,6 +19,11 @@ from nerfaug.nerf.registry import build_field, build_sampler
 from nerfaug.nerf.sampling import ray_box_span, unit_cube
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 
+# Most samples one network pass evaluates when rendering without gradients on the CPU: passes
+# this size keep their intermediate tensors in the cache. Measured (100x100 image, 1 thread):
+# nerfacto-cpu 0.30 s an image against 0.45 s in one pass of 16384 rays, cpu 0.13 against 0.19 s,
+# with every number the same (each ray is computed alone).
+CPU_PASS_SAMPLES = 65536
 # State-dict prefixes of models saved before samplers were modules of their own.
 _RENAMED_KEYS = (("occupancy.", "sampler.grid."), ("proposals.", "sampler.networks."), ("anneal", "sampler.anneal"))
 
@@ -161,9 +166,13 @@ class NerfModel(nn.Module):
         self, origins: Tensor, directions: Tensor, chunk: int | None
     ) -> Iterator[tuple[int, int, Tensor, Tensor]]:
         """(start, stop, origins, directions) of consecutive ray chunks on the model's device, in
-        eval mode without gradients (the mode is restored after)."""
+        eval mode without gradients (the mode is restored after). On the CPU a chunk holds at
+        most `CPU_PASS_SAMPLES` samples per network pass."""
         device = self.background.device
         chunk = chunk or self.config.render_chunk
+        per_ray = self.sampler.samples_per_ray
+        if device.type == "cpu" and per_ray:
+            chunk = min(chunk, max(1, CPU_PASS_SAMPLES // per_ray))
         was_training = self.training
         self.eval()
         try:
@@ -192,7 +201,8 @@ class NerfModel(nn.Module):
         Args:
             origins, directions: Tensors with shape (n_rays, 3).
             background: Tensor with shape (3,) or (n_rays, 3); None for the configured one.
-            chunk: rays per forward pass (None: `config.render_chunk`); bounds peak memory.
+            chunk: rays per forward pass (None: `config.render_chunk`); bounds peak memory. On
+                the CPU, smaller chunks may be used (`CPU_PASS_SAMPLES`); the numbers are the same.
 
         Returns:
             RenderOutput (extras None) on the model's device.

@@ -144,6 +144,10 @@ class OccupancySampler(Sampler):
         )
         return cls(grid, config.num_samples)
 
+    @property
+    def samples_per_ray(self) -> int:
+        return self.num_samples
+
     def sample(self, origins, directions, t_min, t_max, generator=None) -> tuple[Tensor, dict]:
         return stratified_edges(t_min, t_max, self.num_samples, self.training, generator), {}
 

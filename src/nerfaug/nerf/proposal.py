@@ -175,6 +175,10 @@ class ProposalSampler(Sampler):
             config.distortion_loss_mult,
         )
 
+    @property
+    def samples_per_ray(self) -> int:
+        return max((*self.samples, self.num_samples))
+
     def sample(self, origins, directions, t_min, t_max, generator=None) -> tuple[Tensor, dict]:
         """See `Sampler.sample`; `extras` holds each network's histogram ("proposal_edges",
         "proposal_weights") for the interlevel loss."""

@@ -45,6 +45,12 @@ class Sampler(nn.Module, ABC):
             extras: what `auxiliary_loss` needs of this pass (put in `RenderOutput.extras`).
         """
 
+    @property
+    def samples_per_ray(self) -> int | None:
+        """The most samples along one ray that a network evaluates in one pass (None: not
+        known); sizes the chunks of rendering without gradients on the CPU."""
+        return None
+
     def live(self, points: Tensor) -> Tensor | None:
         """Which final samples may hold density: bool Tensor with shape (n,) for world points
         (n, 3), or None when every sample may (the field then sees all of them)."""
