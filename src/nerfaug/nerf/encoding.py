@@ -62,7 +62,7 @@ def triton_available() -> bool:
     return importlib.util.find_spec("triton") is not None
 
 
-# Types as wide as a table row of 1, 2 or 4 float32 features, to gather a row as one element.
+# Types as wide as a table row (4, 8 or 16 bytes: 1, 2 or 4 float32 features), to gather it as one element.
 _ROW_TYPES = {4: torch.int32, 8: torch.int64, 16: torch.complex128}
 
 
@@ -92,7 +92,7 @@ class _HashInterpolation(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, table: Tensor, rows: Tensor, weights: Tensor) -> Tensor:
-        levels, _, n = weights.shape
+        n = weights.shape[-1]
         gathered = _gather_rows(table, rows.reshape(-1)).reshape(*weights.shape, -1)  # (L, 8, n, F)
         channels = [(gathered[..., f] * weights).sum(dim=1) for f in range(table.shape[1])]  # each (L, n)
         ctx.save_for_backward(table, rows, weights)
@@ -130,7 +130,7 @@ class HashEncoding(nn.Module):
 
     `kernel` picks how: "torch" (PyTorch operations, the reference: bit for bit the same on
     every run), "triton" (`nerfaug.nerf.hash_triton`'s fused kernels: one launch per pass
-    instead of ~20 a level, gradients summed by atomic adds in no fixed order), or "auto" (Triton
+    instead of ~25, gradients summed by atomic adds in no fixed order), or "auto" (Triton
     on CUDA tensors where Triton is installed, else PyTorch; the default, `default_kernel`, which
     a benchmark may set for the whole process). Points that need gradients of their own always
     take the PyTorch path.

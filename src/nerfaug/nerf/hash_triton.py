@@ -1,6 +1,6 @@
-"""The hash encoding's interpolation fused into Triton kernels: on a GPU, the PyTorch path's ~20
-launches per level (index arithmetic, gather, products, sums) and their backward become one
-launch each way.
+"""The hash encoding's interpolation fused into Triton kernels: on a GPU, the PyTorch path's ~25
+launches per encoding (index arithmetic, gather, products, sums) and as many in its backward
+become one launch each way.
 
 Forward: each program takes a block of points at one level, computes the rows and trilinear
 weights of the cell's 8 vertices as `HashEncoding.corners` does (the same integer rows, the same

@@ -21,8 +21,10 @@ from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 
 # Most samples one network pass evaluates when rendering without gradients on the CPU: passes
 # this size keep their intermediate tensors in the cache. Measured (100x100 image, 1 thread):
-# nerfacto-cpu 0.30 s an image against 0.45 s in one pass of 16384 rays, cpu 0.13 against 0.19 s,
-# with every number the same (each ray is computed alone).
+# nerfacto-cpu 0.30 s an image against 0.45 s in one pass of 16384 rays, cpu 0.13 against 0.19 s.
+# Each ray is computed alone, so the pixels are the same, but for the last bit of a rare one: a
+# network's matrix product may round a row differently in a pass of another size (seen: 1 pixel
+# in 50 views of 100x100, by 6e-8).
 CPU_PASS_SAMPLES = 65536
 # State-dict prefixes of models saved before samplers were modules of their own.
 _RENAMED_KEYS = (("occupancy.", "sampler.grid."), ("proposals.", "sampler.networks."), ("anneal", "sampler.anneal"))
@@ -202,7 +204,7 @@ class NerfModel(nn.Module):
             origins, directions: Tensors with shape (n_rays, 3).
             background: Tensor with shape (3,) or (n_rays, 3); None for the configured one.
             chunk: rays per forward pass (None: `config.render_chunk`); bounds peak memory. On
-                the CPU, smaller chunks may be used (`CPU_PASS_SAMPLES`); the numbers are the same.
+                the CPU, smaller chunks may be used (`CPU_PASS_SAMPLES`).
 
         Returns:
             RenderOutput (extras None) on the model's device.
