@@ -89,6 +89,23 @@ def test_two_trains_of_one_session_at_once_both_reach_their_step(run):
     assert CaptureSession.open(run).step == 120
 
 
+def test_a_train_that_waited_finds_its_step_reached_by_the_holder(run):
+    """The order the test above leaves to chance, made certain: `train --steps 60` waits while this
+    process holds the session and trains it to 120; once let in, it says its step is reached."""
+    with acquire(run, "nerfaug train"):
+        waiting = nerfaug("train", run, "--steps", "60", "--device", "cpu")
+        deadline = time.monotonic() + 120
+        while "waiting for" not in (line := waiting.stderr.readline()) and time.monotonic() < deadline:
+            assert line, "the second command ended before it waited"
+        session = CaptureSession.open(run)
+        session.train(120 - session.step)
+        session.save()
+    out, err = waiting.communicate(timeout=600)
+    assert waiting.returncode == 0, err
+    assert "already at step 120 (--steps 60)" in out
+    assert SessionState.read(run).step == 120
+
+
 def test_a_session_saved_before_digests_opens_with_a_warning_naming_its_checkpoint(run):
     data = json.loads((run / "session.json").read_text())
     data.pop("integrity")

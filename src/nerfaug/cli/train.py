@@ -266,8 +266,12 @@ def _at_step(run: Path, data: Path | None, settings: SessionSettings, split, giv
         return False
     folder.checkpoint()
     step = folder.state.step
-    print(f"{run}: already at step {step} (--steps {steps}); nothing to do. Give a larger --steps to train further")
+    print(_reached(run, step, steps))
     return True
+
+
+def _reached(run: Path, step: int, steps: int) -> str:
+    return f"{run}: already at step {step} (--steps {steps}); nothing to do. Give a larger --steps to train further"
 
 
 def _refuse_other_settings(folder, data: Path | None, settings: SessionSettings, split, given, steps: int) -> None:
@@ -291,6 +295,9 @@ def _refuse_other_settings(folder, data: Path | None, settings: SessionSettings,
 
 
 def _train_further(session, target: int, every_s: float, resuming: bool) -> None:
+    if session.step >= target:  # another command reached it while this one waited for the lock
+        print(_reached(session.run_dir, session.step, target), flush=True)
+        return
     verb = "resuming" if resuming else "training"
     print(
         f"{session.run_dir}: {verb} from step {session.step}, its last save, until step {target} "
