@@ -85,6 +85,15 @@ PROBES: dict[str, tuple[str, dict[str, str]]] = {
     ),
     "start-fixed-bg": ("start with the fixed white background (= nerfacto-cpu)", {"background_mode": "fixed"}),
 }
+# The end of the walk (the paper preset) with another background: a probe whose settings are
+# the whole walk's plus one change, run where the full preset is affordable (a GPU).
+END_PROBES: dict[str, tuple[str, dict[str, str]]] = {
+    "paper-fixed-bg": ("the paper preset with the fixed white background", {"background_mode": "fixed"}),
+    "paper-last-composited-bg": (
+        "the paper preset with nerfacto's own last_sample (the last composited sample's colour)",
+        {"background_mode": "last_composited"},
+    ),
+}
 
 
 def walk_entries() -> list[tuple[str, str, str]]:
@@ -105,6 +114,8 @@ def all_entries() -> dict[str, tuple[str, str]]:
     """Every runnable entry: name -> (what changed, engine variant)."""
     out = {name: (what, engine) for name, what, engine in walk_entries()}
     out.update({name: (what, variant(changes)) for name, (what, changes) in PROBES.items()})
+    whole_walk = {key: value for _, _, changes in GROUPS for key, value in changes.items()}
+    out.update({name: (what, variant({**whole_walk, **changes})) for name, (what, changes) in END_PROBES.items()})
     return out
 
 
@@ -147,7 +158,7 @@ def view_metrics(model, views) -> tuple[float, dict[str, float | None]]:
     values, obj, bg = [], [], []
     with torch.no_grad():
         for i in range(len(views)):
-            out = model.render_image(views.cameras, i)
+            out = {key: value.cpu() for key, value in model.render_image(views.cameras, i).items()}
             values.append(float(psnr(out["rgb"].clamp(0, 1), views.images[i])))
             if views.alphas is not None:
                 mask = views.alphas[i] > 0.5
@@ -162,14 +173,17 @@ def save_render(model, views, index: int, path: Path) -> None:
     from PIL import Image
 
     with torch.no_grad():
-        out = model.render_image(views.cameras, index)
+        out = {key: value.cpu() for key, value in model.render_image(views.cameras, index).items()}
     acc = out["accumulation"].clamp(0, 1)[..., None].expand(-1, -1, 3)
     row = torch.cat([out["rgb"].clamp(0, 1), views.images[index], acc], dim=1)
     path.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray((row * 255).round().to(torch.uint8).numpy()).save(path, optimize=True)
 
 
-def run_one(data, engine: str, seed: int, steps: int, add_at: int, holdout: int, render_path: Path | None) -> dict:
+def run_one(
+    data, engine: str, seed: int, steps: int, add_at: int, holdout: int, render_path: Path | None, device: str = "cpu"
+) -> dict:
+    from nerfaug.device import synchronize
     from nerfaug.experiment.config import ExperimentConfig
     from nerfaug.nerf.config import NerfConfig
     from nerfaug.nerf.trainer import Trainer
@@ -178,7 +192,7 @@ def run_one(data, engine: str, seed: int, steps: int, add_at: int, holdout: int,
     config = NerfConfig.preset(engine)
     n_new = ExperimentConfig().n_new
     wall, cpu = time.perf_counter(), time.process_time()
-    trainer = Trainer(data.initial, config, seed=seed, device="cpu", progress=False)
+    trainer = Trainer(data.initial, config, seed=seed, device=device, progress=False)
     trainer.train(min(add_at, steps))
     selection = select_views(
         "uniform",
@@ -191,6 +205,7 @@ def run_one(data, engine: str, seed: int, steps: int, add_at: int, holdout: int,
     chosen = [int(i) for i in selection.indices]
     trainer.add_views(data.pool.subset(chosen))
     trainer.train(steps)
+    synchronize(torch.device(device))
     train_seconds, train_cpu = time.perf_counter() - wall, time.process_time() - cpu
     model = trainer.model
     rest = [i for i in range(len(data.pool)) if i not in set(chosen)]
@@ -237,6 +252,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--holdout", type=int, default=10)
     parser.add_argument("--resolution", type=int, default=100)
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--device", default="cpu", help="cpu or cuda (GPU runs are not bit-reproducible)")
     parser.add_argument(
         "--stop-below",
         type=float,
@@ -276,18 +292,20 @@ def main(argv: list[str] | None = None) -> None:
         "test_views": len(data.test),
         "holdout_views": args.holdout,
         "threads": args.threads,
+        "device": args.device,
     }
     table["entries"] = {name: {"what": what, "engine": engine} for name, (what, engine) in entries.items()}
-    done = {(r["name"], r["seed"], r["steps"]) for r in table["runs"]}
+    done = {(r["name"], r["seed"], r["steps"], r.get("device", "cpu")) for r in table["runs"]}
     start_holdout = None
     for name in names:
         what, engine = entries[name]
         for seed in args.seeds:
-            if (name, seed, args.steps) in done:
+            if (name, seed, args.steps, args.device) in done:
                 print(f"{name} seed {seed}: already in {table_path}", file=sys.stderr)
                 continue
             render = args.out / f"{name}-seed{seed}-test0.png" if seed == args.seeds[0] else None
-            result = {"name": name, **run_one(data, engine, seed, args.steps, args.add_at, args.holdout, render)}
+            run = run_one(data, engine, seed, args.steps, args.add_at, args.holdout, render, args.device)
+            result = {"name": name, "device": args.device, **run}
             table["runs"].append(result)
             table_path.write_text(json.dumps(table, indent=1) + "\n")
             print(

@@ -2,7 +2,7 @@
 rendered on a CPU machine, then the paper's protocol, on a GPU machine that has no Blender and
 no network and takes at most 64 MiB per call (repository included).
 
-Three modes:
+Four modes:
 
 - `pack` (here, on the CPU machine with Blender): render a built-in scene with
   `nerfaug scene render` into data/, then pack its initial, train (candidate pool) and test
@@ -13,6 +13,9 @@ Three modes:
   method's 6 views added at `--add-at`, `--steps` steps, evaluation on `--test-views` views),
   after a short warm-up of the process. Prints s/step, trial time, peak GPU memory and
   PSNR/SSIM/LPIPS; `--json` writes them.
+- `kernel` (on the GPU): the hash encoding's fused Triton kernels against its PyTorch path at the
+  paper preset's size (16 levels of 2^19 entries up to 2048): largest difference of the features
+  and of the table's gradient, and the time of a forward + backward pass of each.
 - `protocol` (on the GPU): the paper's comparison (ours, uniform, entropy, fisherrf) x
   `--trials`, one run at a time, stopping before `--budget-s` would be exceeded
   (a device call lasts at most 10 minutes): run the same command again to resume; finished runs
@@ -394,6 +397,57 @@ def trial(args) -> dict:
     return figures
 
 
+def kernel(args) -> dict:
+    """The fused hash kernels against the PyTorch path on one device: agreement and speed."""
+    from nerfaug.device import resolve_device, synchronize
+    from nerfaug.nerf.config import NerfConfig
+    from nerfaug.nerf.encoding import HashEncoding
+
+    device = resolve_device(args.device)
+    paper = NerfConfig.preset("paper")
+    generator = torch.Generator(device=device).manual_seed(0)
+    reference = HashEncoding.from_config(paper).to(device)
+    reference.kernel = "torch"
+    with torch.no_grad():
+        reference.table.normal_(generator=generator)
+    fused = HashEncoding.from_config(paper).to(device)
+    fused.kernel = "triton"
+    fused.load_state_dict(reference.state_dict())
+    x = torch.rand(args.points, 3, device=device, generator=generator)
+    grad = torch.randn(args.points, reference.output_dim, device=device, generator=generator)
+
+    def pass_of(encoding) -> tuple[torch.Tensor, torch.Tensor]:
+        encoding.table.grad = None
+        out = encoding(x)
+        out.backward(grad)
+        return out.detach(), encoding.table.grad
+
+    expected, expected_grad = pass_of(reference)
+    got, got_grad = pass_of(fused)
+    figures = {
+        "mode": "kernel",
+        **environment(device),
+        "points": args.points,
+        "levels": reference.num_levels,
+        "table_size": reference.table_size,
+        "feature_max_abs_diff": (got - expected).abs().max().item(),
+        "gradient_max_abs_diff": (got_grad - expected_grad).abs().max().item(),
+        "gradient_scale": expected_grad.abs().max().item(),
+    }
+    for name, encoding in (("torch", reference), ("triton", fused)):
+        for _ in range(3):
+            pass_of(encoding)
+        synchronize(device)
+        start = time.perf_counter()
+        for _ in range(args.repeats):
+            pass_of(encoding)
+        synchronize(device)
+        figures[f"{name}_ms_per_pass"] = 1000 * (time.perf_counter() - start) / args.repeats
+    figures["speedup"] = figures["torch_ms_per_pass"] / figures["triton_ms_per_pass"]
+    print(json.dumps(figures, indent=1))
+    return figures
+
+
 def _fmt(value, spec: str) -> str:
     return "n/a" if value is None else format(value, spec)
 
@@ -600,6 +654,12 @@ def parser() -> argparse.ArgumentParser:
     k.add_argument("--render-dir", type=Path, help="where to render (default data/<scene><resolution>-gpu)")
     k.add_argument("--out", type=Path, default=Path("data/gpu/lego.npz"), help="the pack; its folder is what travels")
 
+    c = sub.add_parser("kernel", help="the fused hash kernels against the PyTorch path: agreement and speed")
+    c.add_argument("--device", default="auto", help="auto, cpu or cuda (cpu needs TRITON_INTERPRET=1)")
+    c.add_argument("--points", type=int, default=2**20, help="points encoded per pass")
+    c.add_argument("--repeats", type=int, default=20)
+    c.add_argument("--json", type=Path, help="also write the figures here")
+
     for name, default_out in (("trial", "results/bench_gpu/trial"), ("protocol", "results/bench_gpu/protocol")):
         s = sub.add_parser(name, help="one timed protocol run" if name == "trial" else "the paper's comparison")
         s.add_argument("--data", type=Path, required=True, help="a pack made by `pack`")
@@ -682,14 +742,14 @@ def main(argv: list[str] | None = None) -> dict:
         )
         print(f'carry {args.out.parent} to the GPU machine (device tool: carry ["{args.out.parent}"])')
     else:
-        if args.quick:
+        if getattr(args, "quick", False):
             for name, value in QUICK.items():
                 setattr(args, name, value)
             if args.mode == "trial":
                 args.warmup_steps = min(args.warmup_steps, 2)
             else:
                 args.methods, args.trials = ["ours", "uniform"], 1
-        figures = trial(args) if args.mode == "trial" else protocol(args)
+        figures = {"trial": trial, "kernel": kernel, "protocol": protocol}[args.mode](args)
     if getattr(args, "json", None):
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=2, default=str))

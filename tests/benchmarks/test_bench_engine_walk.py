@@ -41,3 +41,10 @@ def test_every_probe_is_a_valid_engine_name(walk):
     for what, engine in walk.all_entries().values():
         NerfConfig.preset(engine)  # raises on an unknown setting or a badly typed value
         assert what
+
+
+def test_the_end_probes_are_the_paper_preset_with_only_their_background_changed(walk):
+    paper = NerfConfig.preset("paper").to_dict()
+    for name, (_, changes) in walk.END_PROBES.items():
+        probe = NerfConfig.preset(walk.all_entries()[name][1]).to_dict()
+        assert {k for k in paper if paper[k] != probe[k]} == set(changes) == {"background_mode"}, name

@@ -163,3 +163,21 @@ def test_weights_only_rendering_equals_the_full_rendering(model, generator):
     only = model.render_weights_only(origins, directions, chunk=128)
     assert model.training
     assert torch.equal(only, full)
+
+
+def test_last_composited_background_is_the_last_samples_colour(generator):
+    """nerfacto's "last_sample": what passes through a ray is painted in the colour of its last
+    composited sample; worked out here from the samples' weights and colours."""
+    torch.manual_seed(0)
+    model = NerfModel(NerfConfig.preset("test", **TINY_PROPOSAL, background_mode="last_composited"))
+    model.eval()
+    origins, directions = rays_at_origin(40, generator)
+    with torch.no_grad():
+        edges, _ = model._sample(origins, directions, None)
+        weights, rgbs = model._shade(origins, directions, edges[:, :-1], edges[:, 1:])
+        out = model(origins, directions)
+    seen = (weights[..., None] * rgbs).sum(1)
+    expected = seen + (1 - weights.sum(1, keepdim=True)) * rgbs[:, -1]
+    assert torch.allclose(out.rgb, expected, atol=1e-6)
+    white = seen + (1 - weights.sum(1, keepdim=True))
+    assert (out.rgb - white).abs().max() > 0.05  # the background is not the fixed white

@@ -124,7 +124,7 @@ def test_the_last_sample_engine_differs_from_nerfacto_cpu_in_its_background_only
         ("nerfacto", "unknown engine preset 'nerfacto'"),
         ("cpu+colour=red", "unknown setting 'colour'"),
         ("cpu+batch_size=many", "batch_size='many' is not a valid value"),
-        ("cpu+background_mode=grey", "background_mode must be 'fixed' or 'last_sample'"),
+        ("cpu+background_mode=grey", "background_mode must be one of fixed, last_sample, last_composited"),
         ("cpu+batch_size", "'batch_size' is not FIELD=VALUE"),
     ],
 )

@@ -92,8 +92,9 @@ class NerfModel(nn.Module):
         Args:
             origins, directions: Tensors with shape (n_rays, 3), world space, unit directions.
             background: Tensor with shape (3,) or (n_rays, 3); None for the configured
-                background (`self.background`, or the last sample's colour if
-                `config.background_mode == "last_sample"`).
+                background (`self.background`, or the field's colour at the box exit with
+                `config.background_mode == "last_sample"`, or the last composited sample's
+                colour with "last_composited").
             generator: source of the sample jitter in training mode (None: global RNG).
 
         Returns:
@@ -105,6 +106,10 @@ class NerfModel(nn.Module):
         weights, rgbs = self._shade(origins, directions, t_starts, t_ends)
         if background is None and self.config.background_mode == "last_sample":
             background = self._last_sample_colour(origins, directions, t_ends[:, -1])
+        elif background is None and self.config.background_mode == "last_composited":
+            # nerfacto's "last_sample": the last sample's colour (0 where it lies behind opaque
+            # matter, `_shade`, where the background's weight is below transmittance_eps anyway).
+            background = rgbs[:, -1]
         background = (self.background if background is None else background).to(weights)
         rgb, accumulation, depth = composite(weights, rgbs, t_starts, t_ends, background)
         return RenderOutput(rgb, accumulation, depth, weights, t_starts, t_ends, extras)

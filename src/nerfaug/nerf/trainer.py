@@ -174,7 +174,7 @@ class Trainer:
         origins, directions = generate_rays(cameras, view, pixel % cameras.width, pixel // cameras.width)
         index = index.to(self.device)
         target = self._pixels[index]
-        background = None if self.config.background_mode == "last_sample" else self.model.background
+        background = None if self.config.background_mode != "fixed" else self.model.background
         if self.config.random_background and self._alphas is not None:
             # Swap the stored background behind each pixel for a random colour the model must
             # learn to see through, so empty space cannot hide in the background colour.
