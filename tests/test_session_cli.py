@@ -195,6 +195,22 @@ def test_the_same_command_with_other_settings_is_refused_naming_the_command_that
     assert "--engine cpu (the session's: test)" in capsys.readouterr().err
 
 
+def test_a_setting_given_at_its_default_value_is_still_compared_with_the_sessions(tmp_path, capsys):
+    """`--seed 0` is the default, yet given: a session seeded 4 refuses it; `--no-estimate-up`,
+    also the default and equal to the session's, is not named."""
+    run = tmp_path / "run"
+    train_new(dataset(tmp_path / "data"), run, "--seed", "4")
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as refused:
+        main(["train", str(run), "--seed", "0", "--no-estimate-up", "--steps", "3", "--device", "cpu"])
+    assert refused.value.code == 2
+    error = capsys.readouterr().err
+    assert "--seed 0 (the session's: 4)" in error and "estimate-up" not in error
+    assert CaptureSession.open(run).step == 2
+    main(["train", str(run), "--steps", "3", "--device", "cpu"])  # nothing given: the session's own settings
+    assert CaptureSession.open(run).step == 3
+
+
 def test_train_threads_policy_agrees_with_a_sweeps():
     from nerfaug.cli.train import THREADS
     from nerfaug.experiment.config import ExperimentConfig

@@ -32,8 +32,6 @@ from dataclasses import dataclass
 
 import tyro
 
-# options.COMMAND_LINE: `train` reads which of its options the command line gives.
-from nerfaug.cli.options import COMMAND_LINE
 from nerfaug.errors import NerfaugError
 
 # Each command's home, "module:function": a command's module is imported only when it runs, so
@@ -205,26 +203,22 @@ def _dispatch(argv: list[str]) -> None:
             function.__doc__ = reflow(function.__doc__)
         tyro.extras.subcommand_cli_from_dict(scenes, args=argv[1:], prog="nerfaug scene")
         return
-    parsing = COMMAND_LINE.set(tuple(argv))
-    try:
-        if argv and argv[0] in COMMANDS:  # only this command's module is imported
-            _check_renamed(argv)
-            target = command(argv[0])
-            parsed = parse(target, argv[1:], f"nerfaug {argv[0]}")
-            if isinstance(target, type):  # a command's options as a dataclass: run them
-                parsed()
-            return
-        if not argv or argv[0] in ("-h", "--help"):
-            print(__doc__.strip())
-            print()
-        tyro.extras.subcommand_cli_from_dict(
-            {name: command(name) for name in COMMANDS},
-            args=argv,
-            prog="nerfaug",
-            description="Choose which views to add when a NeRF has too little data.",
-        )
-    finally:
-        COMMAND_LINE.reset(parsing)
+    if argv and argv[0] in COMMANDS:  # only this command's module is imported
+        _check_renamed(argv)
+        target = command(argv[0])
+        parsed = parse(target, argv[1:], f"nerfaug {argv[0]}")
+        if isinstance(target, type):  # a command's options as a dataclass: run them
+            parsed()
+        return
+    if not argv or argv[0] in ("-h", "--help"):
+        print(__doc__.strip())
+        print()
+    tyro.extras.subcommand_cli_from_dict(
+        {name: command(name) for name in COMMANDS},
+        args=argv,
+        prog="nerfaug",
+        description="Choose which views to add when a NeRF has too little data.",
+    )
 
 
 if __name__ == "__main__":

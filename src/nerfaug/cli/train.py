@@ -33,16 +33,19 @@ from nerfaug.capture.requests import (
     SessionSettings,
     Split,
     check_steps,
+    given_form,
     replaced_by,
     words,
 )
 from nerfaug.capture.runfolder import SESSION_FILE
-from nerfaug.cli.options import COMMAND_LINE, given_options
 from nerfaug.errors import Interrupted
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
 Device = Literal["auto", "cpu", "cuda"]
-Settings = Annotated[SessionSettings, tyro.conf.arg(name="")]
+# The session settings the command line gives, each None unless given (at its default value
+# too): `nerfaug train RUN` compares those alone with the session's.
+GivenSettings = given_form(SessionSettings)
+Settings = Annotated[GivenSettings, tyro.conf.arg(name="")]
 # Torch threads of a session's training: a sweep's policy (`ExperimentConfig.threads_per_run`, one
 # per run unless told; tests/test_session_cli.py checks they agree), so a session and a study
 # sharing a machine do not oversubscribe its cores.
@@ -186,7 +189,7 @@ def train(
     path: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="DATA|RUN")],
     out: Annotated[Path | None, replaced_by("required when DATA|RUN is a dataset", "PATH")] = None,
     steps: int = 1000,
-    settings: Settings = SessionSettings(),  # noqa: B008 -- read-only: the defaults tyro shows
+    settings: Settings = GivenSettings(),  # noqa: B008 -- read-only: nothing given
     split: Annotated[
         Split | None, replaced_by('"initial" for a dataset `nerfaug scene render` wrote, else "train"', "STR")
     ] = None,
@@ -214,7 +217,8 @@ def train(
         threads: torch threads for training (one by default, as each run of a sweep).
     """
     _check_training(steps, checkpoint_every)
-    run, data, given = _which_session(path, out, settings, split, steps)
+    run, data, given = _which_session(path, out, _given(settings, split), steps)
+    settings = _settings(settings)
     if run is None:
         _configure(threads)
         _finish(_create(path, out, settings, split, device), steps, checkpoint_every)
@@ -223,14 +227,14 @@ def train(
         _train_further(_open(run, device, changing="train"), steps, checkpoint_every, resuming=data is not None)
 
 
-def _which_session(path: Path, out: Path | None, settings: SessionSettings, split: str | None, steps: int):
+def _which_session(path: Path, out: Path | None, given: set[str], steps: int):
     """(run folder, its dataset, the settings to compare) for `nerfaug train PATH [--out OUT]`:
-    `train RUN` compares the options given, the same `train DATA --out RUN` again every setting
+    `train RUN` compares the settings `given`, the same `train DATA --out RUN` again every setting
     (None); (None, PATH, None) when a new session is to be made."""
     if (path / SESSION_FILE).exists():
         if out is not None:
             raise SystemExit(f"{path} is a session folder; drop --out: `{resume_command(path, steps)}`")
-        return path, None, _given(settings, split)
+        return path, None, given
     if out is not None and (out / SESSION_FILE).exists():
         return out, path, None
     if out is None:
@@ -238,17 +242,15 @@ def _which_session(path: Path, out: Path | None, settings: SessionSettings, spli
     return None, path, None
 
 
-def _given(settings: SessionSettings, split: str | None) -> set[str]:
-    """The settings the command line gives, even at their default values ("split" among them);
-    from Python (no command line), those that differ from the defaults."""
-    names = [f.name for f in dataclasses.fields(SessionSettings)] + ["split"]
-    argv = COMMAND_LINE.get()
-    if argv is not None:
-        spelled = {option(name)[2:]: name for name in names}
-        return {spelled[given] for given in given_options(list(spelled), argv)}
-    values = {**dataclasses.asdict(settings), "split": split}
-    defaults = {**dataclasses.asdict(SessionSettings()), "split": None}
-    return {name for name in names if values[name] != defaults[name]}
+def _given(settings, split: str | None) -> set[str]:
+    """The names of the settings given (not None), even at their default values, "split" among them."""
+    given = {name for name, value in dataclasses.asdict(settings).items() if value is not None}
+    return given if split is None else given | {"split"}
+
+
+def _settings(settings) -> SessionSettings:
+    """The session settings `settings` (a `GivenSettings`) gives, those not given at their defaults."""
+    return SessionSettings(**{name: value for name, value in dataclasses.asdict(settings).items() if value is not None})
 
 
 def _at_step(run: Path, data: Path | None, settings: SessionSettings, split, given, steps: int) -> bool:
