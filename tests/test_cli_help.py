@@ -127,9 +127,9 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
 
     planned = []
 
-    def make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command, **_):
-        config = study_module.STUDY_PRESETS.choose(preset, resolution=resolution, device="cpu")
-        plan = study_module.StudyPlan(out, config, ["test"], command=command)
+    def make_plan(spec, command, **_):
+        config = study_module.STUDY_PRESETS.choose(spec.preset, resolution=spec.resolution, device="cpu")
+        plan = study_module.StudyPlan(spec.out, config, ["test"], command=command)
         planned.append(plan)
         return plan
 
