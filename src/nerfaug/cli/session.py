@@ -26,7 +26,9 @@ from nerfaug.capture.proposal import check_poses_out, read_poses
 from nerfaug.capture.requests import replaced_by
 from nerfaug.capture.state import SessionState
 from nerfaug.cli import serve as serve_cli
-from nerfaug.cli.train import THREADS, Device, RunFolder, _configure, _open, add, checked, train
+from nerfaug.cli.option_names import checked
+from nerfaug.cli.train import THREADS, Device, RunFolder, add, train
+from nerfaug.cli.train_work import configure, open_session
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.errors import FolderRefused
 from nerfaug.jsonio import atomic_write_json
@@ -63,8 +65,8 @@ def propose(
     """
     request = checked(request)  # before the session is opened: a refused call loads nothing
     check_poses_out(out, force)
-    _configure(threads)
-    session = _open(run, device, changing="propose")
+    configure(threads)
+    session = open_session(run, device, changing="propose")
     proposal = session.propose(request)
     path = proposal.write(out)
     session.save()
@@ -142,8 +144,8 @@ def evaluate(
     """
     if out is not None:
         _check_eval_out(out, data)
-    _configure(threads)
-    session = _open(run, device)
+    configure(threads)
+    session = open_session(run, device)
     views = session.held_out(data, split)
     result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
     m = result.mean
