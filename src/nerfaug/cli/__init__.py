@@ -122,16 +122,7 @@ def main(argv: list[str] | None = None) -> None:
     if threading.current_thread() is threading.main_thread():  # signal handlers live in the main thread
         previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        if wants_help(argv):  # --help imports no torch: it only reads the options
-            _dispatch(argv)
-        else:
-            # Imported here: both load torch, which `--help` (above) answers without.
-            from nerfaug.capture.lock import command_scope
-            from nerfaug.device import configure_process
-
-            configure_process()
-            with command_scope():  # a session a command locked is unlocked when it ends
-                _dispatch(argv)
+        _run(argv)
     except SystemExit as done:
         if isinstance(done.code, str):  # a command's own refusal: one line, bad input
             print(f"nerfaug: {' '.join(done.code.split())}", file=sys.stderr)
@@ -151,6 +142,20 @@ def main(argv: list[str] | None = None) -> None:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _run(argv: list[str]) -> None:
+    """The command `argv`, set up for running unless it asks for help."""
+    if wants_help(argv):  # --help imports no torch: it only reads the options
+        _dispatch(argv)
+        return
+    # Imported here: both load torch, which `--help` (above) answers without.
+    from nerfaug.capture.lock import command_scope
+    from nerfaug.device import configure_process
+
+    configure_process()
+    with command_scope():  # a session a command locked is unlocked when it ends
+        _dispatch(argv)
 
 
 # Options that were renamed so that each name means one thing across commands: (command, old) -> new.

@@ -145,6 +145,3 @@ def _check_uncertainty(run: Path, out: Path, width: int | None, fisher_width: in
         raise FolderRefused(f"{out}: not empty and not written by `nerfaug uncertainty`; choose a new folder for --out")
     if owned.overlaps(out, run):
         raise FolderRefused(f"{out}: lies inside or holds the session {run}; choose a folder outside it")
-
-
-COMMANDS: dict = {"serve": serve, "uncertainty": uncertainty}

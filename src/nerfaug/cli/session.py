@@ -25,9 +25,8 @@ from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.proposal import check_poses_out, read_poses
 from nerfaug.capture.requests import replaced_by
 from nerfaug.capture.state import SessionState
-from nerfaug.cli import serve as serve_cli
 from nerfaug.cli.option_names import checked
-from nerfaug.cli.train import THREADS, Device, RunFolder, add, train
+from nerfaug.cli.train import THREADS, Device, RunFolder
 from nerfaug.cli.train_work import configure, open_session
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.errors import FolderRefused
@@ -193,14 +192,3 @@ def render_proposals(
     paths = [out / f"{name}.png" for name in names]
     render_poses(scene, matrices, paths, k.width, k.height, k.camera_angle_x, samples, seed, threads)
     print(f"rendered {len(paths)} views to {out}")
-
-
-COMMANDS: dict = {
-    "train": train,
-    "propose": propose,
-    "add": add,
-    "export": export,
-    "eval": evaluate,
-    "render-proposals": render_proposals,
-    **serve_cli.COMMANDS,
-}
