@@ -32,13 +32,13 @@ def test_run_help_shows_the_presets_values_not_none(capsys, monkeypatch):
 
 def test_top_level_help_lists_every_command(capsys, monkeypatch):
     from nerfaug.cli import COMMANDS
-    from nerfaug.cli import session as session_cli
 
     text = help_text([], capsys, monkeypatch)
     usage = re.search(r"usage: nerfaug \[-h\] \{([^}]*)\}", text)
     assert usage is not None, text
     listed = set(usage.group(1).split(","))
-    assert {"scene", "run", "report", "methods", "study", "serve", "uncertainty", *session_cli.COMMANDS} <= listed
+    capture = {"train", "propose", "add", "export", "eval", "render-proposals", "serve", "uncertainty"}
+    assert {"scene", "run", "report", "methods", "study", *capture} <= listed
     assert listed == set(COMMANDS)
     # The examples above the usage line show every command too (as `nerfaug NAME ...`).
     shown = {line.split()[1] for line in text.split("usage:")[0].splitlines() if line.startswith("nerfaug ")}
@@ -127,9 +127,9 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
 
     planned = []
 
-    def make_plan(out, engines, scenes, methods, trials, resolution, steps, device, preset, command, **_):
-        config = study_module.STUDY_PRESETS.choose(preset, resolution=resolution, device="cpu")
-        plan = study_module.StudyPlan(out, config, ["test"], command=command)
+    def make_plan(spec, command, **_):
+        config = study_module.STUDY_PRESETS.choose(spec.preset, resolution=spec.resolution, device="cpu")
+        plan = study_module.StudyPlan(spec.out, config, ["test"], command=command)
         planned.append(plan)
         return plan
 

@@ -93,14 +93,14 @@ def test_the_same_view_added_twice_is_named_in_a_warning(tmp_path, capsys):
 
 
 def test_session_training_takes_one_torch_thread_unless_told(tmp_path, monkeypatch):
-    import nerfaug.device
+    import nerfaug.cli.train_work
 
     calls = []
-    monkeypatch.setattr(nerfaug.device, "configure_process", lambda threads=None: calls.append(threads))
+    monkeypatch.setattr(nerfaug.cli.train_work, "configure_process", lambda threads=None: calls.append(threads))
     data = dataset(tmp_path / "data")
     train_new(data, tmp_path / "run")
     main(["train", str(tmp_path / "run"), "--steps", "3", "--threads", "2", "--device", "cpu"])
-    assert [c for c in calls if c is not None] == [1, 2]  # cli.main's own call sets no threads
+    assert calls == [1, 2]
 
 
 def test_a_session_saved_between_its_two_writes_still_opens(tmp_path):
@@ -193,6 +193,22 @@ def test_the_same_command_with_other_settings_is_refused_naming_the_command_that
     with pytest.raises(SystemExit):
         main(["train", str(run), "--engine", "cpu", "--steps", "4", "--device", "cpu"])
     assert "--engine cpu (the session's: test)" in capsys.readouterr().err
+
+
+def test_a_setting_given_at_its_default_value_is_still_compared_with_the_sessions(tmp_path, capsys):
+    """`--seed 0` is the default, yet given: a session seeded 4 refuses it; `--no-estimate-up`,
+    also the default and equal to the session's, is not named."""
+    run = tmp_path / "run"
+    train_new(dataset(tmp_path / "data"), run, "--seed", "4")
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as refused:
+        main(["train", str(run), "--seed", "0", "--no-estimate-up", "--steps", "3", "--device", "cpu"])
+    assert refused.value.code == 2
+    error = capsys.readouterr().err
+    assert "--seed 0 (the session's: 4)" in error and "estimate-up" not in error
+    assert CaptureSession.open(run).step == 2
+    main(["train", str(run), "--steps", "3", "--device", "cpu"])  # nothing given: the session's own settings
+    assert CaptureSession.open(run).step == 3
 
 
 def test_train_threads_policy_agrees_with_a_sweeps():

@@ -18,11 +18,14 @@ Nothing here imports torch: `nerfaug train --help` reads these classes.
 
 from __future__ import annotations
 
+import ast
+import inspect
 import math
 import re
-from dataclasses import dataclass, fields
+import textwrap
+from dataclasses import dataclass, fields, make_dataclass
 from functools import cache
-from typing import Annotated
+from typing import Annotated, get_args, get_origin, get_type_hints
 
 import tyro
 from pydantic import (
@@ -126,6 +129,40 @@ def replaced_by(default: str, metavar: str):
     """`--help` for an option whose default (None, or empty) means something: "(default: the
     hemisphere)" instead of "(default: None)"."""
     return tyro.conf.arg(metavar=metavar, help_behavior_hint=f"(default: {default})")
+
+
+def given_form(schema: type) -> type:
+    """`schema` as tyro reads it where an option given at its default value must be told from
+    one not given: a frozen dataclass of the same fields, each None unless given (None cannot be
+    written on the command line), with `schema`'s help, metavar and default in `--help`.
+
+    Example:
+        >>> Given = given_form(SessionSettings)
+        >>> Given(seed=0)
+        GivenSessionSettings(preset=None, seed=0, downscale=None, centre=None, radius=None, up=None, estimate_up=None)
+    """
+    hints, docs = get_type_hints(schema, include_extras=True), _field_docs(schema)
+    form = []
+    for f in fields(schema):
+        kind, *meta = get_args(hints[f.name]) if get_origin(hints[f.name]) is Annotated else (hints[f.name],)
+        shown = tyro.conf.arg(help=docs.get(f.name), help_behavior_hint=f"(default: {_shown(f.default)})")
+        form.append((f.name, Annotated[kind | None, shown, *meta, tyro.conf.DisallowNone], None))
+    return make_dataclass(f"Given{schema.__name__}", form, frozen=True)
+
+
+def _field_docs(schema: type) -> dict[str, str]:
+    """The docstring under each field of the class `schema`, by field name."""
+    body = ast.parse(textwrap.dedent(inspect.getsource(schema))).body[0].body
+    return {
+        line.target.id: " ".join(after.value.value.split())
+        for line, after in zip(body, body[1:])
+        if isinstance(line, ast.AnnAssign) and isinstance(after, ast.Expr) and isinstance(after.value, ast.Constant)
+    }
+
+
+def _shown(value) -> str:
+    """A default as tyro's `--help` shows it: (0.0, 0.0, 1.0) -> "0.0 0.0 1.0"."""
+    return " ".join(map(str, value)) if isinstance(value, tuple) else str(value)
 
 
 # ---- numbers and names ------------------------------------------------------------------------
@@ -288,7 +325,7 @@ class SessionSettings(Schema):
     """the hemisphere's centre, world space."""
     radius: Annotated[Radius | None, replaced_by("the cameras' mean distance to the centre", "FLOAT")] = None
     """the hemisphere's radius, world units (within 1000x of the cameras' distance to the centre)."""
-    up: Annotated[Vector, AfterValidator(_direction)] = (0.0, 0.0, 1.0)
+    up: Annotated[Vector, AfterValidator(_direction), tyro.conf.arg(metavar="FLOAT FLOAT FLOAT")] = (0.0, 0.0, 1.0)
     """the hemisphere's pole direction, world space (the world is z-up by default)."""
     estimate_up: bool = False
     """take the pole from the cameras' mean up axis instead of --up."""

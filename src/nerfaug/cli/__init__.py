@@ -32,8 +32,6 @@ from dataclasses import dataclass
 
 import tyro
 
-# options.COMMAND_LINE: `train` reads which of its options the command line gives.
-from nerfaug.cli.options import COMMAND_LINE
 from nerfaug.errors import NerfaugError
 
 # Each command's home, "module:function": a command's module is imported only when it runs, so
@@ -124,16 +122,7 @@ def main(argv: list[str] | None = None) -> None:
     if threading.current_thread() is threading.main_thread():  # signal handlers live in the main thread
         previous = signal.signal(signal.SIGTERM, _terminate)
     try:
-        if wants_help(argv):  # --help imports no torch: it only reads the options
-            _dispatch(argv)
-        else:
-            # Imported here: both load torch, which `--help` (above) answers without.
-            from nerfaug.capture.lock import command_scope
-            from nerfaug.device import configure_process
-
-            configure_process()
-            with command_scope():  # a session a command locked is unlocked when it ends
-                _dispatch(argv)
+        _run(argv)
     except SystemExit as done:
         if isinstance(done.code, str):  # a command's own refusal: one line, bad input
             print(f"nerfaug: {' '.join(done.code.split())}", file=sys.stderr)
@@ -153,6 +142,20 @@ def main(argv: list[str] | None = None) -> None:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _run(argv: list[str]) -> None:
+    """The command `argv`, set up for running unless it asks for help."""
+    if wants_help(argv):  # --help imports no torch: it only reads the options
+        _dispatch(argv)
+        return
+    # Imported here: both load torch, which `--help` (above) answers without.
+    from nerfaug.capture.lock import command_scope
+    from nerfaug.device import configure_process
+
+    configure_process()
+    with command_scope():  # a session a command locked is unlocked when it ends
+        _dispatch(argv)
 
 
 # Options that were renamed so that each name means one thing across commands: (command, old) -> new.
@@ -205,26 +208,22 @@ def _dispatch(argv: list[str]) -> None:
             function.__doc__ = reflow(function.__doc__)
         tyro.extras.subcommand_cli_from_dict(scenes, args=argv[1:], prog="nerfaug scene")
         return
-    parsing = COMMAND_LINE.set(tuple(argv))
-    try:
-        if argv and argv[0] in COMMANDS:  # only this command's module is imported
-            _check_renamed(argv)
-            target = command(argv[0])
-            parsed = parse(target, argv[1:], f"nerfaug {argv[0]}")
-            if isinstance(target, type):  # a command's options as a dataclass: run them
-                parsed()
-            return
-        if not argv or argv[0] in ("-h", "--help"):
-            print(__doc__.strip())
-            print()
-        tyro.extras.subcommand_cli_from_dict(
-            {name: command(name) for name in COMMANDS},
-            args=argv,
-            prog="nerfaug",
-            description="Choose which views to add when a NeRF has too little data.",
-        )
-    finally:
-        COMMAND_LINE.reset(parsing)
+    if argv and argv[0] in COMMANDS:  # only this command's module is imported
+        _check_renamed(argv)
+        target = command(argv[0])
+        parsed = parse(target, argv[1:], f"nerfaug {argv[0]}")
+        if isinstance(target, type):  # a command's options as a dataclass: run them
+            parsed()
+        return
+    if not argv or argv[0] in ("-h", "--help"):
+        print(__doc__.strip())
+        print()
+    tyro.extras.subcommand_cli_from_dict(
+        {name: command(name) for name in COMMANDS},
+        args=argv,
+        prog="nerfaug",
+        description="Choose which views to add when a NeRF has too little data.",
+    )
 
 
 if __name__ == "__main__":

@@ -4,15 +4,14 @@ uncertainty images of any view of a session.
     nerfaug serve --root SESSIONS                   the HTTP JSON service (API docs at /docs)
     nerfaug uncertainty RUN --poses POSES.json --out DIR
 
-`--help` answers at once: torch, FastAPI and the capture core's sessions are imported inside the
-commands (the service's packages are optional: `pip install 'nerfaug[serve]'`).
+Their work, which loads torch (and FastAPI, an optional package: `pip install 'nerfaug[serve]'`),
+is `nerfaug.cli.serve_work`, imported when a command runs, so that `--help` answers at once.
 """
 
 from __future__ import annotations
 
 import gc
 import ipaddress
-import logging
 import os
 import sys
 from pathlib import Path
@@ -68,7 +67,9 @@ def serve(
     """
     token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
     _check_serve(root, host, port, token, checkpoint_every, threads, max_upload_mb)
-    uvicorn, app = _service_app(root, device, token, checkpoint_every, threads, max_upload_mb)
+    from nerfaug.cli import serve_work  # torch: here, so that `nerfaug serve --help` loads none
+
+    uvicorn, app = serve_work.service_app(root, device, token, checkpoint_every, threads, max_upload_mb)
     # The event loop answers /health and states while worker threads run torch: it gets the GIL
     # after 1 ms rather than 5, and the cyclic collector skips what was loaded at start (a full
     # pass over those ~375,000 objects took 0.4 s on the 2-core machine, every thread stopped).
@@ -95,34 +96,6 @@ def _check_serve(root: Path, host: str, port: int, token, checkpoint_every: floa
             raise ValueError(f"--{name} {value}: {rule}")
     if root.exists() and not root.is_dir():
         raise ValueError(f"--root {root}: not a folder")
-
-
-def _service_app(root: Path, device: str, token, checkpoint_every: float, threads: int, max_upload_mb: float):
-    """(uvicorn, the service's app over the sessions in `root`), torch set up for `threads`."""
-    try:  # the service's packages are optional, and torch is not loaded for `--help`
-        import uvicorn
-
-        from nerfaug.device import configure_process, resolve_device
-        from nerfaug.service.app import create_app
-        from nerfaug.service.hub import SessionHub
-    except ImportError as error:
-        raise SystemExit(
-            f"nerfaug serve needs the service's packages ({error.name} is missing): pip install 'nerfaug[serve]'"
-        ) from None
-    configure_process(threads=threads)
-    _log_to_stderr()
-    hub = SessionHub(root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every)
-    return uvicorn, create_app(hub, token=token, max_upload_mb=max_upload_mb)
-
-
-def _log_to_stderr() -> None:
-    """The service's own messages (a training job resumed after a restart, ...) as plain lines on stderr."""
-    logger = logging.getLogger("nerfaug.service")
-    if not logger.handlers:
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(message)s"))
-        logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
 
 
 def uncertainty(
@@ -156,10 +129,11 @@ def uncertainty(
         threads: torch threads (one is the fastest on a machine that runs other work).
     """
     _check_uncertainty(run, out, width, fisher_width, threads)
-    matrices, names = _poses_of(poses)
-    session = _session_for(run, device, threads)
-    maps = session.uncertainty_maps(matrices, width, fisher, fisher_width, progress=True, names=names)
-    _write_uncertainty(out, names, maps, shared_scale)
+    from nerfaug.cli import serve_work  # torch, matplotlib: here, so that `--help` loads neither
+
+    serve_work.uncertainty(
+        run, poses, out, UNCERTAINTY_KIND, device, threads, (width, fisher, fisher_width), shared_scale
+    )
 
 
 def _check_uncertainty(run: Path, out: Path, width: int | None, fisher_width: int, threads: int) -> None:
@@ -171,34 +145,3 @@ def _check_uncertainty(run: Path, out: Path, width: int | None, fisher_width: in
         raise FolderRefused(f"{out}: not empty and not written by `nerfaug uncertainty`; choose a new folder for --out")
     if owned.overlaps(out, run):
         raise FolderRefused(f"{out}: lies inside or holds the session {run}; choose a folder outside it")
-
-
-def _poses_of(path: Path):
-    from nerfaug.capture.proposal import read_poses  # torch: not loaded for `--help`
-
-    return read_poses(path)
-
-
-def _session_for(run: Path, device: str, threads: int):
-    """The session in `run` on `device`, torch on `threads` threads."""
-    from nerfaug.capture.session import CaptureSession  # torch: not loaded for `--help`
-    from nerfaug.device import configure_process, resolve_device
-
-    configure_process(threads=threads)
-    return CaptureSession.open(run, device=str(resolve_device(device)))
-
-
-def _write_uncertainty(out: Path, names: list[str], maps: list, shared_scale: bool) -> None:
-    """Each view's figure and arrays into `out`, one line each."""
-    from nerfaug.capture.uncertainty_images import colour_scales, write_maps  # torch, matplotlib: as above
-
-    owned.mark(out, UNCERTAINTY_KIND)
-    scales = colour_scales(maps) if shared_scale else None
-    for name, view in zip(names, maps):
-        write_maps(view, out, name, scales)
-        print(f"{name}: mean entropy {view.entropy.mean():.3f} bits -> {out / (name + '.png')}")
-    if scales is not None and len(maps) > 1:
-        print(f"the {len(maps)} figures share their colour scales (--no-shared-scale: each its own)")
-
-
-COMMANDS: dict = {"serve": serve, "uncertainty": uncertainty}

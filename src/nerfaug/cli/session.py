@@ -25,8 +25,9 @@ from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.proposal import check_poses_out, read_poses
 from nerfaug.capture.requests import replaced_by
 from nerfaug.capture.state import SessionState
-from nerfaug.cli import serve as serve_cli
-from nerfaug.cli.train import THREADS, Device, RunFolder, _configure, _open, add, checked, train
+from nerfaug.cli.option_names import checked
+from nerfaug.cli.train import THREADS, Device, RunFolder
+from nerfaug.cli.train_work import configure, open_session
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 from nerfaug.errors import FolderRefused
 from nerfaug.jsonio import atomic_write_json
@@ -63,8 +64,8 @@ def propose(
     """
     request = checked(request)  # before the session is opened: a refused call loads nothing
     check_poses_out(out, force)
-    _configure(threads)
-    session = _open(run, device, changing="propose")
+    configure(threads)
+    session = open_session(run, device, changing="propose")
     proposal = session.propose(request)
     path = proposal.write(out)
     session.save()
@@ -142,8 +143,8 @@ def evaluate(
     """
     if out is not None:
         _check_eval_out(out, data)
-    _configure(threads)
-    session = _open(run, device)
+    configure(threads)
+    session = open_session(run, device)
     views = session.held_out(data, split)
     result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
     m = result.mean
@@ -191,14 +192,3 @@ def render_proposals(
     paths = [out / f"{name}.png" for name in names]
     render_poses(scene, matrices, paths, k.width, k.height, k.camera_angle_x, samples, seed, threads)
     print(f"rendered {len(paths)} views to {out}")
-
-
-COMMANDS: dict = {
-    "train": train,
-    "propose": propose,
-    "add": add,
-    "export": export,
-    "eval": evaluate,
-    "render-proposals": render_proposals,
-    **serve_cli.COMMANDS,
-}

@@ -11,7 +11,7 @@ import json
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, ClassVar, Literal
+from typing import Annotated, ClassVar
 
 import tyro
 
@@ -20,7 +20,7 @@ from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
 from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.store import finished_runs
-from nerfaug.experiment.study import StudyPreset
+from nerfaug.experiment.study import DEFAULT_PRESET, StudySpec
 from nerfaug.experiment.sweep import default_workers
 from nerfaug.registry import Presets
 from nerfaug.report import study_page, study_table
@@ -37,44 +37,14 @@ def method_records() -> dict[str, dict]:
     }
 
 
-DEFAULT_PRESET = "study"
-Engines = Annotated[
-    tuple[str, ...] | None,
-    tyro.conf.arg(
-        metavar="ENGINE [ENGINE ...]",
-        help_behavior_hint="(default: every preset but the test one, and the paper's only on a GPU; the reason "
-        "is printed)",
-    ),
-]
-Scenes = Annotated[
-    tuple[str, ...] | None,
-    tyro.conf.arg(
-        metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(study_runs.PROCEDURAL_SCENES)})"
-    ),
-]
-Methods = Annotated[
-    tuple[str, ...] | None,
-    tyro.conf.arg(metavar="METHOD [METHOD ...]", help_behavior_hint='(default: the registry\'s "study" family)'),
-]
-Trials = Annotated[
-    int | None,
-    tyro.conf.arg(
-        metavar="INT",
-        help_behavior_hint="(default: 10, or more when Bonferroni over the comparisons with uniform needs more "
-        "for p < 0.05 to be reachable)",
-    ),
-]
 Workers = Annotated[
     int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one on a GPU)")
-]
-Table = Annotated[
-    Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint=f"(default: {StudyFolder(Path('OUT')).table})")
 ]
 ResultsDoc = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")]
 
 
-@dataclass
-class Study:
+@dataclass(frozen=True)
+class Study(StudySpec):
     """The study: which selection method wins where. Runs the study family of methods x engine
     presets x scenes as one resumable sweep per engine into OUT/<engine>/, records every finished
     run in a per-run table, and writes the summary OUT/study.md from that table alone: which method
@@ -83,24 +53,10 @@ class Study:
     seed, PSNR/SSIM/LPIPS, and the coverage of the chosen views.
 
     Args:
-        out: the study folder.
-        engines: engine presets, or variants written BASE+FIELD=VALUE.
-        scenes: built-in scene names or dataset folders.
-        methods: selection methods (`nerfaug methods`).
-        trials: trials per (scene, method, engine).
-        resolution: image size of the built-in scenes (and the width dataset folders are shrunk to).
-        layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
-            views come from turned by 1/LAYOUTS of the way round each time.
-        steps: training steps per run (the preset's unless given).
         workers: concurrent runs.
         force: discard existing runs and redo them.
-        device: auto (cuda when there is a GPU), cpu or cuda.
-        preset: the study's protocol, which --steps and --selection.* change: study (the paper's at
-            100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
-        table: the per-run table to record runs in and summarise; runs it records with their
-            current fingerprint are not run again.
         results_doc: also write this Markdown page (e.g. docs/results.md), figures beside it.
         selection: options of the selection methods (every one is part of the runs' fingerprint;
             left at the preset's, they change nothing); a method's own settings (e.g.
@@ -109,20 +65,9 @@ class Study:
 
     PRESETS: ClassVar[Presets[ExperimentConfig]] = STUDY_PRESETS
 
-    out: Path = Path("results/study")
-    engines: Engines = None
-    scenes: Scenes = None
-    methods: Methods = None
-    trials: Trials = None
-    resolution: int = 100
-    layouts: int = 1
-    steps: int = STUDY_PRESETS[DEFAULT_PRESET].steps
     workers: Workers = None
     force: bool = False
-    device: Literal["auto", "cpu", "cuda"] = "auto"
-    preset: StudyPreset = DEFAULT_PRESET
     summary_only: bool = False
-    table: Table = None
     results_doc: ResultsDoc = None
     selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
 
@@ -153,35 +98,7 @@ class Study:
     def run(self, previous: dict | None) -> dict[str, str]:
         """Plan the study and run its sweeps (runs `previous`, the table, records are not run
         again); the runs that failed, "engine: run" -> why."""
-        # The command that plans this study again: --steps when it is not the preset's.
-        steps = None if self.steps == STUDY_PRESETS[self.preset].steps else self.steps
-        command = study_runs.study_command(
-            self.out,
-            self.engines,
-            self.scenes,
-            self.methods,
-            self.trials,
-            self.resolution,
-            steps,
-            self.device,
-            self.preset,
-            self.table,
-            self.layouts,
-        )
-        command += self.selection.flags()
-        plan = study_runs.make_plan(
-            self.out,
-            self.engines,
-            self.scenes,
-            self.methods,
-            self.trials,
-            self.resolution,
-            self.steps,
-            self.device,
-            self.preset,
-            command,
-            layouts=self.layouts,
-        )
+        plan = study_runs.make_plan(self, self.command() + self.selection.flags())
         plan.config = plan.config.replace(selection=self.selection)
         for engine, why in plan.left_out.items():
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)

@@ -18,8 +18,10 @@ import platform
 import sys
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Annotated, Literal
 
 import torch
+import tyro
 
 from nerfaug.data.prepare import PREPARED
 from nerfaug.device import resolve_device
@@ -44,6 +46,7 @@ GPU_ENGINES = ("paper",)
 """Engine presets left out of a default study on a CPU: the paper's nerfacto-sized engine is about
 100x slower there than the cpu preset (BENCHMARKS.md), so one study would take weeks."""
 StudyPreset = STUDY_PRESETS.name_type()
+DEFAULT_PRESET = "study"
 
 
 def study_methods() -> tuple[str, ...]:
@@ -242,94 +245,138 @@ def with_design(record: dict, out: Path) -> dict:
     return {**record, "engine_settings": settings}
 
 
-def study_command(
-    out: Path,
-    engines,
-    scenes,
-    methods,
-    trials,
-    resolution: int,
-    steps,
-    device: str,
-    preset_name: str,
-    table=None,
-    layouts: int = 1,
-) -> list[str]:
-    """The command line that plans this study again (the options that decide what runs)."""
-    command = ["nerfaug", "study", "--out", str(out)]
-    if table is not None:
-        command += ["--table", str(table)]
-    for flag, values in (("--engines", engines), ("--scenes", scenes), ("--methods", methods)):
-        if values:
-            command += [flag, *map(str, values)]
-    for flag, value in (
-        ("--trials", trials),
-        ("--resolution", resolution),
-        ("--steps", steps),
-        ("--device", device),
-        ("--preset", preset_name),
-        ("--layouts", layouts if layouts != 1 else None),
-    ):
-        if value is not None:
-            command += [flag, str(value)]
-    return command
+# How `nerfaug study --help` shows the options whose default (None) is decided when the study is planned.
+Engines = Annotated[
+    tuple[str, ...] | None,
+    tyro.conf.arg(
+        metavar="ENGINE [ENGINE ...]",
+        help_behavior_hint="(default: every preset but the test one, and the paper's only on a GPU; the reason "
+        "is printed)",
+    ),
+]
+Scenes = Annotated[
+    tuple[str, ...] | None,
+    tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(PROCEDURAL_SCENES)})"),
+]
+Methods = Annotated[
+    tuple[str, ...] | None,
+    tyro.conf.arg(metavar="METHOD [METHOD ...]", help_behavior_hint='(default: the registry\'s "study" family)'),
+]
+Trials = Annotated[
+    int | None,
+    tyro.conf.arg(
+        metavar="INT",
+        help_behavior_hint="(default: 10, or more when Bonferroni over the comparisons with uniform needs more "
+        "for p < 0.05 to be reachable)",
+    ),
+]
+Table = Annotated[
+    Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint=f"(default: {StudyFolder(Path('OUT')).table})")
+]
 
 
-def make_plan(
-    out: Path,
-    engines,
-    scenes,
-    methods,
-    trials,
-    resolution: int,
-    steps,
-    device: str,
-    preset_name: StudyPreset = "study",
-    command: list[str] | None = None,
-    progress: bool = True,
-    layouts: int = 1,
-) -> StudyPlan:
-    """The plan from the command's options (None: the default), with the datasets prepared."""
-    try:
-        device_type = resolve_device(device).type
-    except ValueError as error:
-        raise SystemExit(f"--device: {error}") from None
-    if engines is None:
-        chosen, left_out = default_engines(device_type)
-    else:
-        for engine in engines:
-            try:
-                check_names(NerfConfig.preset(engine))
-            except ValueError as error:
-                raise SystemExit(f"--engines: {error}") from None
-        chosen, left_out = list(dict.fromkeys(engines)), {}
-    methods = tuple(methods) if methods else study_methods()
+@dataclass(frozen=True)
+class StudySpec:
+    """What a study runs: the options of `nerfaug study` that decide its runs (None: decided when
+    it is planned, `make_plan`).
+
+    Args:
+        out: the study folder.
+        engines: engine presets, or variants written BASE+FIELD=VALUE.
+        scenes: built-in scene names or dataset folders.
+        methods: selection methods (`nerfaug methods`).
+        trials: trials per (scene, method, engine).
+        resolution: image size of the built-in scenes (and the width dataset folders are shrunk to).
+        layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
+            views come from turned by 1/LAYOUTS of the way round each time.
+        steps: training steps per run (the preset's unless given).
+        device: auto (cuda when there is a GPU), cpu or cuda.
+        preset: the study's protocol, which --steps and --selection.* change: study (the paper's
+            at 100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
+        table: the per-run table to record runs in and summarise; runs it records with their
+            current fingerprint are not run again.
+    """
+
+    out: Path = Path("results/study")
+    engines: Engines = None
+    scenes: Scenes = None
+    methods: Methods = None
+    trials: Trials = None
+    resolution: int = 100
+    layouts: int = 1
+    steps: int = STUDY_PRESETS[DEFAULT_PRESET].steps
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    preset: StudyPreset = DEFAULT_PRESET
+    table: Table = None
+
+    def command(self) -> list[str]:
+        """The command line that plans this study again (--steps only where it is not the preset's)."""
+        command = ["nerfaug", "study", "--out", str(self.out)]
+        if self.table is not None:
+            command += ["--table", str(self.table)]
+        for flag, values in (("--engines", self.engines), ("--scenes", self.scenes), ("--methods", self.methods)):
+            if values:
+                command += [flag, *map(str, values)]
+        for flag, value in (
+            ("--trials", self.trials),
+            ("--resolution", self.resolution),
+            ("--steps", None if self.steps == STUDY_PRESETS[self.preset].steps else self.steps),
+            ("--device", self.device),
+            ("--preset", self.preset),
+            ("--layouts", self.layouts if self.layouts != 1 else None),
+        ):
+            if value is not None:
+                command += [flag, str(value)]
+        return command
+
+
+def make_plan(spec: StudySpec, command: list[str], progress: bool = True) -> StudyPlan:
+    """The plan of the study `spec`, with the datasets prepared; `command` plans it again."""
+    device_type = _device_type(spec.device)
+    chosen, left_out = _engines(spec.engines, device_type)
+    methods = tuple(spec.methods) if spec.methods else study_methods()
     comparisons = max(1, sum(m != "uniform" for m in methods))
-    if trials is None:
-        trials = min_trials(comparisons)
     config = STUDY_PRESETS.choose(
-        preset_name,
+        spec.preset,
         methods=methods,
-        trials=trials,
-        resolution=resolution,
+        trials=min_trials(comparisons) if spec.trials is None else spec.trials,
+        resolution=spec.resolution,
         device=device_type,
-        layouts=layouts,
-        **({"steps": steps} if steps is not None else {}),
+        layouts=spec.layouts,
+        steps=spec.steps,
     )
-    scenes = tuple(scenes) if scenes else PROCEDURAL_SCENES
+    scenes = tuple(spec.scenes) if spec.scenes else PROCEDURAL_SCENES
     # Every setting checked before any dataset is rendered (a bad --trials costs nothing).
     for engine in chosen:
         check_config(config.replace(scenes=scenes, engine=engine))
-    datasets = prepare_datasets(out, scenes, config, progress=progress)
-    return StudyPlan(
-        Path(out), config, chosen, left_out, list(datasets), datasets, command or ["nerfaug", *sys.argv[1:]]
-    )
+    datasets = prepare_datasets(spec.out, scenes, config, progress=progress)
+    return StudyPlan(Path(spec.out), config, chosen, left_out, list(datasets), datasets, command)
+
+
+def _device_type(device: str) -> str:
+    try:
+        return resolve_device(device).type
+    except ValueError as error:
+        raise SystemExit(f"--device: {error}") from None
+
+
+def _engines(engines, device_type: str) -> tuple[list[str], dict[str, str]]:
+    """The engines a study runs (`engines`, or by default those for `device_type`), and those left out with why."""
+    if engines is None:
+        return default_engines(device_type)
+    for engine in engines:
+        try:
+            check_names(NerfConfig.preset(engine))
+        except ValueError as error:
+            raise SystemExit(f"--engines: {error}") from None
+    return list(dict.fromkeys(engines)), {}
 
 
 __all__ = [
     "DEFAULT_TRIALS",
     "PROCEDURAL_SCENES",
     "REAL_STUDY_SCENES",
+    "StudySpec",
     "prepared_source",
     "StudyPlan",
     "default_engines",
@@ -340,6 +387,5 @@ __all__ = [
     "min_trials",
     "prepare_datasets",
     "run_study",
-    "study_command",
     "study_methods",
 ]

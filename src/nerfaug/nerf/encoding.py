@@ -239,7 +239,7 @@ class HashEncoding(nn.Module):
         Level-major rows keep the backward's scatter inside one level's table at a time
         (cache-friendly)."""
         if self.fused(x):
-            from nerfaug.nerf.hash_triton import FusedHashInterpolation
+            from nerfaug.nerf.hash_triton import FusedHashInterpolation  # needs Triton, an optional package
 
             return FusedHashInterpolation.apply(x, self.table, self)
         rows, weights = self.corners(x)

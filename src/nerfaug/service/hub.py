@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import logging
 import threading
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from time import monotonic, time
 
@@ -31,6 +30,7 @@ from nerfaug.capture.state import SessionSummary
 from nerfaug.data.formats import find_split
 from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.service.errors import ServiceError, bad_input, status_of
+from nerfaug.service.models import Job
 from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
 
 JOBS_DIR = Path(".service") / "jobs"
@@ -39,29 +39,6 @@ MAX_TRAINING = 4  # sessions training at once (each a thread running torch)
 # after a kill knows how many steps beyond the last save are redone.
 RECORD_EVERY_S = 1.0
 log = logging.getLogger("nerfaug.service")
-
-
-@dataclass
-class Job:
-    """A training job: from `start` to `target` steps; `state` is running, done or failed.
-    A job a restarted service resumed has `resumed_from` (the step of the session's last save)
-    and `redone` (the steps trained after that save before the service stopped: trained again)."""
-
-    target: int
-    start: int
-    step: int
-    state: str = "running"
-    error: str | None = None
-    started: float = field(default_factory=time)
-    finished: float | None = None
-    resumed_from: int | None = None
-    redone: int = 0
-
-    def to_dict(self) -> dict:
-        data = asdict(self)
-        done = self.step - self.start
-        data["progress"] = 1.0 if self.target <= self.start else round(done / (self.target - self.start), 4)
-        return data
 
 
 class Slot:
@@ -239,7 +216,7 @@ class SessionHub:
         summary = slot.snapshot or SessionFolder.open(self.folder(session_id)).summary()
         job = slot.job
         running = job is not None and job.state == "running"
-        return {**summary.model_dump(), "running": running, "job": job and job.to_dict()}
+        return {**summary.model_dump(), "running": running, "job": job and job.model_dump()}
 
     # -- training --
 
@@ -247,7 +224,7 @@ class SessionHub:
         return self.root / JOBS_DIR / f"{session_id}.json"
 
     def _record(self, slot: Slot) -> None:
-        atomic_write_json(self._job_file(slot.id), {"kind": "train", **slot.job.to_dict()})
+        atomic_write_json(self._job_file(slot.id), {"kind": "train", **slot.job.model_dump()})
 
     def train(self, session_id: str, steps: int) -> dict:
         """Start training `steps` more steps in a worker thread; 409 when a job is running."""
@@ -261,7 +238,7 @@ class SessionHub:
             slot.job = Job(target=session.step + int(steps), start=session.step, step=session.step)
             self._record(slot)
             self._start(slot)
-            return slot.job.to_dict()
+            return slot.job.model_dump()
 
     def _start(self, slot: Slot) -> None:
         slot.thread = threading.Thread(target=self._train_worker, args=(slot,), name=f"train-{slot.id}", daemon=True)

@@ -9,11 +9,12 @@ Blender and nerfstudio formats; angles of constraints are in degrees.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from time import time
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, computed_field
 
-from nerfaug.capture.requests import SCHEMA, Intrinsics, Pose, Poses, SessionId, SessionSettings, Split
+from nerfaug.capture.requests import MAX_STEPS, SCHEMA, Intrinsics, Pose, Poses, SessionId, SessionSettings, Split
 from nerfaug.capture.state import SessionSummary
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST
 
@@ -49,7 +50,7 @@ class FromUploads(SessionSettings):
 
 
 class TrainRequest(BaseModel):
-    steps: int = Field(ge=1, le=10_000_000, description="training steps to run in the background")
+    steps: int = Field(ge=1, le=MAX_STEPS, description="training steps to run in the background")
 
 
 class UncertaintyRequest(BaseModel):
@@ -86,18 +87,26 @@ class Evaluation(BaseModel):
 
 
 class Job(BaseModel):
+    """A training job: from `start` to `target` steps; `state` is running, done or failed. A job a
+    restarted service resumed has `resumed_from` and `redone`."""
+
     target: int
     start: int
     step: int
-    state: Literal["running", "done", "failed"]
-    error: str | None
-    started: float
-    finished: float | None
-    progress: float
+    state: Literal["running", "done", "failed"] = "running"
+    error: str | None = None
+    started: float = Field(default_factory=time)
+    finished: float | None = None
     resumed_from: int | None = Field(
         None, description="a job a restarted service resumed: the step of the session's last save it went on from"
     )
     redone: int = Field(0, description="steps trained after that save before the service stopped, trained again")
+
+    @computed_field
+    @property
+    def progress(self) -> float:
+        """The share of the job's steps done."""
+        return 1.0 if self.target <= self.start else round((self.step - self.start) / (self.target - self.start), 4)
 
 
 class SessionStatus(SessionSummary):

@@ -1,0 +1,39 @@
+"""The capture commands' refusals in the words of their command line: a schema's field as the
+option that sets it, and a `RequestError` as `--option value: problem`. Light (no torch): both the
+commands' options (`nerfaug.cli.train`) and their work (`nerfaug.cli.train_work`) use it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+
+from nerfaug.capture.requests import RequestError, words
+
+# A field of a schema named otherwise on the command line.
+OPTION_NAMES = {"preset": "engine"}
+
+
+def option(field: str) -> str:
+    """A schema's field as the option that sets it: "estimate_up" -> "--estimate-up"."""
+    return "--" + OPTION_NAMES.get(field, field).replace("_", "-")
+
+
+@contextlib.contextmanager
+def as_options(omitted: tuple[str, ...] = ()):
+    """Show a `RequestError` as this command's option and value: `--n-candidates 0: must be >= 1`
+    (fields under `omitted`, e.g. "constraints.", are options without that prefix)."""
+    try:
+        yield
+    except RequestError as error:
+        name = error.argument
+        for prefix in omitted:
+            name = name.removeprefix(prefix)
+        value = "" if dataclasses.is_dataclass(error.value) else f" {words(error.value)}"  # a group of options
+        raise ValueError(f"{option(name.partition('[')[0])}{value}: {error.problem}") from None
+
+
+def checked(request):
+    """`request.checked()`, a refused value shown as its option."""
+    with as_options(omitted=("constraints.",)):
+        return request.checked()

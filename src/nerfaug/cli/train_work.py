@@ -1,0 +1,246 @@
+"""The work of `nerfaug train` and `nerfaug add`, whose options are in `nerfaug.cli.train`: a new,
+resumed or further trained session, captures added, and the session's one training loop
+(`CaptureSession.train_for`: a save every --checkpoint-every seconds), here stopped cleanly by
+Ctrl-C. This module loads torch: `nerfaug.cli.train` imports it only when a command runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import shlex
+import signal
+import sys
+import warnings
+from pathlib import Path
+
+from nerfaug.capture.dataset import default_split
+from nerfaug.capture.folder import SessionFolder
+from nerfaug.capture.lock import hold
+from nerfaug.capture.requests import SessionSettings
+from nerfaug.capture.runfolder import SESSION_FILE
+from nerfaug.capture.session import CaptureSession
+from nerfaug.capture.state import DuplicateViews, UnverifiedCheckpoint
+from nerfaug.cli.option_names import as_options, checked, option
+from nerfaug.data import load_dataset
+from nerfaug.device import configure_process, resolve_device
+from nerfaug.errors import Interrupted
+
+
+def train(path: Path, out: Path | None, steps: int, given, split, device: str, checkpoint_every: float, threads: int):
+    """`nerfaug train PATH` (`nerfaug.cli.train.train`) with its options, `given` the session
+    settings the command line gives (a `GivenSettings`)."""
+    run, data, compared = _which_session(path, out, _given(given, split), steps)
+    settings = _settings(given)
+    if run is None:
+        configure(threads)
+        _finish(_create(path, out, settings, split, device), steps, checkpoint_every)
+    elif not _at_step(run, data, settings, split, compared, steps):
+        configure(threads)
+        _train_further(open_session(run, device, changing="train"), steps, checkpoint_every, resuming=data is not None)
+
+
+def add(run: Path, images: Path, poses: Path, steps: int, device: str, checkpoint_every: float, threads: int):
+    """`nerfaug add RUN` (`nerfaug.cli.train.add`) with its options."""
+    configure(threads)
+    session = open_session(run, device, changing="add")
+    with warning_lines():
+        names = session.add_views(images, poses)
+    session.save()  # the addition's record is kept even if training is stopped at once
+    print(f"added {len(names)} views ({', '.join(names)}); the dataset now has {session.summary().views} views")
+    if steps:
+        print(f"training from step {session.step} until step {session.step + steps}", flush=True)
+    last = train_session(session, steps, checkpoint_every)
+    if steps:
+        print(f"step {session.step}, training PSNR {last['psnr']:.2f} dB")
+
+
+def device_name(device: str) -> str:
+    """`device` resolved (auto -> cuda or cpu), or exit with one line saying why it cannot be used."""
+    try:
+        return str(resolve_device(device))
+    except ValueError as error:
+        raise SystemExit(f"--device: {error}") from None
+
+
+def configure(threads: int) -> None:
+    if threads < 1:
+        raise ValueError(f"--threads {threads}: must be >= 1 (torch threads)")
+    configure_process(threads=threads)
+
+
+def open_session(run: Path, device: str, changing: str | None = None):
+    """The session in `run`; `changing` (the command, e.g. "train") locks it first until the
+    command ends, waiting for another command that changes it (`nerfaug.capture.lock`)."""
+    if changing is not None:
+        _lock(run, changing)
+    with warning_lines():
+        return CaptureSession.open(run, device=device_name(device), progress=True)
+
+
+def _lock(run: Path, command: str) -> None:
+    if (run / SESSION_FILE).is_file():  # else opening it says what is wrong with the folder
+        hold(run, f"nerfaug {command}", on_wait=lambda line: print(line, file=sys.stderr, flush=True))
+
+
+@contextlib.contextmanager
+def warning_lines():
+    """Show the capture's warnings (`DuplicateViews`, `UnverifiedCheckpoint`) as one line each,
+    `warning: ...` on stderr."""
+    kinds = (DuplicateViews, UnverifiedCheckpoint)
+    with warnings.catch_warnings():
+        for kind in kinds:
+            warnings.simplefilter("always", kind)
+        default = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, kinds):
+                print(f"warning: {message}", file=sys.stderr)
+            else:
+                default(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
+
+
+def resume_command(run: Path, target: int) -> str:
+    """The shell command that trains the session in `run` on until step `target`."""
+    return f"nerfaug train {shlex.quote(str(run))} --steps {target}"
+
+
+def train_session(session, steps: int, checkpoint_every: float) -> dict:
+    """`session.train_for(steps, checkpoint_every)`, where a first Ctrl-C stops at the next chunk
+    and saves, a second at once, keeping the last save.
+
+    Raises:
+        Interrupted: after Ctrl-C, saying at which step the session was saved and the command that
+            goes on from there.
+    """
+    asked = []
+
+    def stop(signum, frame):
+        if asked:
+            raise KeyboardInterrupt
+        asked.append(signum)
+        print("stopping after the current steps to save the session (Ctrl-C again: stop at once)", file=sys.stderr)
+
+    go_on = resume_command(session.run_dir, session.step + steps)
+    previous = signal.signal(signal.SIGINT, stop)
+    try:
+        last = session.train_for(steps, checkpoint_every, stop=lambda: bool(asked))
+    except KeyboardInterrupt:
+        raise Interrupted(
+            f"{session.run_dir}: interrupted at step {session.step}; the session saved at step "
+            f"{session.saved_step} is kept (`{go_on}` goes on from there)"
+        ) from None
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if asked:
+        raise Interrupted(
+            f"{session.run_dir}: interrupted; the session is saved at step {session.step} "
+            f"(`{go_on}` goes on from there)"
+        )
+    return last
+
+
+def _which_session(path: Path, out: Path | None, given: set[str], steps: int):
+    """(run folder, its dataset, the settings to compare) for `nerfaug train PATH [--out OUT]`:
+    `train RUN` compares the settings `given`, the same `train DATA --out RUN` again every setting
+    (None); (None, PATH, None) when a new session is to be made."""
+    if (path / SESSION_FILE).exists():
+        if out is not None:
+            raise SystemExit(f"{path} is a session folder; drop --out: `{resume_command(path, steps)}`")
+        return path, None, given
+    if out is not None and (out / SESSION_FILE).exists():
+        return out, path, None
+    if out is None:
+        raise SystemExit(f"{path} is a dataset: give the run folder to create with --out RUN")
+    return None, path, None
+
+
+def _given(settings, split: str | None) -> set[str]:
+    """The names of the settings given (not None), even at their default values, "split" among them."""
+    given = {name for name, value in dataclasses.asdict(settings).items() if value is not None}
+    return given if split is None else given | {"split"}
+
+
+def _settings(settings) -> SessionSettings:
+    """The session settings `settings` (a `GivenSettings`) gives, those not given at their defaults."""
+    return SessionSettings(**{name: value for name, value in dataclasses.asdict(settings).items() if value is not None})
+
+
+def _at_step(run: Path, data: Path | None, settings: SessionSettings, split, given, steps: int) -> bool:
+    """Whether the session in `run` is at step `steps` already (and says so), once the settings
+    `given` (every one when None) agree with the session's."""
+    folder = SessionFolder.open(run)  # the captures are checked all the same: a damaged session is never done
+    if given is None:
+        given = {f.name for f in dataclasses.fields(SessionSettings)} | {"split"}
+        split = default_split(data)[0] if split is None else split
+    _refuse_other_settings(folder, data, checked(settings), split, given, steps)
+    if folder.state.step < steps:
+        return False
+    folder.checkpoint()
+    step = folder.state.step
+    print(_reached(run, step, steps))
+    return True
+
+
+def _reached(run: Path, step: int, steps: int) -> str:
+    return f"{run}: already at step {step} (--steps {steps}); nothing to do. Give a larger --steps to train further"
+
+
+def _refuse_other_settings(folder, data: Path | None, settings: SessionSettings, split, given, steps: int) -> None:
+    """Refuse, in one line, settings `given` that differ from the session's in `folder` (and a
+    dataset `data` other than the one it started from)."""
+    state = folder.state
+    found = [
+        f"{option(name)} {asked} (the session's: {theirs})"
+        for name, asked, theirs in settings.differences(state.settings(), given)
+    ]
+    if "split" in given and split is not None and split != state.source.split:
+        found.append(f"--split {split} (the session's: {state.source.split})")
+    if data is not None and Path(data).resolve() != Path(state.source.data_dir).resolve():
+        found.insert(0, f"DATA {data} (the session's: {state.source.data_dir})")
+    if found:
+        raise ValueError(
+            f"{folder.run_dir} holds a session (at step {state.step}) made with other settings: {'; '.join(found)}. "
+            f"`{resume_command(folder.run_dir, steps)}` trains it on with its own settings; to start a session "
+            "with these, give a new --out"
+        )
+
+
+def _train_further(session, target: int, every_s: float, resuming: bool) -> None:
+    if session.step >= target:  # another command reached it while this one waited for the lock
+        print(_reached(session.run_dir, session.step, target), flush=True)
+        return
+    verb = "resuming" if resuming else "training"
+    print(
+        f"{session.run_dir}: {verb} from step {session.step}, its last save, until step {target} "
+        f"({session.summary().views} views)",
+        flush=True,
+    )
+    _finish(session, target - session.step, every_s)
+
+
+def _create(data: Path, out: Path, settings: SessionSettings, split: str | None, device: str):
+    """A new session on `data` in `out`, after one line saying how many views it trains on and why."""
+
+    why = f"split '{split}' of {data}"
+    if split is None:
+        split, why = default_split(data)
+    print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
+    with warning_lines(), as_options():
+        session = CaptureSession.create(data, out, settings, split=split, device=device_name(device), progress=True)
+    _lock(out, "train")
+    h = session.hemisphere
+    print(
+        f"session created in {out}: {session.summary().views} views; hemisphere centre "
+        f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}"
+    )
+    return session
+
+
+def _finish(session, steps: int, every_s: float) -> None:
+    last = train_session(session, steps, every_s)
+    psnr = f", training PSNR {last['psnr']:.2f} dB" if "psnr" in last else ""
+    print(f"{session.run_dir}: step {session.step}{psnr}")
