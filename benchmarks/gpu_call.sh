@@ -8,9 +8,9 @@
 #
 # Stages: (1) the fused hash kernels against the PyTorch path at the paper grid's size;
 # (2) the paper preset's step time with each kernel (short uniform trials at 400 px);
-# (3) one paper-scale trial (400 px, 10k steps, 200 test views) with the fused kernels and the
-#     fixed white background; (4) at 100 px, the walk's start and its end (the paper preset) with
-#     each background, several runs at once, in the time left.
+# (3) one paper-scale trial (400 px, 10k steps, 200 test views) of the paper preset; (4) at
+#     100 px, the walk's start, its last two steps (the paper preset with "last_sample", then with
+#     its fixed background) and nerfacto's own last_sample, several runs at once, in the time left.
 # Everything lands in $OUT/gpu.tgz, re-packed after each stage, so a call cut short still
 # brings back what finished.
 set -u
@@ -41,14 +41,14 @@ for kernel in torch triton; do
     pack
 done
 
-echo "== (3) paper-scale trial, fixed background, $(left) s left"
+echo "== (3) paper-scale trial, $(left) s left"
 timeout $(($(left) - 170)) python3 benchmarks/bench_gpu.py trial --data data/gpu/lego.npz --device cuda \
-    --engine paper+background_mode=fixed --save-renders 3 --out /tmp/trial-full --json "$RES/trial-fixed.json" | tail -12
+    --engine paper --save-renders 3 --out /tmp/trial-full --json "$RES/trial-paper.json" | tail -12
 find /tmp/trial-full -name "*_render_vs_gt.png" | head -3 | xargs -r cp -t "$RES/"
 pack
 
 echo "== (4) walk at 100 px, $(left) s left"
-for entry in start rays-per-step paper-fixed-bg paper-last-composited-bg; do
+for entry in start rays-per-step background paper-last-composited-bg; do
     timeout $(($(left) - 15)) python3 benchmarks/bench_engine_walk.py --data data/lego100 --out "$RES/walk-$entry" \
         --entries "$entry" --seeds 0 1 --device cuda > "$RES/walk-$entry.log" 2>&1 &
 done

@@ -102,7 +102,8 @@ def test_cuda_without_a_gpu_is_refused_in_one_line_everywhere(views, capsys):
 def test_mixed_precision_only_on_cuda():
     cpu, gpu = torch.device("cpu"), torch.device("cuda")
     assert autocast_dtype(cpu, "auto") is None and autocast_dtype(cpu, "fp32") is None
-    assert autocast_dtype(gpu, "auto") is torch.float16  # as nerfacto trains
+    assert autocast_dtype(gpu, "auto") is None  # half precision does not train this engine
+    assert autocast_dtype(gpu, "fp16") is torch.float16
     assert autocast_dtype(gpu, "bf16") is torch.bfloat16 and autocast_dtype(gpu, "fp32") is None
     with pytest.raises(ValueError, match="needs a cuda device"):
         autocast_dtype(cpu, "fp16")

@@ -23,8 +23,9 @@ from nerfaug.nerf.trainer import Trainer
 FROZEN = {
     "cpu": "a94e724a8129081a5c3399cdb7d71d5af270d1a90bef9b3dd7f96663777080a7",
     "nerfacto-cpu": "5fc61d1dc7d76484c8e9727e6a191ab78749eb09092903dd1aa900e54cfabaf0",
-    # with nerfacto's proposal-update schedule (2026-11-23; no study has run it: it needs a GPU)
-    "paper": "8f96efad7a06e95f23e92ab1b584d78145cde0e523a7045fd0a7b13edcccaf05",
+    # with nerfacto's proposal-update schedule (2026-11-23), then the fixed white background
+    # (2026-11-26: with "last_sample" it fogs on 12 views; no study has run it: it needs a GPU)
+    "paper": "c3edd99afaaf4f8ccd200e823404aa4f7cebf7d5dd4a6f804d05776034ed31b2",
     # nerfacto-cpu with nerfacto's "last_sample" background (2026-11-24): the paper's regime
     "nerfacto-cpu-last-sample": "8ada352845b41b53a82309c2724986ffaaf733291f9baa8b86eb48687769a00d",
 }

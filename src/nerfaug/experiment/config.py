@@ -90,7 +90,7 @@ class ExperimentConfig:
     view_uncertainty: bool = True
     """save the first test view's uncertainty images (the report's figure and AUSE; no metric needs them)."""
     # Only the kind (cpu / cuda) is fingerprinted: the two give different numbers (other kernels and
-    # reduction orders, and fp16 autocast on cuda), so a results folder never mixes them.
+    # reduction orders), so a results folder never mixes them.
     device: Literal["auto", "cpu", "cuda"] = "auto"
     """where runs train, select and evaluate: auto (cuda when there is a GPU, else cpu), cpu or cuda."""
 

@@ -77,8 +77,8 @@ class Trainer:
         field: str | nn.Module = DEFAULT_FIELD,
         compile: str | None = None,
     ):
-        # device: "cpu", "cuda", "auto" (cuda when available); precision: "auto" (fp16 autocast
-        # on cuda, fp32 on the CPU), "fp32", "fp16" or "bf16" (`nerfaug.device.autocast_dtype`).
+        # device: "cpu", "cuda", "auto" (cuda when available); precision: "auto" (float32 on
+        # every device), "fp32", or on cuda "fp16" or "bf16" (`nerfaug.device.autocast_dtype`).
         # field: a name in `nerfaug.nerf.registry.FIELDS`, built here from the seed, or a field
         # module built by the caller (a checkpoint then restores into the default field).
         # compile: a torch.compile backend ("inductor" on a GPU) for the field and the sampler's
