@@ -103,3 +103,18 @@ def test_training_steps_with_the_fused_kernels_give_the_pytorch_paths_losses():
     )
     assert result["encodings"] == 3  # the field's and both proposal networks'
     assert result["triton"] == pytest.approx(result["torch"], abs=1e-5, rel=0)
+
+
+def test_no_points_give_no_features_and_no_gradient():
+    result = run_interpreted(
+        """
+        import json, torch
+        from nerfaug.nerf.encoding import HashEncoding
+        encoding = HashEncoding(3, 2, 10, 4, 64, kernel="triton")
+        x = torch.empty(0, 3)
+        out = encoding(x)
+        out.sum().backward()
+        print(json.dumps({"shape": list(out.shape), "gradient": encoding.table.grad.abs().sum().item()}))
+        """
+    )
+    assert result == {"shape": [0, 6], "gradient": 0.0}

@@ -102,7 +102,7 @@ def backward_kernel(
 def _launch(kernel, x: Tensor, tensor: Tensor, out: Tensor, encoding) -> None:
     """Run `kernel` over every (block of points, level) with the encoding's constants."""
     levels, features = encoding.num_levels, encoding.features_per_level
-    if x.shape[0] == 0:  # nothing to do, and a grid of no programs is not a launch Triton accepts
+    if x.shape[0] == 0:  # no points (no live sample in a batch): nothing to launch
         return
     grid = (triton.cdiv(x.shape[0], BLOCK), levels)
     kernel[grid](
