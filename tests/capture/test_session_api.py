@@ -14,7 +14,7 @@ import torch
 from nerfaug.capture import CaptureSession, Intrinsics, SessionFolder, SessionSettings
 from nerfaug.capture import session as capture_session
 from nerfaug.capture.images import ImageFile
-from nerfaug.data import load_dataset
+from nerfaug.data import DatasetError, load_dataset
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 
 from .test_constraints import SIZE, tiny_dataset
@@ -70,6 +70,15 @@ def test_a_session_from_image_files_and_their_poses(tmp_path):
     assert stored.read_bytes() == files[4].data  # byte for byte
     grown = load_dataset(session.dataset_dir)
     assert torch.allclose(grown.cameras.camera_to_world, poses, atol=1e-6)
+    # Two files of one name: the second would replace the first, so both calls refuse them.
+    twice = [files[0], ImageFile("shot_0", ".jpg", files[1].data)]
+    with pytest.raises(DatasetError, match=r"^images\[1\] \(shot_0.jpg\): the same name as images\[0\]$"):
+        CaptureSession.from_files(twice, poses[:2], k, tmp_path / "twice", SETTINGS)
+    assert not (tmp_path / "twice").exists()
+    renamed = [ImageFile(f"again_{f.name}", f.suffix, f.data) for f in twice]
+    with pytest.raises(DatasetError, match="the same name as images"):
+        session.add_files(renamed, poses[:2])
+    assert session.summary().views == 5 and len(load_dataset(session.dataset_dir)) == 5
 
 
 def test_the_summary_is_the_same_with_and_without_the_model(session):

@@ -39,8 +39,24 @@ class ImageFile:
     data: bytes
 
 
+def check_distinct(files: Sequence[ImageFile]) -> None:
+    """Refuse two files of one name (a view's), whatever their suffixes: the second would take
+    the first one's place.
+
+    Raises:
+        DatasetError: naming the second file and the first, by their index in `files`.
+    """
+    seen: dict[str, int] = {}
+    for i, f in enumerate(files):
+        if f.name in seen:
+            raise DatasetError(f"images[{i}] ({f.name}{f.suffix})", f"the same name as images[{seen[f.name]}]")
+        seen[f.name] = i
+
+
 def write_files(files: Sequence[ImageFile], folder: Path) -> list[Path]:
-    """Write the files' bytes, unchanged, into `folder`; returns the files in order."""
+    """Write the files' bytes, unchanged, into `folder` (`check_distinct` first); returns the
+    files in order."""
+    check_distinct(files)
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / f"{f.name}{f.suffix}" for f in files]
     for path, f in zip(paths, files):

@@ -102,18 +102,13 @@ def image_header(data: bytes, label: str) -> tuple[str, int, int]:
 
 def read_uploads(files: list, limit_bytes: int, size: tuple[int, int]) -> list[ImageFile]:
     """Every uploaded image read and checked (`read_upload`); 413 for more than
-    `MAX_CAPTURES_PER_REQUEST`, 422 when two share a name."""
+    `MAX_CAPTURES_PER_REQUEST` (two of one name are refused where they are added:
+    `nerfaug.capture.images.check_distinct`)."""
     if len(files) > MAX_CAPTURES_PER_REQUEST:
         raise ServiceError(
             413, f"images: {len(files)} files; a request may carry at most {MAX_CAPTURES_PER_REQUEST} images"
         )
-    uploads = [read_upload(f, i, limit_bytes, size) for i, f in enumerate(files)]
-    seen: dict[str, int] = {}
-    for i, upload in enumerate(uploads):
-        if upload.name in seen:
-            raise bad_input(f"images[{i}] ({upload.name}{upload.suffix}): the same name as images[{seen[upload.name]}]")
-        seen[upload.name] = i
-    return uploads
+    return [read_upload(f, i, limit_bytes, size) for i, f in enumerate(files)]
 
 
 def form_json(text: str, field: str, kind):
