@@ -78,6 +78,11 @@ def test_a_session_from_image_files_and_their_poses(tmp_path):
     renamed = [ImageFile(f"again_{f.name}", f.suffix, f.data) for f in twice]
     with pytest.raises(DatasetError, match="the same name as images"):
         session.add_files(renamed, poses[:2])
+    # A name that is not a view's would be written outside the folder the files are staged in.
+    with pytest.raises(DatasetError, match=r"^images\[0\] \(\.\./outside\.png\): a file name may hold only"):
+        session.add_files([ImageFile("../outside", ".png", files[1].data)], poses[:1])
+    with pytest.raises(DatasetError, match=r"^images\[0\] \(shot_9\.txt\): the file name must end in one of"):
+        session.add_files([ImageFile("shot_9", ".txt", files[1].data)], poses[:1])
     assert session.summary().views == 5 and len(load_dataset(session.dataset_dir)) == 5
 
 
