@@ -94,3 +94,16 @@ def test_the_summary_is_the_same_with_and_without_the_model(session):
     assert folder.last_losses == []
     assert loaded.model_dump(exclude={"last_losses"}) == folder.model_dump(exclude={"last_losses"})
     assert (loaded.id, loaded.step, loaded.views) == ("run", 3, 4)
+
+
+def test_a_session_names_what_asks_for_another_session(session, tmp_path):
+    """`SessionState.differences`: the dataset first, then the settings given, then the split; a
+    dataset but no split compares the split a new session on it would train on."""
+    state, data = session.state, tmp_path / "data"
+    assert state.differences(state.settings()) == []  # every setting: its own
+    assert state.differences(state.settings(), split=state.source.split, data=data) == []
+    other = SessionSettings(preset="cpu", seed=4, radius=4.03)
+    assert state.differences(other, {"preset"}) == [("preset", "cpu", "test")]
+    elsewhere = tiny_dataset(tmp_path / "elsewhere")
+    found = state.differences(other, {"seed"}, split="initial", data=elsewhere)
+    assert found == [("data", str(elsewhere), state.source.data_dir), ("seed", "4", "3"), ("split", "initial", "train")]
