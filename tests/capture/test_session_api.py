@@ -14,7 +14,7 @@ import torch
 from nerfaug.capture import CaptureSession, Intrinsics, SessionFolder, SessionSettings
 from nerfaug.capture import session as capture_session
 from nerfaug.capture.images import ImageFile
-from nerfaug.data import load_dataset
+from nerfaug.data import DatasetError, load_dataset
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 
 from .test_constraints import SIZE, tiny_dataset
@@ -70,6 +70,20 @@ def test_a_session_from_image_files_and_their_poses(tmp_path):
     assert stored.read_bytes() == files[4].data  # byte for byte
     grown = load_dataset(session.dataset_dir)
     assert torch.allclose(grown.cameras.camera_to_world, poses, atol=1e-6)
+    # Two files of one name: the second would replace the first, so both calls refuse them.
+    twice = [files[0], ImageFile("shot_0", ".jpg", files[1].data)]
+    with pytest.raises(DatasetError, match=r"^images\[1\] \(shot_0.jpg\): the same name as images\[0\]$"):
+        CaptureSession.from_files(twice, poses[:2], k, tmp_path / "twice", SETTINGS)
+    assert not (tmp_path / "twice").exists()
+    renamed = [ImageFile(f"again_{f.name}", f.suffix, f.data) for f in twice]
+    with pytest.raises(DatasetError, match="the same name as images"):
+        session.add_files(renamed, poses[:2])
+    # A name that is not a view's would be written outside the folder the files are staged in.
+    with pytest.raises(DatasetError, match=r"^images\[0\] \(\.\./outside\.png\): a file name may hold only"):
+        session.add_files([ImageFile("../outside", ".png", files[1].data)], poses[:1])
+    with pytest.raises(DatasetError, match=r"^images\[0\] \(shot_9\.txt\): the file name must end in one of"):
+        session.add_files([ImageFile("shot_9", ".txt", files[1].data)], poses[:1])
+    assert session.summary().views == 5 and len(load_dataset(session.dataset_dir)) == 5
 
 
 def test_the_summary_is_the_same_with_and_without_the_model(session):
@@ -80,3 +94,16 @@ def test_the_summary_is_the_same_with_and_without_the_model(session):
     assert folder.last_losses == []
     assert loaded.model_dump(exclude={"last_losses"}) == folder.model_dump(exclude={"last_losses"})
     assert (loaded.id, loaded.step, loaded.views) == ("run", 3, 4)
+
+
+def test_a_session_names_what_asks_for_another_session(session, tmp_path):
+    """`SessionState.differences`: the dataset first, then the settings given, then the split; a
+    dataset but no split compares the split a new session on it would train on."""
+    state, data = session.state, tmp_path / "data"
+    assert state.differences(state.settings()) == []  # every setting: its own
+    assert state.differences(state.settings(), split=state.source.split, data=data) == []
+    other = SessionSettings(preset="cpu", seed=4, radius=4.03)
+    assert state.differences(other, {"preset"}) == [("preset", "cpu", "test")]
+    elsewhere = tiny_dataset(tmp_path / "elsewhere")
+    found = state.differences(other, {"seed"}, split="initial", data=elsewhere)
+    assert found == [("data", str(elsewhere), state.source.data_dir), ("seed", "4", "3"), ("split", "initial", "train")]

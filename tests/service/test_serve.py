@@ -386,6 +386,11 @@ BAD_REQUESTS = {
     ),
     "non-finite pose": (lambda c: add_to(c, ["y.png"], json.dumps([NAN_POSE])), 422, "poses[0]: not finite"),
     "scaled pose": (lambda c: add_to(c, ["y.png"], [SCALED]), 422, "poses[0]: transform_matrix rotation is not rigid"),
+    "two images of one name": (
+        lambda c: add_to(c, ["twice.png", "twice.png"], GOOD * 2),
+        422,
+        "images[1] (twice.png): the same name as images[0]",
+    ),
     "fewer poses than images": (lambda c: add_to(c, ["p.png", "q.png"], GOOD), 422, "got 2 images but 1 poses"),
     "poses not JSON": (lambda c: add_to(c, ["y.png"], "[[1, 2"), 422, "poses: not valid JSON"),
     "image over the limit": (

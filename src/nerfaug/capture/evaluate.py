@@ -3,12 +3,20 @@ dataset split (what `nerfaug eval` reports, as nerfstudio's `ns-eval` does for i
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import nerfaug
+from nerfaug import owned
 from nerfaug.capture.model import SessionModel
 from nerfaug.data.formats import load_dataset
 from nerfaug.data.views import Views, spread_over_frames
+from nerfaug.errors import FolderRefused
 from nerfaug.evaluation import EvaluationResult, evaluate_views
+from nerfaug.jsonio import atomic_write_json
+
+# The key marking a JSON `write_evaluation` wrote (and may overwrite).
+EVAL_KIND = "session-eval"
 
 
 def load_held_out(
@@ -46,3 +54,31 @@ def evaluate_model(model: SessionModel, views: Views, lpips="auto", progress: bo
         return model.model.render_image(cameras, index, background)
 
     return evaluate_views(render, views, lpips=lpips, progress=progress)
+
+
+def check_evaluation_out(out: Path, data: Path) -> None:
+    """Refuse to write an evaluation (`write_evaluation`) inside the dataset `data` it scores, or
+    over a file that is not an evaluation nerfaug wrote.
+
+    Raises:
+        FolderRefused: naming the file and what to do.
+    """
+    if owned.overlaps(out, data):
+        raise FolderRefused(f"{out}: lies inside the dataset {data}; nothing is written into an input folder")
+    if out.exists():
+        try:
+            ours = json.loads(out.read_text()).get("nerfaug", {}).get("kind") == EVAL_KIND
+        except (OSError, ValueError, AttributeError):
+            ours = False
+        if not ours:
+            raise FolderRefused(
+                f"{out}: exists and is not an evaluation nerfaug wrote, so it is not overwritten; choose another --out"
+            )
+
+
+def write_evaluation(out: Path, result: EvaluationResult, run: Path, step: int, data: Path, split: str) -> None:
+    """`result`, the session in `run` at `step` scored on `split` of `data`, as the JSON `out`,
+    marked as an evaluation nerfaug wrote (which `check_evaluation_out` lets be overwritten)."""
+    kind = {"kind": EVAL_KIND, "version": nerfaug.__version__}
+    record = {"nerfaug": kind, "session": str(run), "step": step, "data": str(data), "split": split}
+    atomic_write_json(out, {**record, **result.to_dict()})

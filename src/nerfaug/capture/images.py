@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nerfaug.capture.dataset import NAME
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import STORED_SUFFIXES, decode_image, encode_png
 from nerfaug.data.views import Views
@@ -39,8 +40,38 @@ class ImageFile:
     data: bytes
 
 
+def check_file_name(name: str, suffix: str, label: str) -> None:
+    """Refuse an image file's name (stem) that cannot name a view (`NAME`: no separators, so it
+    stays inside the folder it is written to), or a suffix that is not an image's.
+
+    Raises:
+        DatasetError: naming the file by `label`.
+    """
+    if suffix.lower() not in CAPTURE_SUFFIXES:
+        raise DatasetError(label, f"the file name must end in one of {', '.join(CAPTURE_SUFFIXES)}")
+    if not NAME.fullmatch(name):
+        raise DatasetError(label, "a file name may hold only letters, digits, '.', '_', '-'")
+
+
+def check_files(files: Sequence[ImageFile]) -> None:
+    """Refuse a file whose name cannot name a view (`check_file_name`), or two files of one name
+    (a view's), whatever their suffixes: the second would take the first one's place.
+
+    Raises:
+        DatasetError: naming the file (and the first of its name) by its index in `files`.
+    """
+    seen: dict[str, int] = {}
+    for i, f in enumerate(files):
+        check_file_name(f.name, f.suffix, f"images[{i}] ({f.name}{f.suffix})")
+        if f.name in seen:
+            raise DatasetError(f"images[{i}] ({f.name}{f.suffix})", f"the same name as images[{seen[f.name]}]")
+        seen[f.name] = i
+
+
 def write_files(files: Sequence[ImageFile], folder: Path) -> list[Path]:
-    """Write the files' bytes, unchanged, into `folder`; returns the files in order."""
+    """Write the files' bytes, unchanged, into `folder` (`check_files` first); returns the files
+    in order."""
+    check_files(files)
     folder.mkdir(parents=True, exist_ok=True)
     paths = [folder / f"{f.name}{f.suffix}" for f in files]
     for path, f in zip(paths, files):

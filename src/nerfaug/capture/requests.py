@@ -134,12 +134,15 @@ def replaced_by(default: str, metavar: str):
 def given_form(schema: type) -> type:
     """`schema` as tyro reads it where an option given at its default value must be told from
     one not given: a frozen dataclass of the same fields, each None unless given (None cannot be
-    written on the command line), with `schema`'s help, metavar and default in `--help`.
+    written on the command line), with `schema`'s help, metavar and default in `--help`; its
+    `given_names()` are the fields given, `filled()` the `schema` they give.
 
     Example:
         >>> Given = given_form(SessionSettings)
         >>> Given(seed=0)
         GivenSessionSettings(preset=None, seed=0, downscale=None, centre=None, radius=None, up=None, estimate_up=None)
+        >>> Given(seed=0).given_names(), Given(seed=0).filled().seed
+        ({'seed'}, 0)
     """
     hints, docs = get_type_hints(schema, include_extras=True), _field_docs(schema)
     form = []
@@ -147,7 +150,17 @@ def given_form(schema: type) -> type:
         kind, *meta = get_args(hints[f.name]) if get_origin(hints[f.name]) is Annotated else (hints[f.name],)
         shown = tyro.conf.arg(help=docs.get(f.name), help_behavior_hint=f"(default: {_shown(f.default)})")
         form.append((f.name, Annotated[kind | None, shown, *meta, tyro.conf.DisallowNone], None))
-    return make_dataclass(f"Given{schema.__name__}", form, frozen=True)
+
+    def given_names(self) -> set[str]:
+        """The fields given (not None), even at their default values."""
+        return {f.name for f in fields(self) if getattr(self, f.name) is not None}
+
+    def filled(self):
+        """The `schema` this gives, the fields not given at their defaults."""
+        return schema(**{name: getattr(self, name) for name in self.given_names()})
+
+    methods = {"given_names": given_names, "filled": filled}
+    return make_dataclass(f"Given{schema.__name__}", form, frozen=True, namespace=methods)
 
 
 def _field_docs(schema: type) -> dict[str, str]:
@@ -330,12 +343,14 @@ class SessionSettings(Schema):
     estimate_up: bool = False
     """take the pole from the cameras' mean up axis instead of --up."""
 
-    def differences(self, ours: SessionSettings, given) -> list[tuple[str, str, str]]:
-        """The settings named in `given` (field names) that differ from a session's `ours`, each
-        as (field, this value, the session's), in words ("0 0 1", "estimated", "on").
+    def differences(self, ours: SessionSettings, given=None) -> list[tuple[str, str, str]]:
+        """The settings named in `given` (field names; every one when None) that differ from a
+        session's `ours`, each as (field, this value, the session's), in words ("0 0 1",
+        "estimated", "on").
 
         None for the centre or the radius means estimated; an estimated pole is compared as
         `estimate_up` when that is given too (one difference, not two)."""
+        given = {f.name for f in fields(SessionSettings)} if given is None else given
         found = []
         for f in fields(SessionSettings):
             if f.name not in given or (f.name == "up" and self._up_skipped(ours, given)):

@@ -39,7 +39,7 @@ from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.dataset import default_split, duplicate_frames
 from nerfaug.capture.evaluate import evaluate_model
 from nerfaug.capture.folder import SessionFolder, camera_of
-from nerfaug.capture.images import ImageFile, write_files
+from nerfaug.capture.images import ImageFile, check_files, write_files
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
 from nerfaug.capture.requests import (
@@ -213,6 +213,7 @@ class CaptureSession(SessionFolder):
     ) -> CaptureSession:
         """Start a session on images as captured (their files' bytes, e.g. uploaded), taken at
         world-frame `poses` (one each, in order) with one camera, `intrinsics`; see `create`."""
+        check_files(files)
         poses = as_pose_list(poses)
         if len(poses) != len(files):
             raise ValueError(f"poses: {len(poses)} poses for {len(files)} images; give one pose per image")

@@ -29,6 +29,7 @@ from pydantic import (
 )
 
 import nerfaug
+from nerfaug.capture.dataset import default_split
 from nerfaug.capture.requests import Intrinsics, RequestError, Seed, SessionSettings
 from nerfaug.capture.runfolder import DATASET_SPLIT, SESSION_FILE
 from nerfaug.data.format import Format
@@ -235,6 +236,24 @@ class SessionState(Stored):
             up=h.up,
             estimate_up=estimated.get("up", False),
         )
+
+    def differences(
+        self, settings: SessionSettings, given=None, split: str | None = None, data: str | Path | None = None
+    ) -> list[tuple[str, str, str]]:
+        """What asks for another session than this one (a session keeps its own settings), each
+        as (field, asked, this session's) in words: the dataset folder `data` ("data", first),
+        the fields of `settings` named in `given` (every one when None:
+        `SessionSettings.differences`), and `split` ("split"). Given `data` but no split, the
+        split a new session on `data` trains on is compared (`default_split`)."""
+        found = []
+        if data is not None and Path(data).resolve() != Path(self.source.data_dir).resolve():
+            found.append(("data", str(data), self.source.data_dir))
+        found += settings.differences(self.settings(), given)
+        if split is None and data is not None:
+            split = default_split(Path(data))[0]
+        if split is not None and split != self.source.split:
+            found.append(("split", split, self.source.split))
+        return found
 
     @classmethod
     def from_dict(cls, data, path: Path) -> SessionState:

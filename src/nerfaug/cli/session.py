@@ -12,15 +12,14 @@ are in `nerfaug.cli.train`.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug import __version__, owned
 from nerfaug.capture.choose import ProposalRequest
+from nerfaug.capture.evaluate import check_evaluation_out, write_evaluation
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.proposal import check_poses_out, read_poses
 from nerfaug.capture.requests import replaced_by
@@ -29,8 +28,6 @@ from nerfaug.cli.option_names import checked
 from nerfaug.cli.train import THREADS, Device, RunFolder
 from nerfaug.cli.train_work import configure, open_session
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
-from nerfaug.errors import FolderRefused
-from nerfaug.jsonio import atomic_write_json
 from nerfaug.scenes.render import render_poses
 
 FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
@@ -98,24 +95,6 @@ def export(
     print(f"exported {folder.summary().views} views to {path}")
 
 
-EVAL_KIND = "session-eval"  # the key marking a JSON `nerfaug eval` wrote (and may overwrite)
-
-
-def _check_eval_out(out: Path, data: Path) -> None:
-    """Refuse an --out inside the dataset, or over a file that `nerfaug eval` did not write."""
-    if owned.overlaps(out, data):
-        raise FolderRefused(f"{out}: lies inside the dataset {data}; nothing is written into an input folder")
-    if out.exists():
-        try:
-            ours = json.loads(out.read_text()).get("nerfaug", {}).get("kind") == EVAL_KIND
-        except (OSError, ValueError, AttributeError):
-            ours = False
-        if not ours:
-            raise FolderRefused(
-                f"{out}: exists and is not an evaluation nerfaug wrote, so it is not overwritten; choose another --out"
-            )
-
-
 def _metric(value, digits: int) -> str:
     return "n/a" if value is None else f"{value:.{digits}f}"
 
@@ -142,7 +121,7 @@ def evaluate(
         threads: torch threads for rendering and scoring.
     """
     if out is not None:
-        _check_eval_out(out, data)
+        check_evaluation_out(out, data)
     configure(threads)
     session = open_session(run, device)
     views = session.held_out(data, split)
@@ -153,9 +132,7 @@ def evaluate(
     if m["lpips"] is None:
         print(f"  LPIPS {result.lpips_status}")
     if out is not None:
-        kind = {"kind": EVAL_KIND, "version": __version__}
-        record = {"nerfaug": kind, "session": str(run), "step": session.step, "data": str(data), "split": split}
-        atomic_write_json(out, {**record, **result.to_dict()})
+        write_evaluation(out, result, run, session.step, data, split)
         print(f"  written to {out}")
 
 

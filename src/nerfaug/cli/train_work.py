@@ -7,7 +7,6 @@ Ctrl-C. This module loads torch: `nerfaug.cli.train` imports it only when a comm
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import shlex
 import signal
 import sys
@@ -30,8 +29,8 @@ from nerfaug.errors import Interrupted
 def train(path: Path, out: Path | None, steps: int, given, split, device: str, checkpoint_every: float, threads: int):
     """`nerfaug train PATH` (`nerfaug.cli.train.train`) with its options, `given` the session
     settings the command line gives (a `GivenSettings`)."""
-    run, data, compared = _which_session(path, out, _given(given, split), steps)
-    settings = _settings(given)
+    run, data, compared = _which_session(path, out, given.given_names(), steps)
+    settings = given.filled()
     if run is None:
         configure(threads)
         _finish(_create(path, out, settings, split, device), steps, checkpoint_every)
@@ -158,24 +157,10 @@ def _which_session(path: Path, out: Path | None, given: set[str], steps: int):
     return None, path, None
 
 
-def _given(settings, split: str | None) -> set[str]:
-    """The names of the settings given (not None), even at their default values, "split" among them."""
-    given = {name for name, value in dataclasses.asdict(settings).items() if value is not None}
-    return given if split is None else given | {"split"}
-
-
-def _settings(settings) -> SessionSettings:
-    """The session settings `settings` (a `GivenSettings`) gives, those not given at their defaults."""
-    return SessionSettings(**{name: value for name, value in dataclasses.asdict(settings).items() if value is not None})
-
-
 def _at_step(run: Path, data: Path | None, settings: SessionSettings, split, given, steps: int) -> bool:
     """Whether the session in `run` is at step `steps` already (and says so), once the settings
     `given` (every one when None) agree with the session's."""
     folder = SessionFolder.open(run)  # the captures are checked all the same: a damaged session is never done
-    if given is None:
-        given = {f.name for f in dataclasses.fields(SessionSettings)} | {"split"}
-        split = default_split(data)[0] if split is None else split
     _refuse_other_settings(folder, data, checked(settings), split, given, steps)
     if folder.state.step < steps:
         return False
@@ -190,20 +175,16 @@ def _reached(run: Path, step: int, steps: int) -> str:
 
 
 def _refuse_other_settings(folder, data: Path | None, settings: SessionSettings, split, given, steps: int) -> None:
-    """Refuse, in one line, settings `given` that differ from the session's in `folder` (and a
-    dataset `data` other than the one it started from)."""
-    state = folder.state
-    found = [
-        f"{option(name)} {asked} (the session's: {theirs})"
-        for name, asked, theirs in settings.differences(state.settings(), given)
-    ]
-    if "split" in given and split is not None and split != state.source.split:
-        found.append(f"--split {split} (the session's: {state.source.split})")
-    if data is not None and Path(data).resolve() != Path(state.source.data_dir).resolve():
-        found.insert(0, f"DATA {data} (the session's: {state.source.data_dir})")
+    """Refuse, in one line, what asks for another session than the one in `folder`
+    (`SessionState.differences`)."""
+    found = folder.state.differences(settings, given, split, data)
     if found:
+        named = "; ".join(
+            f"{'DATA' if name == 'data' else option(name)} {asked} (the session's: {theirs})"
+            for name, asked, theirs in found
+        )
         raise ValueError(
-            f"{folder.run_dir} holds a session (at step {state.step}) made with other settings: {'; '.join(found)}. "
+            f"{folder.run_dir} holds a session (at step {folder.state.step}) made with other settings: {named}. "
             f"`{resume_command(folder.run_dir, steps)}` trains it on with its own settings; to start a session "
             "with these, give a new --out"
         )

@@ -14,8 +14,7 @@ import imageio.v3 as iio
 import numpy as np
 from PIL import Image
 
-from nerfaug.capture.dataset import NAME
-from nerfaug.capture.images import CAPTURE_SUFFIXES, ImageFile
+from nerfaug.capture.images import ImageFile, check_file_name
 from nerfaug.capture.requests import validated
 from nerfaug.service.errors import ServiceError, bad_input
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MAX_IMAGE_PIXELS, MEGABYTE
@@ -44,16 +43,14 @@ def read_upload(
         max_pixels: the most pixels an image may have (checked in its header, before decoding).
 
     Raises:
-        ServiceError: 413 over the byte or pixel limit; 422 for a bad name, a format other than
+        DatasetError: (a 422) a name that cannot name a view (`check_file_name`).
+        ServiceError: 413 over the byte or pixel limit; 422 for a format other than
             `UPLOAD_FORMATS`, an undecodable file, a wrong size or shape.
     """
     filename = PurePath(str(file.filename or "")).name
     label = f"images[{index}] ({filename or 'no file name'})"
     stem, suffix = PurePath(filename).stem, PurePath(filename).suffix.lower()
-    if suffix not in CAPTURE_SUFFIXES:
-        raise bad_input(f"{label}: the file name must end in one of {', '.join(CAPTURE_SUFFIXES)}")
-    if not NAME.fullmatch(stem):
-        raise bad_input(f"{label}: a file name may hold only letters, digits, '.', '_', '-'")
+    check_file_name(stem, suffix, label)  # before its bytes are read
     data = file.file.read(limit_bytes + 1)
     if len(data) > limit_bytes:
         raise ServiceError(413, f"{label}: larger than the upload limit of {limit_bytes / MEGABYTE:.3g} MB")
@@ -102,18 +99,13 @@ def image_header(data: bytes, label: str) -> tuple[str, int, int]:
 
 def read_uploads(files: list, limit_bytes: int, size: tuple[int, int]) -> list[ImageFile]:
     """Every uploaded image read and checked (`read_upload`); 413 for more than
-    `MAX_CAPTURES_PER_REQUEST`, 422 when two share a name."""
+    `MAX_CAPTURES_PER_REQUEST` (two of one name are refused where they are added:
+    `nerfaug.capture.images.check_files`)."""
     if len(files) > MAX_CAPTURES_PER_REQUEST:
         raise ServiceError(
             413, f"images: {len(files)} files; a request may carry at most {MAX_CAPTURES_PER_REQUEST} images"
         )
-    uploads = [read_upload(f, i, limit_bytes, size) for i, f in enumerate(files)]
-    seen: dict[str, int] = {}
-    for i, upload in enumerate(uploads):
-        if upload.name in seen:
-            raise bad_input(f"images[{i}] ({upload.name}{upload.suffix}): the same name as images[{seen[upload.name]}]")
-        seen[upload.name] = i
-    return uploads
+    return [read_upload(f, i, limit_bytes, size) for i, f in enumerate(files)]
 
 
 def form_json(text: str, field: str, kind):
