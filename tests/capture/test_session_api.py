@@ -14,6 +14,7 @@ import torch
 from nerfaug.capture import CaptureSession, Intrinsics, SessionFolder, SessionSettings
 from nerfaug.capture import session as capture_session
 from nerfaug.capture.images import ImageFile
+from nerfaug.capture.requests import RequestError
 from nerfaug.data import DatasetError, load_dataset
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 
@@ -48,6 +49,13 @@ def test_train_for_stops_at_a_chunk_boundary_and_saves(session):
     last = session.train_for(100, checkpoint_every=1e9, stop=lambda: len(chunks) >= 2, each=chunks.append)
     assert [entry["step"] for entry in chunks] == [10, 20]
     assert last == chunks[-1] and session.step == 20 == saved_step(session)
+
+
+@pytest.mark.parametrize("seconds", [0, -1.0, float("nan")])
+def test_train_for_refuses_a_period_not_above_zero_before_training(session, seconds):
+    with pytest.raises(RequestError, match=r"^checkpoint_every .*: must be > 0$"):
+        session.train_for(10, checkpoint_every=seconds)
+    assert session.step == 0
 
 
 def png(seed: int) -> bytes:

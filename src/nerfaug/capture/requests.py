@@ -197,6 +197,7 @@ Steps = Annotated[int, Field(ge=0, le=MAX_STEPS)]
 # A session's training saves this often (seconds of training; a killed process loses at most this
 # much), and at the end (`CaptureSession.train_for`).
 CHECKPOINT_EVERY_S = 60.0
+CheckpointEvery = Annotated[float, Field(gt=0, description="seconds of training between saves")]
 
 # A session's id names its folder directly under the service root.
 SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
@@ -226,6 +227,11 @@ def check_session_id(session_id) -> str:
 def check_steps(steps: int) -> int:
     """`steps` (training steps to run) as an int; RequestError unless in 0..`MAX_STEPS`."""
     return validated(Steps, steps, "steps")
+
+
+def check_checkpoint_every(seconds: float) -> float:
+    """`seconds` (of training between saves) as a float; RequestError unless > 0."""
+    return validated(CheckpointEvery, seconds, "checkpoint_every")
 
 
 # ---- poses ------------------------------------------------------------------------------------

@@ -48,6 +48,7 @@ from nerfaug.capture.requests import (
     SessionSettings,
     Split,
     as_pose_list,
+    check_checkpoint_every,
     check_steps,
     validated,
 )
@@ -338,8 +339,11 @@ class CaptureSession(SessionFolder):
 
         Returns:
             The last history entry ({"step", "loss", "psnr"}).
+
+        Raises:
+            RequestError: `steps` out of 0..`MAX_STEPS`, or `checkpoint_every` not > 0.
         """
-        start = self.step
+        start, checkpoint_every = self.step, check_checkpoint_every(checkpoint_every)
         target, last, saved_at = start + check_steps(steps), {"step": start}, monotonic()
         shown, self.trainer.progress = self.trainer.progress, False  # one bar over the chunks
         try:

@@ -20,7 +20,8 @@ from typing import Annotated, Literal
 import tyro
 
 from nerfaug import owned
-from nerfaug.capture.requests import CHECKPOINT_EVERY_S, replaced_by
+from nerfaug.capture.requests import CHECKPOINT_EVERY_S, check_checkpoint_every, replaced_by
+from nerfaug.cli.option_names import as_options
 from nerfaug.errors import FolderRefused
 
 TOKEN_ENV = "NERFAUG_TOKEN"
@@ -88,12 +89,13 @@ def _check_serve(root: Path, host: str, port: int, token, checkpoint_every: floa
         )
     for name, value, ok, rule in [
         ("port", port, 0 <= port <= 65535, "must be in 0-65535"),
-        ("checkpoint-every", checkpoint_every, checkpoint_every > 0, "must be > 0 (seconds between saves)"),
         ("max-upload-mb", max_upload_mb, max_upload_mb > 0, "must be > 0"),
         ("threads", threads, threads >= 1, "must be >= 1"),
     ]:
         if not ok:
             raise ValueError(f"--{name} {value}: {rule}")
+    with as_options():
+        check_checkpoint_every(checkpoint_every)
     if root.exists() and not root.is_dir():
         raise ValueError(f"--root {root}: not a folder")
 

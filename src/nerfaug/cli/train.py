@@ -20,6 +20,7 @@ from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
     SessionSettings,
     Split,
+    check_checkpoint_every,
     check_steps,
     given_form,
     replaced_by,
@@ -42,8 +43,7 @@ def _check_training(steps: int, checkpoint_every: float) -> None:
     """--steps and --checkpoint-every, checked before anything is read or written."""
     with as_options():
         check_steps(steps)
-    if not checkpoint_every > 0:
-        raise ValueError(f"--checkpoint-every {checkpoint_every}: must be > 0 (seconds between saves)")
+        check_checkpoint_every(checkpoint_every)
 
 
 def train(

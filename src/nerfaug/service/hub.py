@@ -23,7 +23,7 @@ from time import monotonic, time
 
 from nerfaug.capture import lock as session_lock
 from nerfaug.capture.folder import SessionFolder
-from nerfaug.capture.requests import CHECKPOINT_EVERY_S, SESSION_ID, check_session_id
+from nerfaug.capture.requests import CHECKPOINT_EVERY_S, SESSION_ID, check_checkpoint_every, check_session_id
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import SessionSummary
@@ -75,10 +75,10 @@ class SessionHub:
         total: int = TOTAL,
         max_training: int = MAX_TRAINING,
     ):
+        self.checkpoint_every = check_checkpoint_every(checkpoint_every)  # before the root is made
         self.root = Path(root)
         self.root.mkdir(parents=True, exist_ok=True)
         self.device = device
-        self.checkpoint_every = float(checkpoint_every)
         self.work = WorkQueues(workers, per_session, total)
         self.max_training = int(max_training)
         self._slots: dict[str, Slot] = {}
