@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from nerfaug.capture import CaptureSession, SessionSettings
+from nerfaug.capture.requests import MAX_FISHER_WIDTH, MAX_IMAGE_WIDTH, RequestError
 from nerfaug.cli import main
 from nerfaug.hemisphere import pose_from_angles
 
@@ -60,6 +61,29 @@ def test_depth_is_in_world_units(run):
     rendered = session.trainer.model.render_image(with_poses(camera, engine), 0)
     assert session.hemisphere.scale == pytest.approx(2.0, rel=1e-3)
     np.testing.assert_allclose(maps.depth, rendered["depth"].numpy() * session.hemisphere.scale, rtol=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("sizes", "line"),
+    [
+        ({"width": 0}, "width 0: must be >= 1"),
+        ({"width": MAX_IMAGE_WIDTH + 1}, f"width {MAX_IMAGE_WIDTH + 1}: must be <= {MAX_IMAGE_WIDTH}"),
+        ({"fisher_width": MAX_FISHER_WIDTH + 1}, f"fisher_width {MAX_FISHER_WIDTH + 1}: must be <= {MAX_FISHER_WIDTH}"),
+    ],
+)
+def test_image_widths_are_bounded_by_the_library_before_any_render(run, sizes, line):
+    pose = pose_from_angles(torch.tensor([1.0]), torch.tensor([0.7]), 8.06)
+    with pytest.raises(RequestError) as refused:
+        CaptureSession.open(run).uncertainty_maps(pose, **sizes)
+    assert str(refused.value) == line
+
+
+def test_the_command_refuses_a_width_as_the_service_does(run, tmp_path, capsys):
+    args = ["uncertainty", str(run), "--poses", str(poses_file(tmp_path / "poses.json")), "--out", str(tmp_path / "o")]
+    with pytest.raises(SystemExit) as done:
+        main([*args, "--width", "2000"])
+    assert done.value.code == 2 and not (tmp_path / "o").exists()
+    assert capsys.readouterr().err.strip() == "nerfaug: --width 2000: must be <= 1024"
 
 
 def test_a_users_folder_is_refused(run, tmp_path, capsys):

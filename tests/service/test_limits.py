@@ -226,6 +226,8 @@ def test_a_full_session_queue_answers_429_and_health_stays_fast(server):
         ("/sessions/from-dataset", {"id": "tiny", "dataset": "data", "radius": 1e-300}, "radius:"),
         ("/sessions/from-dataset", {"id": "far", "dataset": "data", "radius": 1e5}, "radius"),
         ("/sessions/from-dataset", {"id": "sp", "dataset": "data", "split": "../data/train"}, "split:"),
+        ("/sessions/s1/uncertainty", {"pose": np.eye(4).tolist(), "width": 1025}, "width: must be <= 1024"),
+        ("/sessions/s1/uncertainty", {"pose": np.eye(4).tolist(), "fisher_width": 0}, "fisher_width: must be >= 1"),
     ],
 )
 def test_numbers_out_of_range_are_422_naming_the_field_and_leave_nothing(server, root, path, body, field):

@@ -199,6 +199,14 @@ Steps = Annotated[int, Field(ge=0, le=MAX_STEPS)]
 CHECKPOINT_EVERY_S = 60.0
 CheckpointEvery = Annotated[float, Field(gt=0, description="seconds of training between saves")]
 
+# Pixels across of an uncertainty image (`nerfaug.capture.uncertainty_images`): a render holds
+# width^2 rays and FisherRF's image three backward passes per pixel, so these bound the memory and
+# time one request may take.
+MAX_IMAGE_WIDTH = 1024
+MAX_FISHER_WIDTH = 256
+ImageWidth = Annotated[int, Field(ge=1, le=MAX_IMAGE_WIDTH)]
+FisherWidth = Annotated[int, Field(ge=1, le=MAX_FISHER_WIDTH)]
+
 # A session's id names its folder directly under the service root.
 SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 
@@ -232,6 +240,13 @@ def check_steps(steps: int) -> int:
 def check_checkpoint_every(seconds: float) -> float:
     """`seconds` (of training between saves) as a float; RequestError unless > 0."""
     return validated(CheckpointEvery, seconds, "checkpoint_every")
+
+
+def check_image_widths(width: int | None, fisher_width: int) -> tuple[int | None, int]:
+    """(`width`, `fisher_width`) of uncertainty images, pixels across (`width` None: the training
+    resolution); RequestError unless in 1..`MAX_IMAGE_WIDTH` and 1..`MAX_FISHER_WIDTH`."""
+    shown = None if width is None else validated(ImageWidth, width, "width")
+    return shown, validated(FisherWidth, fisher_width, "fisher_width")
 
 
 # ---- poses ------------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ import torch
 from torch import Tensor
 
 from nerfaug.capture.model import SessionModel
+from nerfaug.capture.requests import check_image_widths
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.plotting import figure_png, new_figure, save_figure
 from nerfaug.progress import progress_bar
@@ -100,11 +101,11 @@ def view_maps(
 
     Returns:
         One `ViewMaps` per pose.
+
+    Raises:
+        RequestError: a width out of its range (`check_image_widths`).
     """
-    if width is not None and int(width) < 1:
-        raise ValueError(f"width {width}: must be >= 1 pixel")
-    if int(fisher_width) < 1:
-        raise ValueError(f"fisher_width {fisher_width}: must be >= 1 pixel")
+    width, fisher_width = check_image_widths(width, fisher_width)
     world = torch.as_tensor(poses, dtype=torch.float32).reshape(-1, 4, 4)
     names = list(names) if names is not None else [f"view {i}" for i in range(len(world))]
     cameras = model.engine_cameras(world, width)

@@ -20,7 +20,7 @@ from typing import Annotated, Literal
 import tyro
 
 from nerfaug import owned
-from nerfaug.capture.requests import CHECKPOINT_EVERY_S, check_checkpoint_every, replaced_by
+from nerfaug.capture.requests import CHECKPOINT_EVERY_S, check_checkpoint_every, check_image_widths, replaced_by
 from nerfaug.cli.option_names import as_options
 from nerfaug.errors import FolderRefused
 
@@ -140,9 +140,10 @@ def uncertainty(
 
 def _check_uncertainty(run: Path, out: Path, width: int | None, fisher_width: int, threads: int) -> None:
     """`nerfaug uncertainty`'s options, checked before anything is read."""
-    for name, value in (("width", width), ("fisher-width", fisher_width), ("threads", threads)):
-        if value is not None and value < 1:
-            raise ValueError(f"--{name} {value}: must be >= 1")
+    with as_options():
+        check_image_widths(width, fisher_width)
+    if threads < 1:
+        raise ValueError(f"--threads {threads}: must be >= 1")
     if not owned.is_empty(out) and not owned.marked(out, UNCERTAINTY_KIND):
         raise FolderRefused(f"{out}: not empty and not written by `nerfaug uncertainty`; choose a new folder for --out")
     if owned.overlaps(out, run):

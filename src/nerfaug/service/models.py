@@ -14,7 +14,18 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field, computed_field
 
-from nerfaug.capture.requests import MAX_STEPS, SCHEMA, Intrinsics, Pose, Poses, SessionId, SessionSettings, Split
+from nerfaug.capture.requests import (
+    MAX_STEPS,
+    SCHEMA,
+    FisherWidth,
+    ImageWidth,
+    Intrinsics,
+    Pose,
+    Poses,
+    SessionId,
+    SessionSettings,
+    Split,
+)
 from nerfaug.capture.state import SessionSummary
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST
 
@@ -55,9 +66,9 @@ class TrainRequest(BaseModel):
 
 class UncertaintyRequest(BaseModel):
     pose: Pose = Field(description="the view's 4x4 camera-to-world pose")
-    width: int | None = Field(None, ge=1, le=1024, description="pixels across; default: the training resolution")
+    width: ImageWidth | None = Field(None, description="pixels across; default: the training resolution")
     fisher: bool = Field(True, description="also FisherRF's per-pixel score (slower)")
-    fisher_width: int = Field(16, ge=1, le=256, description="pixels across of the FisherRF image")
+    fisher_width: FisherWidth = Field(16, description="pixels across of the FisherRF image")
     format: Literal["png", "npz"] = Field("png", description="png: the figure; npz: the arrays")
 
 
