@@ -94,6 +94,32 @@ def test_a_session_from_image_files_and_their_poses(tmp_path):
     assert session.summary().views == 5 and len(load_dataset(session.dataset_dir)) == 5
 
 
+def png_of(shape: tuple[int, ...]) -> bytes:
+    return iio.imwrite("<bytes>", np.zeros(shape, np.uint8), extension=".png")
+
+
+@pytest.mark.parametrize(
+    ("data", "problem"),
+    [
+        (b"\x89PNG\r\n\x1a\n" + bytes(30), "cannot read image (its bytes do not decode as .png)"),
+        (png_of((SIZE, SIZE)), "an image must have shape (H, W, 3) or (H, W, 4), channels last (RGB or RGBA)"),
+        (png_of((SIZE, 2 * SIZE, 3)), f"image is {2 * SIZE}x{SIZE} pixels but the dataset's camera is {SIZE}x{SIZE}"),
+    ],
+)
+def test_image_files_are_decoded_and_checked_before_a_session_is_made_or_grows(session, tmp_path, data, problem):
+    poses = sample_uniform_poses(2, torch.Generator().manual_seed(4), radius=4.03)
+    fx = 0.5 * SIZE / np.tan(0.5 * BLENDER_CAMERA_ANGLE_X)
+    files = [ImageFile("good", ".png", png(0)), ImageFile("bad", ".png", data)]
+    with pytest.raises(DatasetError) as refused:
+        CaptureSession.from_files(files, poses, Intrinsics(width=SIZE, height=SIZE, fx=fx), tmp_path / "new", SETTINGS)
+    assert str(refused.value).startswith(f"images[1] (bad.png): {problem}")
+    assert not (tmp_path / "new").exists()
+    views = session.summary().views
+    with pytest.raises(DatasetError, match=r"^images\[1\] \(bad.png\): "):
+        session.add_files(files, poses)
+    assert session.summary().views == views and not any(session.dataset_dir.rglob("good.png"))
+
+
 def test_the_summary_is_the_same_with_and_without_the_model(session):
     session.train(3)
     session.save()

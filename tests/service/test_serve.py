@@ -382,7 +382,7 @@ BAD_REQUESTS = {
     "wrong image size": (
         lambda c: add_to(c, ["big.png"], GOOD, [png(0, SIZE * 2)]),
         422,
-        "images[0] (big.png): image is 16x16 pixels but the camera is 8x8",
+        "images[0] (big.png): image is 16x16 pixels but the dataset's camera is 8x8",
     ),
     "non-finite pose": (lambda c: add_to(c, ["y.png"], json.dumps([NAN_POSE])), 422, "poses[0]: not finite"),
     "scaled pose": (lambda c: add_to(c, ["y.png"], [SCALED]), 422, "poses[0]: transform_matrix rotation is not rigid"),

@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 import torch
 from torch import Tensor
@@ -53,6 +54,11 @@ def check_file_name(name: str, suffix: str, label: str) -> None:
         raise DatasetError(label, "a file name may hold only letters, digits, '.', '_', '-'")
 
 
+def file_label(index: int, file: ImageFile) -> str:
+    """How errors name file `index` of a list: "images[2] (shot_2.png)"."""
+    return f"images[{index}] ({file.name}{file.suffix})"
+
+
 def check_files(files: Sequence[ImageFile]) -> None:
     """Refuse a file whose name cannot name a view (`check_file_name`), or two files of one name
     (a view's), whatever their suffixes: the second would take the first one's place.
@@ -62,10 +68,26 @@ def check_files(files: Sequence[ImageFile]) -> None:
     """
     seen: dict[str, int] = {}
     for i, f in enumerate(files):
-        check_file_name(f.name, f.suffix, f"images[{i}] ({f.name}{f.suffix})")
+        check_file_name(f.name, f.suffix, file_label(i, f))
         if f.name in seen:
-            raise DatasetError(f"images[{i}] ({f.name}{f.suffix})", f"the same name as images[{seen[f.name]}]")
+            raise DatasetError(file_label(i, f), f"the same name as images[{seen[f.name]}]")
         seen[f.name] = i
+
+
+def check_image_files(files: Sequence[ImageFile], width: int, height: int) -> None:
+    """Refuse what `check_files` refuses, and a file whose bytes do not decode to an RGB(A) image
+    of `width` x `height` pixels (`check_capture`), before anything is written.
+
+    Raises:
+        DatasetError: naming the file by its index in `files`.
+    """
+    check_files(files)
+    for i, f in enumerate(files):
+        try:
+            array = np.asarray(iio.imread(f.data, extension=f.suffix.lower()))
+        except Exception:  # noqa: BLE001 -- imageio raises many types; all mean "cannot read"
+            raise DatasetError(file_label(i, f), f"cannot read image (its bytes do not decode as {f.suffix})") from None
+        check_capture(Capture(file_label(i, f), array, name=f.name), width, height)
 
 
 def write_files(files: Sequence[ImageFile], folder: Path) -> list[Path]:

@@ -39,7 +39,7 @@ from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.dataset import default_split, duplicate_frames
 from nerfaug.capture.evaluate import evaluate_model
 from nerfaug.capture.folder import SessionFolder, camera_of
-from nerfaug.capture.images import ImageFile, check_files, write_files
+from nerfaug.capture.images import ImageFile, check_image_files, write_files
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
 from nerfaug.capture.requests import (
@@ -213,8 +213,10 @@ class CaptureSession(SessionFolder):
         progress: bool = False,
     ) -> CaptureSession:
         """Start a session on images as captured (their files' bytes, e.g. uploaded), taken at
-        world-frame `poses` (one each, in order) with one camera, `intrinsics`; see `create`."""
-        check_files(files)
+        world-frame `poses` (one each, in order) with one camera, `intrinsics`; see `create`.
+        Every file is checked (`check_image_files`: names, and RGB(A) pixels of the camera's size)
+        before anything is written."""
+        check_image_files(files, intrinsics.width, intrinsics.height)
         poses = as_pose_list(poses)
         if len(poses) != len(files):
             raise ValueError(f"poses: {len(poses)} poses for {len(files)} images; give one pose per image")
@@ -458,7 +460,9 @@ class CaptureSession(SessionFolder):
 
     def add_files(self, files: Sequence[ImageFile], poses) -> list[str]:
         """`add_views` for images as captured (their files' bytes, e.g. uploaded), stored byte for
-        byte and named by their stems; one world-frame pose each, in order."""
+        byte and named by their stems; one world-frame pose each, in order. Every file is checked
+        (`check_image_files`) before anything is written."""
+        check_image_files(files, self.state.intrinsics.width, self.state.intrinsics.height)
         with tempfile.TemporaryDirectory(prefix="nerfaug-captures-") as staging:
             return self.add_views(write_files(files, Path(staging)), poses)
 

@@ -123,11 +123,10 @@ async def create_from_uploads(
     ),
 ):
     request = form_json(settings, "settings", models.FromUploads)
-    k = request.intrinsics
 
     def create(folder):
-        files = read_uploads(images, limit, (k.width, k.height))
-        return CaptureSession.from_files(files, request.poses, k, folder, request, device=hub.device)
+        files = read_uploads(images, limit)
+        return CaptureSession.from_files(files, request.poses, request.intrinsics, folder, request, device=hub.device)
 
     return await done(hub.submit_create(request.id, create))
 
@@ -155,8 +154,7 @@ async def add_captures(
     matrices = form_json(poses, "poses", Poses)
 
     def add(session):
-        k = session.state.intrinsics
-        names = session.add_files(read_uploads(images, limit, (k.width, k.height)), matrices)
+        names = session.add_files(read_uploads(images, limit), matrices)
         session.save()  # the captures are on disk now, and in the checkpoint's count
         summary = session.summary()
         return models.Added(

@@ -1,8 +1,10 @@
-"""What a client uploads, checked before anything is written: images (size limit, a format whose
-header gives the size, the pixel count and the session camera's size read from the header before
-any pixel is decoded, decodable, RGB(A), a usable name; stored under the suffix of the format their
-bytes are), and form fields holding JSON (read as their schema, e.g. `Poses`), each error one line
-naming the field (`images[2] (capture_000_02.png)`, `poses[1]`)."""
+"""What a client uploads, checked before it reaches a session: images (size limit, a format whose
+header gives the size, the pixel count read from the header before any pixel is decoded, a usable
+name; stored under the suffix of the format their bytes are), and form fields holding JSON (read
+as their schema, e.g. `Poses`), each error one line naming the field (`images[2]
+(capture_000_02.png)`, `poses[1]`). Their pixels (decodable, RGB(A), the camera's size) are checked
+by the session that adds them (`nerfaug.capture.images.check_image_files`).
+"""
 
 from __future__ import annotations
 
@@ -10,8 +12,6 @@ import io
 import json
 from pathlib import PurePath
 
-import imageio.v3 as iio
-import numpy as np
 from PIL import Image
 
 from nerfaug.capture.images import ImageFile, check_file_name
@@ -30,22 +30,18 @@ UPLOAD_FORMATS = {
 }
 
 
-def read_upload(
-    file, index: int, limit_bytes: int, size: tuple[int, int] | None, max_pixels: int = MAX_IMAGE_PIXELS
-) -> ImageFile:
-    """Read and check uploaded image `index`.
+def read_upload(file, index: int, limit_bytes: int, max_pixels: int = MAX_IMAGE_PIXELS) -> ImageFile:
+    """Read uploaded image `index` and check what bounds its cost: its name, bytes and header.
 
     Args:
         file: an object with `.filename` and a binary `.file` (FastAPI's `UploadFile`).
         index: its position in the request's `images` field.
         limit_bytes: the largest accepted file.
-        size: (width, height) the image must have, or None to accept any.
         max_pixels: the most pixels an image may have (checked in its header, before decoding).
 
     Raises:
         DatasetError: (a 422) a name that cannot name a view (`check_file_name`).
-        ServiceError: 413 over the byte or pixel limit; 422 for a format other than
-            `UPLOAD_FORMATS`, an undecodable file, a wrong size or shape.
+        ServiceError: 413 over the byte or pixel limit; 422 for a format other than `UPLOAD_FORMATS`.
     """
     filename = PurePath(str(file.filename or "")).name
     label = f"images[{index}] ({filename or 'no file name'})"
@@ -59,26 +55,9 @@ def read_upload(
         raise ServiceError(
             413, f"{label}: {width}x{height} pixels is over the limit of {max_pixels} pixels per image (not decoded)"
         )
-    if size is not None and (width, height) != tuple(size):
-        raise bad_input(f"{label}: image is {width}x{height} pixels but the camera is {size[0]}x{size[1]}")
     if suffix not in UPLOAD_FORMATS[kind]:  # stored under the name its bytes say
         suffix = UPLOAD_FORMATS[kind][0]
-    _check_pixels(data, suffix, label, size)
     return ImageFile(stem, suffix, data)
-
-
-def _check_pixels(data: bytes, suffix: str, label: str, size: tuple[int, int] | None) -> None:
-    """422 unless `data` decodes to RGB(A) pixels of `size` (width, height)."""
-    try:
-        array = np.asarray(iio.imread(data, extension=suffix))
-    except Exception:  # noqa: BLE001 -- imageio raises many types; all mean "not an image"
-        raise bad_input(f"{label}: not an image this service can read ({suffix} could not be decoded)") from None
-    if array.ndim != 3 or array.shape[-1] not in (3, 4):
-        raise bad_input(f"{label}: an image must be RGB or RGBA, got pixels of shape {list(array.shape)}")
-    if size is not None and (array.shape[1], array.shape[0]) != tuple(size):
-        raise bad_input(
-            f"{label}: image is {array.shape[1]}x{array.shape[0]} pixels but the camera is {size[0]}x{size[1]}"
-        )
 
 
 def image_header(data: bytes, label: str) -> tuple[str, int, int]:
@@ -97,7 +76,7 @@ def image_header(data: bytes, label: str) -> tuple[str, int, int]:
     return kind, int(width), int(height)
 
 
-def read_uploads(files: list, limit_bytes: int, size: tuple[int, int]) -> list[ImageFile]:
+def read_uploads(files: list, limit_bytes: int) -> list[ImageFile]:
     """Every uploaded image read and checked (`read_upload`); 413 for more than
     `MAX_CAPTURES_PER_REQUEST` (two of one name are refused where they are added:
     `nerfaug.capture.images.check_files`)."""
@@ -105,7 +84,7 @@ def read_uploads(files: list, limit_bytes: int, size: tuple[int, int]) -> list[I
         raise ServiceError(
             413, f"images: {len(files)} files; a request may carry at most {MAX_CAPTURES_PER_REQUEST} images"
         )
-    return [read_upload(f, i, limit_bytes, size) for i, f in enumerate(files)]
+    return [read_upload(f, i, limit_bytes) for i, f in enumerate(files)]
 
 
 def form_json(text: str, field: str, kind):
