@@ -211,6 +211,27 @@ def test_a_setting_given_at_its_default_value_is_still_compared_with_the_session
     assert CaptureSession.open(run).step == 3
 
 
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["train", "RUN", "--steps", "1", "--device", "cpu"],
+        ["add", "RUN", "--images", "DIR", "--poses", "POSES", "--device", "cpu"],
+        ["propose", "RUN", "--device", "cpu"],
+        ["eval", "RUN", "--data", "DIR", "--device", "cpu"],
+        ["uncertainty", "RUN", "--poses", "POSES", "--out", "OUT", "--device", "cpu"],
+        ["render-proposals", "RUN", "--poses", "POSES", "--scene", "lego", "--out", "OUT"],
+        ["serve", "--root", "ROOT", "--device", "cpu"],
+    ],
+)
+def test_every_command_refuses_threads_below_one_in_one_line_before_any_read(command, tmp_path, capsys):
+    paths = [str(tmp_path / arg) if arg.isupper() else arg for arg in command]
+    with pytest.raises(SystemExit) as refused:
+        main([*paths, "--threads", "0"])
+    assert refused.value.code == 2
+    assert capsys.readouterr().err.strip() == "nerfaug: --threads 0: must be >= 1"
+    assert not any(tmp_path.iterdir())
+
+
 def test_train_threads_policy_agrees_with_a_sweeps():
     from nerfaug.cli.train import THREADS
     from nerfaug.experiment.config import ExperimentConfig

@@ -14,7 +14,15 @@ from pydantic import TypeAdapter, ValidationError
 
 from nerfaug.capture import Intrinsics, ProposalRequest, SessionSettings, SessionState, ViewConstraints
 from nerfaug.capture.choose import MAX_CANDIDATES, MAX_REACHABLE_POSES, MAX_VIEWS
-from nerfaug.capture.requests import RequestError, as_pose_list, as_poses, check_session_id, check_steps, validated
+from nerfaug.capture.requests import (
+    RequestError,
+    as_pose_list,
+    as_poses,
+    check_session_id,
+    check_steps,
+    check_threads,
+    validated,
+)
 from nerfaug.capture.state import SessionError
 from nerfaug.hemisphere import sample_uniform_poses
 from nerfaug.selection import SelectionConfig
@@ -205,3 +213,9 @@ def test_a_damaged_session_json_is_one_line_naming_the_file_and_field(change, fi
         SessionState.from_dict(data, OLD_SESSION)
     assert str(error.value).startswith(f"{OLD_SESSION}, {field}")
     assert "\n" not in str(error.value) and "restore it" in str(error.value)
+
+
+def test_a_thread_count_below_one_is_refused_by_the_library():
+    assert check_threads(2) == 2
+    with pytest.raises(RequestError, match=r"^threads 0: must be >= 1$"):
+        check_threads(0)

@@ -198,6 +198,8 @@ Steps = Annotated[int, Field(ge=0, le=MAX_STEPS)]
 # much), and at the end (`CaptureSession.train_for`).
 CHECKPOINT_EVERY_S = 60.0
 CheckpointEvery = Annotated[float, Field(gt=0, description="seconds of training between saves")]
+# CPU threads a command runs torch (or Blender's Cycles) on.
+Threads = Annotated[int, Field(ge=1)]
 
 # Pixels across of an uncertainty image (`nerfaug.capture.uncertainty_images`): a render holds
 # width^2 rays and FisherRF's image three backward passes per pixel, so these bound the memory and
@@ -240,6 +242,11 @@ def check_steps(steps: int) -> int:
 def check_checkpoint_every(seconds: float) -> float:
     """`seconds` (of training between saves) as a float; RequestError unless > 0."""
     return validated(CheckpointEvery, seconds, "checkpoint_every")
+
+
+def check_threads(threads: int) -> int:
+    """`threads` (CPU threads to run on) as an int; RequestError unless >= 1."""
+    return validated(Threads, threads, "threads")
 
 
 def check_image_widths(width: int | None, fisher_width: int) -> tuple[int | None, int]:

@@ -20,7 +20,13 @@ from typing import Annotated, Literal
 import tyro
 
 from nerfaug import owned
-from nerfaug.capture.requests import CHECKPOINT_EVERY_S, check_checkpoint_every, check_image_widths, replaced_by
+from nerfaug.capture.requests import (
+    CHECKPOINT_EVERY_S,
+    check_checkpoint_every,
+    check_image_widths,
+    check_threads,
+    replaced_by,
+)
 from nerfaug.cli.option_names import as_options
 from nerfaug.errors import FolderRefused
 
@@ -90,12 +96,12 @@ def _check_serve(root: Path, host: str, port: int, token, checkpoint_every: floa
     for name, value, ok, rule in [
         ("port", port, 0 <= port <= 65535, "must be in 0-65535"),
         ("max-upload-mb", max_upload_mb, max_upload_mb > 0, "must be > 0"),
-        ("threads", threads, threads >= 1, "must be >= 1"),
     ]:
         if not ok:
             raise ValueError(f"--{name} {value}: {rule}")
     with as_options():
         check_checkpoint_every(checkpoint_every)
+        check_threads(threads)
     if root.exists() and not root.is_dir():
         raise ValueError(f"--root {root}: not a folder")
 
@@ -142,8 +148,7 @@ def _check_uncertainty(run: Path, out: Path, width: int | None, fisher_width: in
     """`nerfaug uncertainty`'s options, checked before anything is read."""
     with as_options():
         check_image_widths(width, fisher_width)
-    if threads < 1:
-        raise ValueError(f"--threads {threads}: must be >= 1")
+        check_threads(threads)
     if not owned.is_empty(out) and not owned.marked(out, UNCERTAINTY_KIND):
         raise FolderRefused(f"{out}: not empty and not written by `nerfaug uncertainty`; choose a new folder for --out")
     if owned.overlaps(out, run):

@@ -22,9 +22,9 @@ from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.evaluate import check_evaluation_out, write_evaluation
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.proposal import check_poses_out, read_poses
-from nerfaug.capture.requests import replaced_by
+from nerfaug.capture.requests import check_threads, replaced_by
 from nerfaug.capture.state import SessionState
-from nerfaug.cli.option_names import checked
+from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train import THREADS, Device, RunFolder
 from nerfaug.cli.train_work import configure, open_session
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
@@ -157,9 +157,10 @@ def render_proposals(
         seed: Cycles noise seed.
         threads: CPU threads for Cycles.
     """
-    for name, value in (("samples", samples), ("threads", threads)):
-        if value < 1:
-            raise ValueError(f"--{name} {value}: must be >= 1")
+    if samples < 1:
+        raise ValueError(f"--samples {samples}: must be >= 1")
+    with as_options():
+        check_threads(threads)
     if seed < 0:
         raise ValueError(f"--seed {seed}: must be >= 0")
     k = SessionState.read(run).intrinsics

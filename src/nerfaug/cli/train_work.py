@@ -16,7 +16,7 @@ from pathlib import Path
 from nerfaug.capture.dataset import default_split
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
-from nerfaug.capture.requests import SessionSettings
+from nerfaug.capture.requests import SessionSettings, check_threads
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import DuplicateViews, UnverifiedCheckpoint
@@ -29,13 +29,12 @@ from nerfaug.errors import Interrupted
 def train(path: Path, out: Path | None, steps: int, given, split, device: str, checkpoint_every: float, threads: int):
     """`nerfaug train PATH` (`nerfaug.cli.train.train`) with its options, `given` the session
     settings the command line gives (a `GivenSettings`)."""
+    configure(threads)
     run, data, compared = _which_session(path, out, given.given_names(), steps)
     settings = given.filled()
     if run is None:
-        configure(threads)
         _finish(_create(path, out, settings, split, device), steps, checkpoint_every)
     elif not _at_step(run, data, settings, split, compared, steps):
-        configure(threads)
         _train_further(open_session(run, device, changing="train"), steps, checkpoint_every, resuming=data is not None)
 
 
@@ -63,9 +62,9 @@ def device_name(device: str) -> str:
 
 
 def configure(threads: int) -> None:
-    if threads < 1:
-        raise ValueError(f"--threads {threads}: must be >= 1 (torch threads)")
-    configure_process(threads=threads)
+    """torch set up for this command (`configure_process`) on --threads threads."""
+    with as_options():
+        configure_process(threads=check_threads(threads))
 
 
 def open_session(run: Path, device: str, changing: str | None = None):
