@@ -3,9 +3,11 @@ place of its fields, defaults, ranges and error text, used unchanged by the libr
 (through tyro) and the service (as its request models).
 
 Here: a new session's settings (`SessionSettings`), the camera of captured images (`Intrinsics`),
-world-frame poses (`Pose`, `Poses`), a session's id (`SessionId`), and the bounds the proposal
+world-frame poses (`Pose`, `Poses`), a session's id (`SessionId`), the bounds the proposal
 request (`nerfaug.capture.choose.ProposalRequest`) and the view constraints
-(`nerfaug.capture.constraints.ViewConstraints`) build on.
+(`nerfaug.capture.constraints.ViewConstraints`) build on, and those of training steps, the save
+period, thread counts and uncertainty images' widths (`check_steps`, `check_checkpoint_every`,
+`check_threads`, `check_image_widths`).
 
 The classes tyro reads are dataclasses with one validator each, `checked()` (pydantic, from their
 annotations): tyro builds them from the options without checking, so that a refused value ends
