@@ -127,7 +127,8 @@ def test_a_killed_train_resumes_with_the_same_command_and_stops_at_the_requested
     """A real SIGKILL of `nerfaug train DATA --out RUN --steps N` once a periodic checkpoint is on
     disk: the same command resumes from that save, says so, and ends at step N; once more, it only
     says the session is there already."""
-    data, run, target = dataset(tmp_path / "data"), tmp_path / "run", 400
+    # Enough steps that a loaded machine still finds the child running after its first save.
+    data, run, target = dataset(tmp_path / "data"), tmp_path / "run", 1500
     argv = ["train", data, "--out", run, "--engine", "test", "--steps", target, "--device", "cpu"]
     argv += ["--checkpoint-every", "0.2"]
     child = subprocess.Popen(
