@@ -6,6 +6,7 @@ import torch
 from nerfaug.cameras import Cameras, image_rays
 from nerfaug.data.views import Views
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, pose_from_angles
+from nerfaug.nerf.trainer import Trainer
 
 
 def sphere_views(azimuths, polars, size: int = 12) -> Views:
@@ -31,3 +32,30 @@ def sphere_views(azimuths, polars, size: int = 12) -> Views:
 def sphere_views_fixture():
     """`sphere_views(azimuths, polars, size=12) -> Views`, for tests that build their own views."""
     return sphere_views
+
+
+def engine_numbers(config, steps: int) -> tuple[list[float], object]:
+    """What the engine's recorded-number tests pin: `Trainer(views, config, seed=3)` on four
+    sphere views, one torch thread, the loss of each of `steps` steps, then the sums of
+    `render_weights_only` and `render_rays(...).rgb` over two rays. Returns (numbers, trainer)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        views = sphere_views([0.0, 1.6, 3.2, 4.8], [0.9, 1.1, 0.9, 1.1])
+        trainer = Trainer(views, config, seed=3, progress=False)
+        trainer.train(steps)
+        origins = torch.tensor([[0.0, -4.0, 0.5], [3.0, 3.0, 1.0]])
+        directions = -origins / origins.norm(dim=-1, keepdim=True)
+        numbers = [e["loss"] for e in trainer.history] + [
+            float(trainer.model.render_weights_only(origins, directions).sum()),
+            float(trainer.model.render_rays(origins, directions).rgb.sum()),
+        ]
+    finally:
+        torch.set_num_threads(threads)
+    return numbers, trainer
+
+
+@pytest.fixture(name="engine_numbers", scope="session")
+def engine_numbers_fixture():
+    """`engine_numbers(config, steps) -> (numbers, trainer)`, for the recorded-number tests."""
+    return engine_numbers

@@ -4,10 +4,8 @@ of one bit in one weight moved the losses of a 100 px lego run by 2e-5 after 340
 after 450, so only the same arithmetic keeps a whole run's losses within 1e-5)."""
 
 import pytest
-import torch
 
 from nerfaug.nerf.config import NerfConfig
-from nerfaug.nerf.trainer import Trainer
 
 # Recorded with the engine of commit e2511ee on an AMD EPYC (AVX2) CPU, torch 2.13.0, one
 # thread: `Trainer(views, preset, seed=3)` on the 4 sphere views, the loss of each of 12 steps,
@@ -49,20 +47,7 @@ RECORDED = {
 
 
 @pytest.mark.parametrize("preset", list(RECORDED))
-def test_nerfacto_cpu_computes_the_numbers_recorded_before_its_speed_work(preset, sphere_views):
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        views = sphere_views([0.0, 1.6, 3.2, 4.8], [0.9, 1.1, 0.9, 1.1])
-        trainer = Trainer(views, NerfConfig.preset(preset), seed=3, progress=False)
-        trainer.train(12)
-        origins = torch.tensor([[0.0, -4.0, 0.5], [3.0, 3.0, 1.0]])
-        directions = -origins / origins.norm(dim=-1, keepdim=True)
-        got = [e["loss"] for e in trainer.history] + [
-            float(trainer.model.render_weights_only(origins, directions).sum()),
-            float(trainer.model.render_rays(origins, directions).rgb.sum()),
-        ]
-    finally:
-        torch.set_num_threads(threads)
+def test_nerfacto_cpu_computes_the_numbers_recorded_before_its_speed_work(preset, engine_numbers):
+    got, _ = engine_numbers(NerfConfig.preset(preset), 12)
     # 1e-5 as the engine's other recorded numbers: CPUs with other vector units round differently.
     assert got == pytest.approx([float.fromhex(x) for x in RECORDED[preset]], rel=1e-5)

@@ -60,22 +60,9 @@ BEFORE = {
 
 
 @pytest.mark.parametrize("case", list(BEFORE))
-def test_same_seed_gives_the_numbers_recorded_before_the_sampler_interface(case, sphere_views):
+def test_same_seed_gives_the_numbers_recorded_before_the_sampler_interface(case, engine_numbers):
     overrides, losses, weights_sum, rgb_sum = BEFORE[case]
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        views = sphere_views([0.0, 1.6, 3.2, 4.8], [0.9, 1.1, 0.9, 1.1])
-        trainer = Trainer(views, NerfConfig.preset(case.split(",")[0], **overrides), seed=3, progress=False)
-        trainer.train(len(losses))
-        origins = torch.tensor([[0.0, -4.0, 0.5], [3.0, 3.0, 1.0]])
-        directions = -origins / origins.norm(dim=-1, keepdim=True)
-        got = [e["loss"] for e in trainer.history] + [
-            float(trainer.model.render_weights_only(origins, directions).sum()),
-            float(trainer.model.render_rays(origins, directions).rgb.sum()),
-        ]
-    finally:
-        torch.set_num_threads(threads)
+    got, trainer = engine_numbers(NerfConfig.preset(case.split(",")[0], **overrides), len(losses))
     expected = [float.fromhex(x) for x in losses + [weights_sum, rgb_sum]]
     if case.endswith("step 2"):  # the grid has culled cells: the occupancy path ran
         assert not trainer.model.sampler.grid.occupied.all()
