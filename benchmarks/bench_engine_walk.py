@@ -155,6 +155,11 @@ def keep_freed_memory() -> None:
         libc.mallopt(-1, 2**31 - 1)  # M_TRIM_THRESHOLD: never trim the heap
 
 
+def render_on_cpu(model, views, index: int) -> dict[str, torch.Tensor]:
+    """`model.render_image` of view `index`, its maps moved to the CPU (where the views are)."""
+    return {key: value.cpu() for key, value in model.render_image(views.cameras, index).items()}
+
+
 def view_metrics(model, views) -> tuple[float, dict[str, float | None]]:
     """Mean PSNR of the renders of `views`, and their mean opacity (accumulation) on object
     pixels (alpha > 0.5) and on background pixels (None without alphas). A NeRF that paints its
@@ -165,7 +170,7 @@ def view_metrics(model, views) -> tuple[float, dict[str, float | None]]:
     values, obj, bg = [], [], []
     with torch.no_grad():
         for i in range(len(views)):
-            out = {key: value.cpu() for key, value in model.render_image(views.cameras, i).items()}
+            out = render_on_cpu(model, views, i)
             values.append(float(psnr(out["rgb"].clamp(0, 1), views.images[i])))
             if views.alphas is not None:
                 mask = views.alphas[i] > 0.5
@@ -180,7 +185,7 @@ def save_render(model, views, index: int, path: Path) -> None:
     from PIL import Image
 
     with torch.no_grad():
-        out = {key: value.cpu() for key, value in model.render_image(views.cameras, index).items()}
+        out = render_on_cpu(model, views, index)
     acc = out["accumulation"].clamp(0, 1)[..., None].expand(-1, -1, 3)
     row = torch.cat([out["rgb"].clamp(0, 1), views.images[index], acc], dim=1)
     path.parent.mkdir(parents=True, exist_ok=True)
