@@ -37,7 +37,6 @@ from swagger_ui_bundle import swagger_ui_path
 
 import nerfaug
 from nerfaug.capture.choose import ProposalRequest
-from nerfaug.capture.lock import SessionBusy
 from nerfaug.capture.pool import Job, SessionStatus
 from nerfaug.capture.requests import Poses, RequestError
 from nerfaug.capture.session import CaptureSession
@@ -49,14 +48,12 @@ from nerfaug.service.hub import SessionHub
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
 from nerfaug.service.uploads import form_json, read_uploads
 
-# Kept for clients of earlier versions: images one request may carry.
-MAX_IMAGES_PER_REQUEST = MAX_CAPTURES_PER_REQUEST
 # Where the API page's script and style are served from: Swagger UI's files as the package
 # `swagger_ui_bundle` ships them, so /docs works on a closed network (FastAPI's own page loads
 # them from a CDN).
 DOCS_ASSETS = "/docs-assets"
 # The library's errors that are answers (a 4xx or a 503, `status_of`); anything else is a 500 (also logged).
-ANSWERED = (ServiceError, NerfaugError, SessionBusy, ValueError, FileNotFoundError, Exception)
+ANSWERED = (ServiceError, NerfaugError, ValueError, FileNotFoundError, Exception)
 router = APIRouter()
 
 
