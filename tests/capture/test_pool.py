@@ -118,6 +118,9 @@ def test_at_most_max_training_sessions_train_and_each_one_job_at_a_time(root):
         pool.train("a", 100_000)
         with pytest.raises(TrainingFull, match="^1 sessions are training"):
             pool.refuse_training_beyond("b")
+        with pytest.raises(TrainingFull):  # the pool keeps its bound whoever asks
+            pool.train("b", 1)
+        assert pool.state("b").job is None
         pool.refuse_training_beyond("a")  # its own job is not counted
         with pytest.raises(JobRunning, match="'a': training is already running"):
             pool.train("a", 1)

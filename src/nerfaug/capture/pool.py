@@ -259,21 +259,28 @@ class SessionPool:
     # -- training --
 
     def refuse_training_beyond(self, session_id: str) -> None:
-        """Refuse (`TrainingFull`) a job while `max_training` other sessions are training."""
-        training = sum(1 for s in list(self._slots.values()) if s.id != session_id and s.training)
+        """Refuse (`TrainingFull`) a job of this session while `max_training` others are training."""
+        with self._slots_lock:
+            self._refuse_training_beyond(session_id)
+
+    def _refuse_training_beyond(self, session_id: str) -> None:
+        training = sum(1 for s in self._slots.values() if s.id != session_id and s.training)
         if training >= self.max_training:
             raise TrainingFull(
                 f"{training} sessions are training, the most this service runs at once; retry when one has finished"
             )
 
     def train(self, session_id: str, steps: int) -> Job:
-        """Start training `steps` more steps in a worker thread; `JobRunning` when a job is running."""
+        """Start training `steps` more steps in a worker thread; `JobRunning` when a job is
+        running, `TrainingFull` when `max_training` other sessions are training."""
         slot = self._slot(session_id)
         with slot.lock:
             if slot.training:
                 raise JobRunning(f"session {session_id!r}: training is already running (until step {slot.job.target})")
             session = self._opened(slot)
-            slot.job = Job(target=session.step + int(steps), start=session.step, step=session.step)
+            with self._slots_lock:  # counted and started at once: two sessions never pass the bound together
+                self._refuse_training_beyond(session_id)
+                slot.job = Job(target=session.step + int(steps), start=session.step, step=session.step)
             self._record(slot)
             self._start(slot)
             return slot.job.model_copy()
