@@ -1,16 +1,34 @@
-"""The service's sessions refuse a save period the capture core refuses, when the service is made
-(not at each training job's start)."""
+"""The service's hub refuses a request it could not run before queueing it, in HTTP's words: a
+training job beyond the pool's bound (`nerfaug.capture.pool`, tested there) is a 503 with
+Retry-After, an unknown session a 404, an id taken a 409."""
 
 import pytest
 
 pytest.importorskip("fastapi")
 
-from nerfaug.capture.requests import RequestError  # noqa: E402
+from nerfaug.capture.runfolder import SESSION_FILE  # noqa: E402
+from nerfaug.service.errors import headers_of, status_of  # noqa: E402
 from nerfaug.service.hub import SessionHub  # noqa: E402
 
 
-def test_a_save_period_not_above_zero_is_refused_when_the_hub_is_made(tmp_path):
-    with pytest.raises(RequestError, match=r"^checkpoint_every 0: must be > 0$"):
-        SessionHub(tmp_path / "root", checkpoint_every=0)
-    assert not (tmp_path / "root").exists()
-    assert SessionHub(tmp_path / "root", checkpoint_every=0.5).checkpoint_every == 0.5
+def refusal(call) -> tuple[int, str, dict | None]:
+    with pytest.raises(Exception) as caught:
+        call()
+    return (*status_of(caught.value), headers_of(caught.value))
+
+
+def test_requests_that_could_not_run_are_refused_before_they_are_queued(tmp_path):
+    (tmp_path / "root" / "s").mkdir(parents=True)
+    (tmp_path / "root" / "s" / SESSION_FILE).write_text("{}")  # never opened: each is refused first
+    hub = SessionHub(tmp_path / "root", max_training=0)
+    try:
+        status, message, headers = refusal(lambda: hub.submit_train("s", 1))
+        assert (status, headers) == (503, {"Retry-After": "30"}) and message.startswith("0 sessions are training")
+        assert refusal(lambda: hub.submit("nope", print))[:2] == (
+            404,
+            "session 'nope': no such session under the service root",
+        )
+        assert refusal(lambda: hub.submit_create("s", print))[0] == 409
+        assert hub.work.pending() == 0
+    finally:
+        hub.shutdown()

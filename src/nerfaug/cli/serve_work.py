@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from nerfaug import owned
+from nerfaug.capture import pool
 from nerfaug.capture.proposal import read_poses
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.uncertainty_images import colour_scales, write_maps
@@ -34,7 +35,7 @@ def service_app(root: Path, device: str, token, checkpoint_every: float, threads
 
 def _log_to_stderr() -> None:
     """The service's own messages (a training job resumed after a restart, ...) as plain lines on stderr."""
-    logger = logging.getLogger("nerfaug.service")
+    logger = logging.getLogger(pool.__name__)
     if not logger.handlers:
         handler = logging.StreamHandler(sys.stderr)
         handler.setFormatter(logging.Formatter("%(message)s"))

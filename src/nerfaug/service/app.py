@@ -37,25 +37,23 @@ from swagger_ui_bundle import swagger_ui_path
 
 import nerfaug
 from nerfaug.capture.choose import ProposalRequest
-from nerfaug.capture.lock import SessionBusy
+from nerfaug.capture.pool import Job, SessionStatus
 from nerfaug.capture.requests import Poses, RequestError
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 from nerfaug.errors import NerfaugError
 from nerfaug.service import models
-from nerfaug.service.errors import ServiceError, field_line, status_of
+from nerfaug.service.errors import ServiceError, field_line, headers_of, status_of
 from nerfaug.service.hub import SessionHub
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
 from nerfaug.service.uploads import form_json, read_uploads
 
-# Kept for clients of earlier versions: images one request may carry.
-MAX_IMAGES_PER_REQUEST = MAX_CAPTURES_PER_REQUEST
 # Where the API page's script and style are served from: Swagger UI's files as the package
 # `swagger_ui_bundle` ships them, so /docs works on a closed network (FastAPI's own page loads
 # them from a CDN).
 DOCS_ASSETS = "/docs-assets"
-# The library's errors that are answers (a 4xx, `status_of`); anything else is a 500 (also logged).
-ANSWERED = (ServiceError, NerfaugError, SessionBusy, ValueError, FileNotFoundError, Exception)
+# The library's errors that are answers (a 4xx or a 503, `status_of`); anything else is a 500 (also logged).
+ANSWERED = (ServiceError, NerfaugError, ValueError, FileNotFoundError, Exception)
 router = APIRouter()
 
 
@@ -73,7 +71,7 @@ def _answer(request: Request, error: Exception) -> JSONResponse:
     if isinstance(error, ValidationError):
         return JSONResponse({"detail": validation_line(error.errors())}, 422)
     status, message = status_of(error)
-    return JSONResponse({"detail": message}, status, headers=getattr(error, "headers", None))
+    return JSONResponse({"detail": message}, status, headers=headers_of(error))
 
 
 def _hub(request: Request) -> SessionHub:
@@ -103,7 +101,7 @@ async def sessions(hub: Hub):
     return hub.ids()
 
 
-@router.post("/sessions/from-dataset", status_code=201, response_model=models.SessionStatus)
+@router.post("/sessions/from-dataset", status_code=201, response_model=SessionStatus)
 async def create_from_dataset(request: models.FromDataset, hub: Hub):
     data = hub.dataset_path(request.dataset, request.split)
 
@@ -113,7 +111,7 @@ async def create_from_dataset(request: models.FromDataset, hub: Hub):
     return await done(hub.submit_create(request.id, create))
 
 
-@router.post("/sessions/from-uploads", status_code=201, response_model=models.SessionStatus)
+@router.post("/sessions/from-uploads", status_code=201, response_model=SessionStatus)
 async def create_from_uploads(
     hub: Hub,
     limit: UploadLimit,
@@ -131,7 +129,7 @@ async def create_from_uploads(
     return await done(hub.submit_create(request.id, create))
 
 
-@router.get("/sessions/{session_id}", response_model=models.SessionStatus)
+@router.get("/sessions/{session_id}", response_model=SessionStatus)
 async def state(session_id: str, hub: Hub):
     """The session's state from its last snapshot: answered at once, even while it trains."""
     if hub.has_snapshot(session_id):
@@ -164,7 +162,7 @@ async def add_captures(
     return await done(hub.submit(session_id, add))
 
 
-@router.post("/sessions/{session_id}/train", status_code=202, response_model=models.Job)
+@router.post("/sessions/{session_id}/train", status_code=202, response_model=Job)
 async def train(session_id: str, request: models.TrainRequest, hub: Hub):
     return await done(hub.submit_train(session_id, request.steps))
 

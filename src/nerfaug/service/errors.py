@@ -5,6 +5,7 @@ file on the server holds)."""
 from __future__ import annotations
 
 from nerfaug.capture.lock import SessionBusy
+from nerfaug.capture.pool import TrainingFull
 from nerfaug.capture.requests import RequestError
 from nerfaug.capture.state import SessionError
 from nerfaug.data import DatasetError
@@ -36,9 +37,11 @@ def status_of(error: BaseException) -> tuple[int, str]:
     """The HTTP status and one-line message for an error raised inside a request.
 
     422: bad input (`DatasetError`, `ValueError`: a value, pose or image the client sent);
-    409: the session's folder refuses the operation, is inconsistent, or another process is
-    changing it (`FolderRefused`, `SessionError`, `SessionBusy`); 404: a file the request names
-    does not exist; 500: anything else, named as an internal error.
+    409: the session's folder refuses the operation, is inconsistent, or another process (or a
+    training job) is changing it (`FolderRefused`, `SessionError`, `SessionBusy`); 404: a file or
+    session the request names does not exist; 503: as many sessions are training as the service
+    runs at once (`TrainingFull`, with Retry-After: `headers_of`); 500: anything else, named as an
+    internal error.
     """
     if isinstance(error, ServiceError):
         return error.status, error.message
@@ -49,6 +52,8 @@ def status_of(error: BaseException) -> tuple[int, str]:
         # The value may be what a file holds (a dataset's JSON); the file, field and problem say enough.
         field = f", field '{error.field}'" if error.field is not None else ""
         text = " ".join(f"{error.path}{field}: {error.problem}".split())
+    if isinstance(error, TrainingFull):
+        return 503, text
     if isinstance(error, (FolderRefused, SessionError, SessionBusy)):
         return 409, text
     if isinstance(error, (DatasetError, ValueError)):
@@ -56,3 +61,10 @@ def status_of(error: BaseException) -> tuple[int, str]:
     if isinstance(error, FileNotFoundError):
         return 404, text
     return 500, f"internal error ({type(error).__name__}: {text})"
+
+
+def headers_of(error: BaseException) -> dict[str, str] | None:
+    """The headers of the answer to `error`: Retry-After where the client is to ask again later."""
+    if isinstance(error, TrainingFull):
+        return {"Retry-After": str(error.retry_after)}
+    return getattr(error, "headers", None)

@@ -1,6 +1,7 @@
-"""The service's requests and answers (they make the OpenAPI page at /docs): the capture core's
-schemas (`nerfaug.capture.requests`, `ProposalRequest`, `ViewConstraints`) with what only the
-service adds: a session's id, datasets named relative to its root, and its jobs.
+"""The service's requests and answers (they make the OpenAPI page at /docs) beyond the capture
+core's schemas (`nerfaug.capture.requests`, `ProposalRequest`, `ViewConstraints`; a session's
+state and training job, `nerfaug.capture.pool`'s `SessionStatus` and `Job`): the core's with what
+only the service adds, a session's id and datasets named relative to its root.
 
 Poses are world-frame OpenGL camera-to-world 4x4 matrices (rows of 4 numbers), as in the
 Blender and nerfstudio formats; angles of constraints are in degrees.
@@ -9,10 +10,9 @@ Blender and nerfstudio formats; angles of constraints are in degrees.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from time import time
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, Field, computed_field
+from pydantic import BaseModel, Field
 
 from nerfaug.capture.requests import (
     MAX_STEPS,
@@ -26,7 +26,6 @@ from nerfaug.capture.requests import (
     SessionSettings,
     Split,
 )
-from nerfaug.capture.state import SessionSummary
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST
 
 Dataset = Annotated[str, Field(max_length=1024, description="a dataset folder, relative to the service root")]
@@ -95,36 +94,6 @@ class Evaluation(BaseModel):
     lpips: float | None
     lpips_status: str
     per_view: list[dict]
-
-
-class Job(BaseModel):
-    """A training job: from `start` to `target` steps; `state` is running, done or failed. A job a
-    restarted service resumed has `resumed_from` and `redone`."""
-
-    target: int
-    start: int
-    step: int
-    state: Literal["running", "done", "failed"] = "running"
-    error: str | None = None
-    started: float = Field(default_factory=time)
-    finished: float | None = None
-    resumed_from: int | None = Field(
-        None, description="a job a restarted service resumed: the step of the session's last save it went on from"
-    )
-    redone: int = Field(0, description="steps trained after that save before the service stopped, trained again")
-
-    @computed_field
-    @property
-    def progress(self) -> float:
-        """The share of the job's steps done."""
-        return 1.0 if self.target <= self.start else round((self.step - self.start) / (self.target - self.start), 4)
-
-
-class SessionStatus(SessionSummary):
-    """The session's state, and its training job."""
-
-    running: bool
-    job: Job | None
 
 
 class Added(BaseModel):
