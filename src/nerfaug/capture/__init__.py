@@ -12,7 +12,8 @@ model), `session` (`CaptureSession`: create, open, save, train; it coordinates),
 calls with the narrow pieces they need: `choose` (proposing the next views, `ProposalRequest`),
 `constraints` (where views may lie), `add` (adding captured views), `export` (writing the dataset
 in any format), and, through `model` (`SessionModel`: the NeRF seen from the world frame),
-`evaluate` and `uncertainty_images`; `pool` (`SessionPool`: the sessions under one root, trained in
+`evaluate` and `uncertainty_images`; `simulate` (a simulated capture: proposed poses rendered by
+Blender with the session's camera); `pool` (`SessionPool`: the sessions under one root, trained in
 the background, their jobs resumed when the pool is made again: what `nerfaug serve` serves).
 """
 

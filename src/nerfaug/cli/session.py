@@ -21,14 +21,13 @@ import tyro
 from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.evaluate import check_evaluation_out, write_evaluation
 from nerfaug.capture.folder import SessionFolder
-from nerfaug.capture.proposal import check_poses_out, read_poses
-from nerfaug.capture.requests import check_threads, replaced_by
-from nerfaug.capture.state import SessionState
+from nerfaug.capture.proposal import check_poses_out
+from nerfaug.capture.requests import replaced_by
+from nerfaug.capture.simulate import render_proposals as simulated_capture
 from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train import THREADS, Device, RunFolder
 from nerfaug.cli.train_work import configure, open_session
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
-from nerfaug.scenes.render import render_poses
 
 FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
 Request = Annotated[ProposalRequest, tyro.conf.arg(name="")]
@@ -157,16 +156,6 @@ def render_proposals(
         seed: Cycles noise seed.
         threads: CPU threads for Cycles.
     """
-    if samples < 1:
-        raise ValueError(f"--samples {samples}: must be >= 1")
     with as_options():
-        check_threads(threads)
-    if seed < 0:
-        raise ValueError(f"--seed {seed}: must be >= 0")
-    k = SessionState.read(run).intrinsics
-    if abs(k.fx - k.fy) > 1e-3 * k.fx:
-        raise SystemExit("Blender renders square pixels; this session's camera has fx != fy")
-    matrices, names = read_poses(poses)
-    paths = [out / f"{name}.png" for name in names]
-    render_poses(scene, matrices, paths, k.width, k.height, k.camera_angle_x, samples, seed, threads)
+        paths = simulated_capture(run, poses, scene, out, samples, seed, threads)
     print(f"rendered {len(paths)} views to {out}")
