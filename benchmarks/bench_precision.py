@@ -18,7 +18,8 @@ scaled by 2^16 as a GradScaler would), the batch's colour MSE and how far the sa
 along the rays. A float32 step repeated gives the noise floor (0 on a CPU; a GPU's atomic adds
 land in no fixed order). With `--train-half N`, the engine is also trained N steps from scratch
 under autocast with a GradScaler, as the trainer does, and its scale, skipped steps and training
-views' PSNR recorded; with `--train-keep proposal` (etc.) once more with those networks in float32.
+views' PSNR recorded beside a float32 training of the same seed; with `--train-keep proposal` (etc.)
+once more with those networks in float32.
 
     python benchmarks/bench_precision.py --data data/lego100 --engine nerfacto-cpu --at-steps 400
     python benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \\
@@ -149,11 +150,12 @@ def probe(trainer, dtype: torch.dtype) -> dict:
 
 
 def train_half(
-    data, engine: str, seed: int, steps: int, device: str, dtype: torch.dtype, keep: tuple[str, ...] = ()
+    data, engine: str, seed: int, steps: int, device: str, dtype: torch.dtype | None, keep: tuple[str, ...] = ()
 ) -> dict:
-    """Train `steps` steps under autocast with a GradScaler, as the trainer's fp16 does, with the
-    networks named in `keep` (see `float32_parts`) in float32, and record the scale, the skipped
-    steps and the training views' PSNR."""
+    """Train `steps` steps on the initial views under autocast to `dtype` (None: float32) with a
+    GradScaler for float16, as the trainer's fp16 does, with the networks named in `keep` (see
+    `float32_parts`) in float32, and record the scale, the skipped steps and the training views'
+    PSNR."""
     from bench_engine_walk import view_metrics
     from nerfaug.nerf.config import NerfConfig
     from nerfaug.nerf.trainer import Trainer
@@ -172,6 +174,7 @@ def train_half(
             trace.append({"step": trainer.step, "batch_psnr": entry["psnr"], "scale": scale, "skipped": skipped})
     train_psnr, opacity = view_metrics(trainer.model, trainer.train_views)
     return {
+        "precision": str(dtype).removeprefix("torch.") if dtype is not None else "float32",
         "steps": steps,
         "float32": list(keep),
         "skipped": skipped,
@@ -218,14 +221,17 @@ def main(argv: list[str] | None = None) -> dict:
         probe_result["seconds"] = time.perf_counter() - start
         report["probes"].append(probe_result)
         print_probe(probe_result)
-    keeps = [()] + ([tuple(args.train_keep)] if args.train_keep else [])
+    # float32 first: the baseline the half-precision trainings are read against
+    plans = [(None, ())] + [(dtype, ())] + ([(dtype, tuple(args.train_keep))] if args.train_keep else [])
     report["train_half"] = [
-        train_half(data, args.engine, args.seed, args.train_half, args.device, dtype, keep)
-        for keep in (keeps if args.train_half else [])
+        train_half(data, args.engine, args.seed, args.train_half, args.device, kind, keep)
+        for kind, keep in (plans if args.train_half else [])
     ]
-    for half in report["train_half"]:
+    for half, (kind, _) in zip(report["train_half"], plans):
+        kept = ", ".join(half["float32"]) or "none"
+        precision = args.half if kind is not None else "float32"
         print(
-            f"trained {half['steps']} steps in {args.half} (float32: {', '.join(half['float32']) or 'none'}): "
+            f"trained {half['steps']} steps in {precision} (networks kept in float32: {kept}): "
             f"train PSNR {half['train_psnr']:.2f} dB, {half['skipped']} steps skipped by the scaler"
         )
     if args.json:

@@ -38,7 +38,7 @@ timeout 100 python3 benchmarks/bench_dense.py --data data/lego100 --presets pape
 pack
 
 echo "== (2) half precision, $(left) s left"
-timeout 150 python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
+timeout 200 python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
     --at-steps 100 1000 --train-half 1000 --train-keep proposal --json "$RES/precision.json" | tail -16
 pack
 

@@ -40,8 +40,10 @@ def test_probe_compares_each_variant_with_float32_on_the_same_draws(bench, datas
     assert probe["variants"]["proposal nets float32"]["samples_moved_max"] == 0.0
     assert probe["variants"]["half everywhere"]["samples_moved_max"] > 0.0
     assert (tmp_path / "p.json").is_file()
-    everything, proposal_kept = report["train_half"]
+    baseline, everything, proposal_kept = report["train_half"]
+    assert [t["precision"] for t in report["train_half"]] == ["float32", "float16", "float16"]
     assert (everything["float32"], proposal_kept["float32"]) == ([], ["proposal"])
+    assert baseline["skipped"] == 0 and baseline["trace"][-1]["scale"] == 1.0
     assert everything["steps"] == 4 and everything["trace"][-1]["step"] == 4
 
 
