@@ -89,18 +89,28 @@ def group_of(name: str) -> str:
     return ".".join(name.split(".")[:2]) + ("/table" if "table" in name else "")
 
 
-def step_gradients(trainer, cpu_state: torch.Tensor, dtype: torch.dtype | None, parts: tuple[str, ...] = ()):
+def step_gradients(
+    trainer, cpu_state: torch.Tensor, dtype: torch.dtype | None, parts: tuple[str, ...] = (), other_batch: bool = False
+):
     """One training step's gradients, colour MSE and sample edges, without updating anything.
 
     The draws repeat exactly: on a CPU the trainer's generator is reset to `cpu_state`; on a GPU
-    `step_generator` reseeds itself from (seed, step).
+    `step_generator` reseeds itself from (seed, step). `other_batch` draws other rays and jitter
+    for the same step (the generator moved by one draw; on a GPU the seed by one), the scale of the
+    gradient's own noise from one batch to the next, against which a change is read.
 
     Returns:
         ({parameter name: gradient}, mse, t_starts (rays, samples)).
     """
     trainer.model.train()
     trainer.generator.set_state(cpu_state)
-    generator = trainer.step_generator()
+    if other_batch:
+        torch.rand(1, generator=trainer.generator)
+    seed, trainer.seed = trainer.seed, trainer.seed + int(other_batch)
+    try:
+        generator = trainer.step_generator()
+    finally:
+        trainer.seed = seed
     trainer.model.before_step(trainer.step, generator)
     origins, directions, target, background = trainer.sample_batch(generator)
     trainer.model.zero_grad(set_to_none=True)
@@ -137,7 +147,14 @@ def probe(trainer, dtype: torch.dtype) -> dict:
     state = trainer.generator.get_state()
     reference, mse, t_ref = step_gradients(trainer, state, None)
     repeat, _, _ = step_gradients(trainer, state, None)
-    result = {"step": trainer.step, "mse_float32": mse, "float32_repeated": compare(reference, repeat), "variants": {}}
+    other, _, _ = step_gradients(trainer, state, None, other_batch=True)
+    result = {
+        "step": trainer.step,
+        "mse_float32": mse,
+        "float32_repeated": compare(reference, repeat),
+        "float32_other_batch": compare(reference, other),
+        "variants": {},
+    }
     for name, parts in VARIANTS.items():
         gradients, half_mse, t_half = step_gradients(trainer, state, dtype, parts)
         result["variants"][name] = {
@@ -241,8 +258,11 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 def print_probe(result: dict) -> None:
-    """One line per variant: its MSE, the samples' largest move, each group's relative error."""
+    """One line per variant: its MSE, the samples' largest move, each group's relative error; and
+    float32 with another batch, the scale of the gradients' own noise."""
     print(f"step {result['step']}: float32 batch MSE {result['mse_float32']:.6f}")
+    noise = ", ".join(f"{g} {v['rel_error']:.3f}" for g, v in result["float32_other_batch"].items())
+    print(f"  {'float32, another batch':24s} {noise}")
     for name, variant in result["variants"].items():
         groups = ", ".join(f"{g} {v['rel_error']:.3f}" for g, v in variant["groups"].items())
         print(f"  {name:24s} MSE {variant['mse']:.6f}, samples moved <= {variant['samples_moved_max']:.3f}: {groups}")
