@@ -16,7 +16,8 @@ For each: the relative error of each parameter group's gradient (||g_half - g_32
 fraction of its non-zero float32 entries that are zero in half precision (underflow; the loss is
 scaled by 2^16 as a GradScaler would), the batch's colour MSE and how far the samples moved
 along the rays. A float32 step repeated gives the noise floor (0 on a CPU; a GPU's atomic adds
-land in no fixed order). With `--train-half N`, the engine is also trained N steps from scratch
+land in no fixed order); float32 with another batch at the same step gives the gradients' own
+noise, against which a change is read. With `--train-half N`, the engine is also trained N steps from scratch
 under autocast with a GradScaler, as the trainer does, and its scale, skipped steps and training
 views' PSNR recorded beside a float32 training of the same seed; with `--train-keep proposal` (etc.)
 once more with those networks in float32.
