@@ -1,6 +1,7 @@
 """A simulated capture (`nerfaug.capture.simulate.render_proposals`): its numbers are refused
-before anything is read, a camera with non-square pixels is refused naming session.json's field,
-and Blender is asked for the session's image size and field of view, one PNG per proposed pose."""
+before anything is read, a camera Blender cannot render (non-square pixels, an off-centre
+principal point) is refused naming session.json's field, and Blender is asked for the session's
+image size and field of view, one PNG per proposed pose."""
 
 from __future__ import annotations
 
@@ -48,13 +49,18 @@ def test_numbers_are_refused_before_the_session_is_read(tmp_path, name, value):
     assert refused.value.argument == name and refused.value.value == value
 
 
-def test_non_square_pixels_are_refused_naming_the_field(session, tmp_path, monkeypatch):
+@pytest.mark.parametrize(("field", "factor"), [("fy", 1.5), ("cx", 0.8), ("cy", 1.2)])
+def test_a_camera_blender_cannot_render_is_refused_naming_the_field(session, tmp_path, monkeypatch, field, factor):
     state = json.loads((session / "session.json").read_text())
-    state["intrinsics"]["fy"] = state["intrinsics"]["fx"] * 1.5
+    state["intrinsics"][field] = state["intrinsics"][field] * factor
     (session / "session.json").write_text(json.dumps(state))
     monkeypatch.setattr(simulate, "render_poses", lambda *a, **k: pytest.fail("rendered"))
-    with pytest.raises(DatasetError, match=r"session\.json, field 'intrinsics\.fy': Blender renders square pixels"):
+    with pytest.raises(
+        DatasetError, match=r"session\.json, field 'intrinsics': Blender renders square pixels"
+    ) as refused:
         simulate.render_proposals(session, poses_file(tmp_path / "p.json"), "lego", tmp_path / "out")
+    assert refused.value.value[field] == pytest.approx(state["intrinsics"][field])
+    assert not (tmp_path / "out").exists()
 
 
 def test_blender_gets_the_sessions_camera_and_one_path_per_pose(session, tmp_path, monkeypatch):

@@ -9,10 +9,12 @@ from typing import Annotated
 
 from pydantic import Field
 
+from nerfaug.capture.folder import camera_of
 from nerfaug.capture.proposal import read_poses
 from nerfaug.capture.requests import Seed, check_threads, validated
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.state import SessionState
+from nerfaug.data.blender import blender_fits
 from nerfaug.errors import DatasetError
 from nerfaug.scenes.render import render_poses
 
@@ -36,15 +38,19 @@ def render_proposals(
 
     Raises:
         RequestError: `samples`, `seed` or `threads` out of range (checked before anything is read).
-        DatasetError: the session's camera has non-square pixels (Blender renders square ones).
+        DatasetError: the session's camera has non-square pixels or an off-centre principal point
+            (Blender renders from one horizontal field of view: `blender_fits`).
     """
     validated(CyclesSamples, samples, "samples")
     validated(Seed, seed, "seed")
     check_threads(threads)
     k = SessionState.read(run).intrinsics
-    if abs(k.fx - k.fy) > 1e-3 * k.fx:
+    if not blender_fits(camera_of(k)):  # Blender renders from one camera_angle_x
         raise DatasetError(
-            run / SESSION_FILE, f"Blender renders square pixels; this camera has fx {k.fx:g}", "intrinsics.fy", k.fy
+            run / SESSION_FILE,
+            "Blender renders square pixels with the principal point at the image centre",
+            "intrinsics",
+            {"width": k.width, "height": k.height, "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
         )
     matrices, names = read_poses(poses)
     paths = [out / f"{name}.png" for name in names]
