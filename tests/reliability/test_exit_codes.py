@@ -58,3 +58,10 @@ def test_debug_shows_the_traceback_instead_of_the_line(bases, tmp_path, monkeypa
     outcome = run_cli(argv)
     assert outcome.escaped is not None and "ValueError: --n 0: must be >= 1" in outcome.escaped
     assert not outcome.error_lines()
+
+
+def test_a_refused_run_prints_no_plan_before_its_refusal(bases, tmp_path):
+    # the size line ("N runs ... about T") is a promise; a setting that is refused must come first
+    outcome = run_cli(["run", "--data", bases.dataset, "--out", tmp_path / "r", *TINY, "--resolution", "7"])
+    assert outcome.code == 2 and "--resolution 7" in outcome.err, outcome.err
+    assert "runs" not in outcome.out and not (tmp_path / "r").exists()
