@@ -66,3 +66,21 @@ def test_degenerate_candidate_sets_still_draw(tmp_path):
     for i, poses in enumerate((pole, line, line[:1])):
         path = plot_hemisphere_map(poses, torch.rand(len(poses)), half_hemisphere_poses(6), path=tmp_path / f"{i}.png")
         assert path.read_bytes()[:8] == PNG_MAGIC
+
+
+@pytest.mark.parametrize("polar_deg", [95.0, 150.0])
+def test_views_below_the_horizon_stay_in_frame_and_are_explained(polar_deg):
+    from matplotlib.figure import Figure
+
+    from nerfaug.maps import _draw
+
+    poses, azimuth, _ = candidates()
+    below = pose_from_angles(torch.tensor([math.pi / 4]), torch.tensor([math.radians(polar_deg)]))
+    ax = Figure().subplots()
+    _draw(ax, poses, torch.cos(azimuth), below, below, "equal-area", (0.0, 0.0, 0.0))
+    (x, y) = hemisphere_xy(below)[0]
+    assert ax.get_xlim()[1] > x > ax.get_xlim()[0] and ax.get_ylim()[1] > y > ax.get_ylim()[0]
+    assert "below the horizon" in " ".join(t.get_text() for t in ax.texts)
+    above = Figure().subplots()  # the upper hemisphere only: the frame and the words as before
+    _draw(above, poses, torch.cos(azimuth), half_hemisphere_poses(6), None, "equal-area", (0.0, 0.0, 0.0))
+    assert above.get_xlim() == (-1.18, 1.18) and "below the horizon" not in " ".join(t.get_text() for t in above.texts)

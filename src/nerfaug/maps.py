@@ -147,8 +147,14 @@ def _draw(
             label="chosen views",
             zorder=4,
         )
-    ax.set_xlim(-1.18, 1.18)
-    ax.set_ylim(-1.18, 1.18)
+    # Captured sets (LLFF, DTU) may hold views below the horizon: beyond the rim, kept in frame.
+    drawn = [xy, train] + ([chosen] if chosen_c2w is not None else [])
+    reach = max([float(np.linalg.norm(points, axis=-1).max()) for points in drawn if len(points)], default=0.0)
+    limit = max(1.18, reach + 0.1)
+    if reach > 1.0 + 1e-6:
+        ax.text(0.0, -limit, "beyond the rim: below the horizon", ha="center", va="bottom", fontsize=6, color="0.3")
+    ax.set_xlim(-limit, limit)
+    ax.set_ylim(-limit, limit)
     ax.set_aspect("equal")
     ax.axis("off")
     return image
@@ -236,6 +242,10 @@ def plot_method_maps(
             ax, candidate_c2w, shown, train_c2w, chosen, projection, centre, vmin=0.0, vmax=1.0, train_label=train_label
         )
         ax.set_title(name, fontsize=10)
+    limit = max(ax.get_xlim()[1] for ax in axes[0])  # one scale, so the panels' disks match
+    for ax in axes[0]:
+        ax.set_xlim(-limit, limit)
+        ax.set_ylim(-limit, limit)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
     fig.colorbar(image, ax=list(axes[0]), fraction=0.02, pad=0.01, label="score (min-max per panel)")
