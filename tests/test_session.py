@@ -93,6 +93,33 @@ def test_estimate_centre_refuses_parallel_axes():
         estimate_centre(poses)
 
 
+def test_a_capture_whose_world_is_not_z_up_is_warned_about_at_creation(dataset, tmp_path):
+    import warnings
+
+    from nerfaug.capture.state import TiltedPole
+
+    # the sphere's capture turned as LLFF and COLMAP frames often are: the world's up along -y
+    turn = torch.tensor([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])
+    tilted = render_sphere(
+        turn @ half_hemisphere_poses(8, radius=RADIUS, centre=CENTRE),
+        centre=(turn[:3, :3] @ torch.tensor(CENTRE)).tolist(),
+    )
+    write_blender_split(tmp_path / "tilted", "train", tilted)
+    with pytest.warns(
+        TiltedPole, match=r"transforms_train.json: the cameras. mean up axis is 9[0-9] degrees .*--estimate-up"
+    ):
+        new_session(tmp_path / "tilted", tmp_path / "run")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TiltedPole)  # the pole taken from the cameras, or a z-up world: silent
+        CaptureSession.create(
+            tmp_path / "tilted", tmp_path / "estimated", SessionSettings(preset="test", estimate_up=True)
+        )
+        CaptureSession.create(
+            tmp_path / "tilted", tmp_path / "given", SessionSettings(preset="test", up=(0.0, -1.0, 0.0))
+        )
+        new_session(dataset, tmp_path / "upright")
+
+
 def test_engine_frame_round_trip_and_angles():
     hemisphere = Hemisphere(centre=(1.0, 2.0, -0.5), radius=0.8, up=(0.3, -0.2, 0.9))
     engine = pose_from_angles(torch.tensor([0.4, 2.0]), torch.tensor([0.3, 1.2]))  # on the engine hemisphere

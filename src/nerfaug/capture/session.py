@@ -51,6 +51,7 @@ from nerfaug.capture.requests import (
     check_checkpoint_every,
     check_steps,
     validated,
+    words,
 )
 from nerfaug.capture.runfolder import (
     CHECKPOINT_FILE,
@@ -70,12 +71,13 @@ from nerfaug.capture.state import (
     SessionState,
     SessionSummary,
     SourceInfo,
+    TiltedPole,
     now,
 )
 from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
 from nerfaug.data.format import DatasetSplit, NewFrame
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format, plainest_format
-from nerfaug.data.frame import estimate_hemisphere
+from nerfaug.data.frame import estimate_hemisphere, pole_tilt_degrees
 from nerfaug.data.views import Views
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
@@ -84,6 +86,11 @@ from nerfaug.nerf.trainer import Trainer
 from nerfaug.progress import progress_bar
 
 CHUNK_STEPS = 10  # training steps between looks at the clock and at `stop`
+
+
+# Beyond this, the default pole cannot be the capture's up: an upright ring of cameras, even on
+# one side of the object and looking down steeply, keeps its mean up axis closer to the world's.
+TILTED_POLE_DEGREES = 60.0
 
 
 class CaptureSession(SessionFolder):
@@ -170,6 +177,16 @@ class CaptureSession(SessionFolder):
             )
         up = "estimate" if settings.estimate_up else settings.up
         hemisphere = estimate_hemisphere(cameras.camera_to_world, settings.centre, settings.radius, up)
+        tilt = None if settings.estimate_up else pole_tilt_degrees(cameras.camera_to_world, hemisphere.up)
+        if tilt is not None and tilt > TILTED_POLE_DEGREES:
+            warnings.warn(
+                f"{source.listing}: the cameras' mean up axis is {tilt:.0f} degrees from the hemisphere's pole "
+                f"(--up {words(settings.up)}), so the candidate views would lie on a tilted hemisphere; if this world "
+                "is not z-up (LLFF, COLMAP and DTU frames seldom are), create the session with --estimate-up "
+                "or --up X Y Z",
+                TiltedPole,
+                stacklevel=2,
+            )
         origin = SourceInfo(data_dir=str(data_dir), split=split, format=source.format.name)
         state = _new_state(origin, cameras, plainest_format(source, cameras), settings, config, background, hemisphere)
         # Everything is checked: from here on the run folder is written, and marked as nerfaug's first;

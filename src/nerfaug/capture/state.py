@@ -48,6 +48,12 @@ class DuplicateViews(UserWarning):
     """The same view (camera pose) twice in a dataset or an addition; the message names the frames."""
 
 
+class TiltedPole(UserWarning):
+    """The hemisphere's pole is far from the cameras' mean up axis: the candidate views would lie
+    on a tilted hemisphere (a capture whose world is not z-up, given the default pole); the message
+    says how to set the pole."""
+
+
 class UnverifiedCheckpoint(UserWarning):
     """A checkpoint that session.json records no digest of (a session saved before digests were
     kept) is used; the message names it. Its digest is recorded at the next save."""

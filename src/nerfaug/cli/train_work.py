@@ -19,7 +19,7 @@ from nerfaug.capture.lock import hold
 from nerfaug.capture.requests import SessionSettings, check_threads
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.session import CaptureSession
-from nerfaug.capture.state import DuplicateViews, UnverifiedCheckpoint
+from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint
 from nerfaug.cli.option_names import as_options, checked, option
 from nerfaug.data import load_dataset
 from nerfaug.device import configure_process, resolve_device
@@ -83,9 +83,9 @@ def _lock(run: Path, command: str) -> None:
 
 @contextlib.contextmanager
 def warning_lines():
-    """Show the capture's warnings (`DuplicateViews`, `UnverifiedCheckpoint`) as one line each,
-    `warning: ...` on stderr."""
-    kinds = (DuplicateViews, UnverifiedCheckpoint)
+    """Show the capture's warnings (`DuplicateViews`, `TiltedPole`, `UnverifiedCheckpoint`) as one
+    line each, `warning: ...` on stderr."""
+    kinds = (DuplicateViews, TiltedPole, UnverifiedCheckpoint)
     with warnings.catch_warnings():
         for kind in kinds:
             warnings.simplefilter("always", kind)

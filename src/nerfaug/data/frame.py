@@ -83,6 +83,23 @@ def estimate_up(camera_to_world: Tensor) -> Tensor:
     return up / up.norm()
 
 
+def pole_tilt_degrees(camera_to_world: Tensor, up) -> float | None:
+    """Degrees between the pole `up` (3,) and the cameras' mean up axis (`estimate_up`): near 0
+    for a capture taken upright in a world whose up is `up`; None when the cameras' up axes cancel.
+
+    Args:
+        camera_to_world: Tensor with shape (n, 4, 4).
+        up: the pole direction, world space, any length.
+    """
+    try:
+        mean_up = estimate_up(camera_to_world)
+    except ValueError:
+        return None
+    pole = torch.as_tensor(up, dtype=torch.float64)
+    cosine = float(mean_up @ (pole / pole.norm()))
+    return math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
+
+
 @dataclass(frozen=True)
 class Hemisphere:
     """The upper half, relative to `up`, of the sphere of `radius` about `centre` (world frame).
