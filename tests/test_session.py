@@ -120,6 +120,27 @@ def test_a_capture_whose_world_is_not_z_up_is_warned_about_at_creation(dataset, 
         new_session(dataset, tmp_path / "upright")
 
 
+def test_an_evaluation_marks_the_views_the_session_trains_on(dataset, tmp_path, capsys):
+    from nerfaug.cli import main
+
+    session = new_session(dataset, tmp_path / "run")
+    own = session.evaluate(session.held_out(dataset, "train"), lpips=None)
+    assert [row["trained_on"] for row in own.per_view] == [True] * 8
+    other = tmp_path / "other"
+    write_blender_split(
+        other, "test", render_sphere(half_hemisphere_poses(3, azimuth_start=math.pi, radius=RADIUS, centre=CENTRE))
+    )
+    held_out = session.evaluate(session.held_out(other, "test"), lpips=None)
+    assert [row["trained_on"] for row in held_out.per_view] == [False] * 3
+    # the command says so in one line, and its JSON keeps which
+    main(["eval", str(tmp_path / "run"), "--data", str(dataset), "--split", "train", "--out", str(tmp_path / "e.json")])
+    (line,) = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning:")]
+    assert "8 of the 8 views have the pose of a view the session trains on" in line
+    assert all(row["trained_on"] for row in json.loads((tmp_path / "e.json").read_text())["per_view"])
+    main(["eval", str(tmp_path / "run"), "--data", str(other)])
+    assert "warning" not in capsys.readouterr().err
+
+
 def test_engine_frame_round_trip_and_angles():
     hemisphere = Hemisphere(centre=(1.0, 2.0, -0.5), radius=0.8, up=(0.3, -0.2, 0.9))
     engine = pose_from_angles(torch.tensor([0.4, 2.0]), torch.tensor([0.3, 1.2]))  # on the engine hemisphere

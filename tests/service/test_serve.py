@@ -214,6 +214,7 @@ def test_held_out_views_are_scored_as_the_library_scores_them(server, root):
     assert scored["split"] == "test" and scored["dataset"] == "held-out"
     assert 0 < scored["psnr"] < 60 and 0 <= scored["ssim"] <= 1
     assert scored["lpips"] is None and "smaller than" in scored["lpips_status"]  # 8x8 pixels: below AlexNet's size
+    assert scored["trained_on"] == 0 and not any(v["trained_on"] for v in scored["per_view"])  # other poses
     # The same numbers as `nerfaug eval` computes in process.
     session = CaptureSession.open(root / "scored")
     local = session.evaluate(session.held_out(root / "held-out", "test", max_views=2), lpips=None)

@@ -14,6 +14,7 @@ from nerfaug.data.views import Views, spread_over_frames
 from nerfaug.errors import FolderRefused
 from nerfaug.evaluation import EvaluationResult, evaluate_views
 from nerfaug.jsonio import atomic_write_json
+from nerfaug.selection.candidates import matching_poses
 
 # The key marking a JSON `write_evaluation` wrote (and may overwrite).
 EVAL_KIND = "session-eval"
@@ -45,7 +46,9 @@ def evaluate_model(model: SessionModel, views: Views, lpips="auto", progress: bo
         progress: show a progress bar.
 
     Returns:
-        `EvaluationResult`: per view and mean PSNR (dB), SSIM and LPIPS (None when unavailable).
+        `EvaluationResult`: per view and mean PSNR (dB), SSIM and LPIPS (None when unavailable),
+        and per view `trained_on`: whether the session trains on that pose (then the view scores
+        how well it was fitted, not how well the NeRF generalises; `trained_on_count`).
     """
     cameras = model.hemisphere.cameras_to_engine(views.cameras).to(model.device)
     background = model.background_tensor()
@@ -53,7 +56,17 @@ def evaluate_model(model: SessionModel, views: Views, lpips="auto", progress: bo
     def render(_, index: int):
         return model.model.render_image(cameras, index, background)
 
-    return evaluate_views(render, views, lpips=lpips, progress=progress)
+    result = evaluate_views(render, views, lpips=lpips, progress=progress)
+    # Compared in the engine frame, as proposals compare poses, so the tolerance ignores the data's units.
+    seen = matching_poses(cameras.camera_to_world.cpu(), model.train_cameras.camera_to_world.cpu())
+    for row in result.per_view:
+        row["trained_on"] = bool(seen[row["index"]])
+    return result
+
+
+def trained_on_count(result: EvaluationResult) -> int:
+    """How many of an `evaluate_model` result's views the session trains on."""
+    return sum(bool(row.get("trained_on")) for row in result.per_view)
 
 
 def check_evaluation_out(out: Path, data: Path) -> None:

@@ -13,13 +13,14 @@ are in `nerfaug.cli.train`.
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
 from nerfaug.capture.choose import ProposalRequest
-from nerfaug.capture.evaluate import check_evaluation_out, write_evaluation
+from nerfaug.capture.evaluate import check_evaluation_out, trained_on_count, write_evaluation
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.proposal import check_poses_out
 from nerfaug.capture.requests import replaced_by
@@ -130,6 +131,13 @@ def evaluate(
     print(f"  PSNR {_metric(m['psnr'], 2)} dB   SSIM {_metric(m['ssim'], 4)}   LPIPS {_metric(m['lpips'], 4)}")
     if m["lpips"] is None:
         print(f"  LPIPS {result.lpips_status}")
+    if trained := trained_on_count(result):
+        print(
+            f"warning: {trained} of the {len(views)} views have the pose of a view the session trains on, so "
+            "they score how well it was fitted, not held-out views (a captured set keeps one listing: every "
+            "--split of it is all of it)",
+            file=sys.stderr,
+        )
     if out is not None:
         write_evaluation(out, result, run, session.step, data, split)
         print(f"  written to {out}")

@@ -37,6 +37,7 @@ from swagger_ui_bundle import swagger_ui_path
 
 import nerfaug
 from nerfaug.capture.choose import ProposalRequest
+from nerfaug.capture.evaluate import trained_on_count
 from nerfaug.capture.pool import Job, SessionStatus
 from nerfaug.capture.requests import Poses, RequestError
 from nerfaug.capture.session import CaptureSession
@@ -205,6 +206,7 @@ async def evaluate(session_id: str, request: models.EvaluateRequest, hub: Hub):
         views = session.held_out(data, request.split, request.max_views)
         result = session.evaluate(views, lpips="auto" if request.lpips else None)
         found = {"views": len(views), **result.mean, "lpips_status": result.lpips_status, "per_view": result.per_view}
+        found["trained_on"] = trained_on_count(result)
         return {"step": session.step, "dataset": request.dataset, "split": request.split, **found}
 
     return await done(hub.submit(session_id, score))

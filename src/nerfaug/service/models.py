@@ -93,6 +93,9 @@ class Evaluation(BaseModel):
     ssim: float | None
     lpips: float | None
     lpips_status: str
+    trained_on: int = Field(
+        0, description="views whose pose the session trains on: they score the fit, not held-out views (see per_view)"
+    )
     per_view: list[dict]
 
 
