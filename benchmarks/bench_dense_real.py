@@ -44,18 +44,8 @@ def permuted_cameras(views, seed: int):
     return Views(cameras, views.images, list(views.names), views.alphas)
 
 
-def psnr_over(model, views) -> float:
-    from nerfaug.evaluation import psnr
-
-    with torch.no_grad():
-        values = [
-            float(psnr(model.render_image(views.cameras, i)["rgb"].clamp(0, 1).cpu(), views.images[i]))
-            for i in range(len(views))
-        ]
-    return sum(values) / len(values)
-
-
 def train_and_score(train, test, engine: str, steps: int, seed: int) -> dict:
+    from bench_dense import evaluate as psnr_over  # the dense check's own scoring: mean PSNR over views
     from nerfaug.nerf.config import NerfConfig
     from nerfaug.nerf.trainer import Trainer
 

@@ -1,6 +1,9 @@
-"""Shared by the benchmark scripts' tests: a toy Blender-format dataset (an analytic sphere) with
-initial, train and test splits, made without Blender."""
+"""Shared by the benchmark scripts' tests: the script a test module names, loaded as a module, and
+a toy Blender-format dataset (an analytic sphere) with initial, train and test splits, made
+without Blender."""
 
+import importlib.util
+import sys
 from pathlib import Path
 
 import pytest
@@ -9,6 +12,19 @@ import torch
 from nerfaug.cameras import Cameras, image_rays
 from nerfaug.data import Views, write_blender_split
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, sample_uniform_poses
+
+
+@pytest.fixture(scope="module")
+def bench(request):
+    """The script `SCRIPT` of the requesting test module, as a module. benchmarks/ holds scripts,
+    not a package; it joins sys.path, as it is when a script runs, so scripts import each other."""
+    script = request.module.SCRIPT
+    if str(script.parent) not in sys.path:
+        sys.path.insert(0, str(script.parent))
+    spec = importlib.util.spec_from_file_location(script.stem, script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def sphere_views(poses: torch.Tensor, prefix: str, size: int = 24) -> Views:

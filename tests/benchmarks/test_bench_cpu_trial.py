@@ -1,21 +1,12 @@
 """benchmarks/bench_cpu_trial.py compares today's engine with an earlier commit's: the earlier
 engine is that commit's own source, and losses are compared step by step."""
 
-import importlib.util
 import subprocess
 from pathlib import Path
 
 import pytest
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_cpu_trial.py"
-
-
-@pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_cpu_trial", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_the_baseline_is_the_earlier_commits_own_engine(bench, tmp_path):

@@ -1,12 +1,9 @@
 """benchmarks/bench_dense_real.py at toy size: the control really gives every image another
 view's camera, and a scene the engine has not learnt fails the registration rule."""
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
-import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -16,15 +13,6 @@ from nerfaug.data import Views
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_dense_real.py"
-
-
-@pytest.fixture(scope="module")
-def bench():
-    sys.path.insert(0, str(SCRIPT.parent))
-    spec = importlib.util.spec_from_file_location("bench_dense_real", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @settings(max_examples=20, deadline=None)

@@ -1,50 +1,39 @@
 """benchmarks/bench_engine_walk.py walks from `nerfacto-cpu-last-sample` to exactly `paper`, one
 group at a time, each group changing only settings where the two presets differ."""
 
-import importlib.util
 from pathlib import Path
-
-import pytest
 
 from nerfaug.nerf.config import NerfConfig
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_engine_walk.py"
 
 
-@pytest.fixture(scope="module")
-def walk():
-    spec = importlib.util.spec_from_file_location("bench_engine_walk", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_the_walk_starts_at_the_cpu_sibling_and_ends_at_the_paper_preset(walk):
-    entries = walk.walk_entries()
+def test_the_walk_starts_at_the_cpu_sibling_and_ends_at_the_paper_preset(bench):
+    entries = bench.walk_entries()
     assert NerfConfig.preset(entries[0][2]) == NerfConfig.preset("nerfacto-cpu-last-sample")
     assert NerfConfig.preset(entries[-1][2]) == NerfConfig.preset("paper")
-    walk.check_walk_reaches_paper()
+    bench.check_walk_reaches_paper()
 
 
-def test_each_group_sets_paper_values_and_every_difference_is_in_one_group(walk):
+def test_each_group_sets_paper_values_and_every_difference_is_in_one_group(bench):
     start, paper = NerfConfig.preset("nerfacto-cpu-last-sample").to_dict(), NerfConfig.preset("paper").to_dict()
     differing = {k for k in start if start[k] != paper[k]}
-    changed = [name for _, _, changes in walk.GROUPS for name in changes]
+    changed = [name for _, _, changes in bench.GROUPS for name in changes]
     assert len(changed) == len(set(changed))
     assert differing <= set(changed)
-    for _, _, changes in walk.GROUPS:
-        alone = NerfConfig.preset(walk.variant(changes)).to_dict()
+    for _, _, changes in bench.GROUPS:
+        alone = NerfConfig.preset(bench.variant(changes)).to_dict()
         assert all(alone[name] == paper[name] for name in changes), changes
 
 
-def test_every_probe_is_a_valid_engine_name(walk):
-    for what, engine in walk.all_entries().values():
+def test_every_probe_is_a_valid_engine_name(bench):
+    for what, engine in bench.all_entries().values():
         NerfConfig.preset(engine)  # raises on an unknown setting or a badly typed value
         assert what
 
 
-def test_the_end_probes_are_the_paper_preset_with_only_their_background_changed(walk):
+def test_the_end_probes_are_the_paper_preset_with_only_their_background_changed(bench):
     paper = NerfConfig.preset("paper").to_dict()
-    for name, (_, changes) in walk.END_PROBES.items():
-        probe = NerfConfig.preset(walk.all_entries()[name][1]).to_dict()
+    for name, (_, changes) in bench.END_PROBES.items():
+        probe = NerfConfig.preset(bench.all_entries()[name][1]).to_dict()
         assert {k for k in paper if paper[k] != probe[k]} == set(changes) == {"background_mode"}, name

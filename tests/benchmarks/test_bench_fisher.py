@@ -1,7 +1,6 @@
 """benchmarks/bench_fisher.py measures the estimator the study runs: its H_train and H_cand are the
 ones `fisherrf_candidates` computes, draw for draw, for the same generator."""
 
-import importlib.util
 from pathlib import Path
 
 import pytest
@@ -16,14 +15,6 @@ from nerfaug.selection.estimators import fisher_train_rays
 from nerfaug.uncertainty.fisher import fisher_diagonal, fisherrf_scores, sample_pixel_rays
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_fisher.py"
-
-
-@pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_fisher", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def cameras(n: int, seed: int, size: int = 10) -> Cameras:

@@ -1,7 +1,6 @@
 """benchmarks/bench_gpu.py end to end on the CPU at toy size: pack a dataset into one file, unpack
 it as the GPU machine would, run a timed trial and the resumable protocol, without Blender."""
 
-import importlib.util
 import json
 import math
 import os
@@ -34,14 +33,6 @@ TOY = [
     "--save-renders",
     "0",
 ]
-
-
-@pytest.fixture(scope="module")
-def bench():
-    spec = importlib.util.spec_from_file_location("bench_gpu", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")

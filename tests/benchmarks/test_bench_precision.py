@@ -1,8 +1,6 @@
 """benchmarks/bench_precision.py on the CPU at toy size: float32 repeated is the same step, half
 precision changes the gradients a little, and the networks' methods are restored afterwards."""
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
@@ -11,15 +9,6 @@ import torch
 from nerfaug.nerf import field
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_precision.py"
-
-
-@pytest.fixture(scope="module")
-def bench():
-    sys.path.insert(0, str(SCRIPT.parent))
-    spec = importlib.util.spec_from_file_location("bench_precision", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_probe_compares_each_variant_with_float32_on_the_same_draws(bench, dataset, tmp_path):
