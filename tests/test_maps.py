@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from nerfaug.hemisphere import fibonacci_angles, half_hemisphere_poses, pose_from_angles
+from nerfaug.hemisphere import fibonacci_angles, half_hemisphere_poses, pose_from_angles, sample_uniform_poses
 from nerfaug.maps import hemisphere_xy, plot_hemisphere_map, plot_method_maps
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -84,3 +84,21 @@ def test_views_below_the_horizon_stay_in_frame_and_are_explained(polar_deg):
     above = Figure().subplots()  # the upper hemisphere only: the frame and the words as before
     _draw(above, poses, torch.cos(azimuth), half_hemisphere_poses(6), None, "equal-area", (0.0, 0.0, 0.0))
     assert above.get_xlim() == (-1.18, 1.18) and "below the horizon" not in " ".join(t.get_text() for t in above.texts)
+
+
+def test_a_map_leaves_blank_where_no_candidate_lies_and_nowhere_else():
+    from nerfaug.maps import _interpolate
+
+    axis = np.linspace(-1.0, 1.0, 120)
+    gx, gy = np.meshgrid(axis, axis)
+    inside = gx**2 + gy**2 <= 1.0
+    spread = hemisphere_xy(sample_uniform_poses(200, torch.Generator().manual_seed(3)))
+    assert not np.ma.getmaskarray(_interpolate(spread, np.random.rand(200), gx, gy))[inside].any()
+    # a wedge of candidates (as a DTU scan's): the map keeps to the wedge, the rest is blank
+    generator = torch.Generator().manual_seed(0)
+    azimuth = torch.deg2rad(283 + 52 * torch.rand(31, generator=generator))
+    wedge = hemisphere_xy(pose_from_angles(azimuth, torch.deg2rad(20 + 50 * torch.rand(31, generator=generator))))
+    masked = np.ma.getmaskarray(_interpolate(wedge, np.random.rand(31), gx, gy))
+    assert 0.6 < masked[inside].mean() < 0.95
+    opposite = (gx < -0.3) & inside  # the far side of the disk from the wedge (azimuth ~300 deg)
+    assert masked[opposite].all()
