@@ -188,3 +188,15 @@ def test_hash_encoding_kernel_is_checked_and_the_cpu_takes_the_pytorch_path():
     assert not HashEncoding(2, 2, 8, 4, 16).fused(x)  # "auto": Triton on CUDA tensors only
     assert HashEncoding(2, 2, 8, 4, 16, kernel="triton").fused(x)
     assert not HashEncoding(2, 2, 8, 4, 16, kernel="triton").fused(x.requires_grad_())  # positions' gradients
+
+
+@pytest.mark.parametrize("levels", [6, 16])
+def test_no_points_encode_to_no_rows_and_backpropagate(levels):
+    # a render pass whose rays lost every sample (all background) hands the encoding 0 points
+    encoding = HashEncoding(num_levels=levels, log2_table_size=12, max_resolution=256)
+    for needs_grad in (False, True):
+        points = torch.rand(0, 3, requires_grad=needs_grad)
+        features = encoding(points)
+        assert features.shape == (0, levels * 2)
+        features.sum().backward()
+        assert encoding.table.grad is not None and not encoding.table.grad.any()

@@ -92,11 +92,13 @@ class _HashInterpolation(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, table: Tensor, rows: Tensor, weights: Tensor) -> Tensor:
-        n = weights.shape[-1]
-        gathered = _gather_rows(table, rows.reshape(-1)).reshape(*weights.shape, -1)  # (L, 8, n, F)
-        channels = [(gathered[..., f] * weights).sum(dim=1) for f in range(table.shape[1])]  # each (L, n)
+        levels, _, n = weights.shape
+        features = table.shape[1]
+        # Sizes spelled out, not -1: a render pass whose rays lost every sample brings n = 0 points.
+        gathered = _gather_rows(table, rows.reshape(-1)).reshape(*weights.shape, features)  # (L, 8, n, F)
+        channels = [(gathered[..., f] * weights).sum(dim=1) for f in range(features)]  # each (L, n)
         ctx.save_for_backward(table, rows, weights)
-        return torch.stack(channels, dim=-1).transpose(0, 1).reshape(n, -1)
+        return torch.stack(channels, dim=-1).transpose(0, 1).reshape(n, levels * features)
 
     @staticmethod
     def backward(ctx, grad: Tensor) -> tuple[Tensor | None, None, Tensor | None]:
