@@ -235,6 +235,18 @@ def test_a_session_from_uploaded_images(server):
     state = answer.json()
     assert state["views"] == 4 and state["intrinsics"]["fx"] == pytest.approx(10.0)
     assert sorted(Path(n).stem for n in state["names"]) == [f"shot_{i}" for i in range(4)]
+    assert state["warnings"] == []
+    # the same captures in a world whose up is -y (as LLFF's): the answer says the pole is off
+    turn = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])
+    sideways = [(turn @ np.array(pose)).tolist() for pose in poses]
+    answer = server.client.post(
+        "/sessions/from-uploads",
+        data={"settings": json.dumps({**settings, "id": "sideways", "poses": sideways})},
+        files=[("images", (f"shot_{i}.png", png(i), "image/png")) for i in range(4)],
+    )
+    assert answer.status_code == 201, answer.text
+    (line,) = answer.json()["warnings"]
+    assert line.startswith("the poses: the cameras' mean up axis is") and "--estimate-up" in line
 
 
 def test_two_sessions_train_at_once_and_the_state_answers_meanwhile(server):

@@ -21,6 +21,7 @@ the engine frame of the session's hemisphere (`nerfaug.data.frame`).
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import shutil
 import tempfile
@@ -130,6 +131,8 @@ class CaptureSession(SessionFolder):
         background=(1.0, 1.0, 1.0),
         device="cpu",
         progress: bool = False,
+        warn: Callable[[str, type[Warning]], None] | None = None,
+        source_name: str | None = None,
     ) -> CaptureSession:
         """Start a session: copy `split` of the dataset into `run_dir/dataset`, build the NeRF,
         save. Nothing is trained yet (call `train`).
@@ -146,6 +149,9 @@ class CaptureSession(SessionFolder):
             background: colour behind transparent pixels, RGB in [0, 1].
             device: torch device for the NeRF.
             progress: show training progress bars.
+            warn: receives each warning (message, `DuplicateViews` or `TiltedPole`) instead of
+                Python's `warnings` (a service returns them with its answer).
+            source_name: how warnings name the views' listing (default: its file).
 
         Raises:
             RequestError: a setting out of range (naming it).
@@ -168,9 +174,10 @@ class CaptureSession(SessionFolder):
         source = find_split(data_dir, split)
         views = source.load(lazy=True)  # validates the listing and every path
         cameras = views.cameras
+        listing = source_name or str(source.listing)
+        warn = warn or functools.partial(warnings.warn, stacklevel=2)
         for a, b in duplicate_frames(cameras, views.names):
-            same = f"{source.listing}: frames {a} and {b} have the same pose (the same view twice)"
-            warnings.warn(same, DuplicateViews, stacklevel=2)
+            warn(f"{listing}: frames {a} and {b} have the same pose (the same view twice)", DuplicateViews)
         if settings.downscale > min(cameras.width, cameras.height):
             raise ValueError(
                 f"downscale must be at most the image size ({cameras.width}x{cameras.height}), got {settings.downscale}"
@@ -179,13 +186,12 @@ class CaptureSession(SessionFolder):
         hemisphere = estimate_hemisphere(cameras.camera_to_world, settings.centre, settings.radius, up)
         tilt = None if settings.estimate_up else pole_tilt_degrees(cameras.camera_to_world, hemisphere.up)
         if tilt is not None and tilt > TILTED_POLE_DEGREES:
-            warnings.warn(
-                f"{source.listing}: the cameras' mean up axis is {tilt:.0f} degrees from the hemisphere's pole "
+            warn(
+                f"{listing}: the cameras' mean up axis is {tilt:.0f} degrees from the hemisphere's pole "
                 f"(--up {words(settings.up)}), so the candidate views would lie on a tilted hemisphere; if this world "
                 "is not z-up (LLFF, COLMAP and DTU frames seldom are), create the session with --estimate-up "
                 "or --up X Y Z",
                 TiltedPole,
-                stacklevel=2,
             )
         origin = SourceInfo(data_dir=str(data_dir), split=split, format=source.format.name)
         state = _new_state(origin, cameras, plainest_format(source, cameras), settings, config, background, hemisphere)
@@ -228,9 +234,11 @@ class CaptureSession(SessionFolder):
         *,
         device="cpu",
         progress: bool = False,
+        warn: Callable[[str, type[Warning]], None] | None = None,
     ) -> CaptureSession:
         """Start a session on images as captured (their files' bytes, e.g. uploaded), taken at
-        world-frame `poses` (one each, in order) with one camera, `intrinsics`; see `create`.
+        world-frame `poses` (one each, in order) with one camera, `intrinsics`; see `create`
+        (its warnings name the views "the poses").
         Every file is checked (`check_image_files`: names, and RGB(A) pixels of the camera's size)
         before anything is written."""
         check_image_files(files, intrinsics.width, intrinsics.height)
@@ -241,7 +249,16 @@ class CaptureSession(SessionFolder):
         with tempfile.TemporaryDirectory(prefix="nerfaug-captures-") as staging:
             data = DatasetSplit(Path(staging) / "data", get_format(EXCHANGE_FORMAT))
             data.append(frames, camera_of(intrinsics))
-            return cls.create(data.root, run_dir, settings, split=DATASET_SPLIT, device=device, progress=progress)
+            return cls.create(
+                data.root,
+                run_dir,
+                settings,
+                split=DATASET_SPLIT,
+                device=device,
+                progress=progress,
+                warn=warn,
+                source_name="the poses",
+            )
 
     @classmethod
     def open(cls, run_dir: str | Path, device="cpu", progress: bool = False) -> CaptureSession:

@@ -102,17 +102,28 @@ async def sessions(hub: Hub):
     return hub.ids()
 
 
-@router.post("/sessions/from-dataset", status_code=201, response_model=SessionStatus)
+async def created(hub: SessionHub, session_id: str, create) -> dict:
+    """Create a session with `create(folder, warn)` in its queue; its state and its warnings."""
+    found: list[str] = []
+
+    def warn(line: str, _kind) -> None:
+        found.append(line)
+
+    status = await done(hub.submit_create(session_id, lambda folder: create(folder, warn)))
+    return {**status.model_dump(), "warnings": found}
+
+
+@router.post("/sessions/from-dataset", status_code=201, response_model=models.Created)
 async def create_from_dataset(request: models.FromDataset, hub: Hub):
     data = hub.dataset_path(request.dataset, request.split)
 
-    def create(folder):
-        return CaptureSession.create(data, folder, request, split=request.split, device=hub.device)
+    def create(folder, warn):
+        return CaptureSession.create(data, folder, request, split=request.split, device=hub.device, warn=warn)
 
-    return await done(hub.submit_create(request.id, create))
+    return await created(hub, request.id, create)
 
 
-@router.post("/sessions/from-uploads", status_code=201, response_model=SessionStatus)
+@router.post("/sessions/from-uploads", status_code=201, response_model=models.Created)
 async def create_from_uploads(
     hub: Hub,
     limit: UploadLimit,
@@ -123,11 +134,13 @@ async def create_from_uploads(
 ):
     request = form_json(settings, "settings", models.FromUploads)
 
-    def create(folder):
+    def create(folder, warn):
         files = read_uploads(images, limit)
-        return CaptureSession.from_files(files, request.poses, request.intrinsics, folder, request, device=hub.device)
+        return CaptureSession.from_files(
+            files, request.poses, request.intrinsics, folder, request, device=hub.device, warn=warn
+        )
 
-    return await done(hub.submit_create(request.id, create))
+    return await created(hub, request.id, create)
 
 
 @router.get("/sessions/{session_id}", response_model=SessionStatus)

@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field
 
+from nerfaug.capture.pool import SessionStatus
 from nerfaug.capture.requests import (
     MAX_STEPS,
     SCHEMA,
@@ -82,6 +83,16 @@ class EvaluateRequest(BaseModel):
         description="score only this many of the split's views, spread evenly over its frames (default: all)",
     )
     lpips: bool = Field(True, description="also LPIPS (when its weights are installed and images are large enough)")
+
+
+class Created(SessionStatus):
+    """A new session's state, and what its creation warned about."""
+
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="what `nerfaug train` would warn about when it creates the session: the same view twice, a "
+        "hemisphere pole far from the cameras' up (one line each)",
+    )
 
 
 class Evaluation(BaseModel):
