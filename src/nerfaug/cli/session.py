@@ -109,7 +109,8 @@ def evaluate(
     threads: int = THREADS,
 ) -> None:
     """Score the session's NeRF on held-out views: PSNR, SSIM and LPIPS of its renders against
-    a dataset split, at the session's training resolution (as nerfstudio's ns-eval).
+    a dataset split, at the session's training resolution (as nerfstudio's ns-eval). A view with
+    the pose of one the session trains on is marked in the JSON and counted in a warning.
 
     Args:
         run: the session's run folder.
