@@ -371,7 +371,7 @@ class SessionSettings(Schema):
     up: Annotated[Vector, AfterValidator(_direction), tyro.conf.arg(metavar="FLOAT FLOAT FLOAT")] = (0.0, 0.0, 1.0)
     """the hemisphere's pole direction, world space (the world is z-up by default)."""
     estimate_up: bool = False
-    """take the pole from the cameras' mean up axis instead of --up."""
+    """take the pole from the cameras' mean up axis instead of --up (for LLFF, COLMAP or DTU captures, seldom z-up)."""
 
     def differences(self, ours: SessionSettings, given=None) -> list[tuple[str, str, str]]:
         """The settings named in `given` (field names; every one when None) that differ from a
