@@ -15,7 +15,7 @@ from nerfaug.experiment.store import (
     read_result,
     write_result,
 )
-from nerfaug.experiment.sweep import plan_runs, sweep_record
+from nerfaug.experiment.sweep import finished_in_plan, plan_runs, sweep_record
 
 
 def complete_result(fp="abc", psnr=20.0):
@@ -76,6 +76,22 @@ def test_incompatible_sweep_is_refused_with_the_changed_settings(tmp_path):
     # --force moves finished results aside; it deletes nothing.
     assert read_result(moved / finished.relative_to(tmp_path), first["fingerprint"]) is not None
     assert json.loads((tmp_path / "sweep.json").read_text())["fingerprint"] == changed["fingerprint"]
+
+
+def test_a_resume_counts_only_its_own_finished_runs(tmp_path):
+    # A study's engine folder holds every scene's runs: the size line of a study of one scene counted
+    # all of them ("80 already finished, 0 to run" while 29 were left).
+    config = PROTOCOL_PRESETS.choose("tiny").replace(scenes=("lego",), trials=2)  # 2 methods x 2 trials
+    for key in [RunKey("lego", "ours", 0), RunKey("chair", "ours", 0), RunKey("chair", "uniform", 1)]:
+        write_result(key.folder(tmp_path), {**complete_result(), "scene": key.scene, "method": key.method})
+    RunKey("lego", "ours", 5).folder(tmp_path).mkdir(parents=True)  # a trial beyond the plan's
+    write_result(RunKey("lego", "uniform", 7).folder(tmp_path), complete_result())
+    assert finished_in_plan(config, tmp_path) == 1
+    # Runs a study's table records are not run again either.
+    assert (
+        finished_in_plan(config, tmp_path, {RunKey("lego", "uniform", 1): "fp", RunKey("chair", "ours", 1): "fp"}) == 2
+    )
+    assert finished_in_plan(config, tmp_path / "nothing here") == 0
 
 
 def test_fingerprint_is_stable_and_sensitive():

@@ -125,7 +125,7 @@ class Run:
 def run_size_line(config: ExperimentConfig, out: Path, workers: int) -> str:
     """How many runs `config` makes, how big, and about how long on this device (`nerfaug.cli.run_size`)."""
     total = len(config.scenes) * len(config.methods) * config.trials
-    finished = min(len(finished_runs(out)), total) if Path(out).is_dir() else 0
+    finished = sweep.finished_in_plan(config, Path(out))
     shape = " x ".join(
         (
             per_cell(len(config.scenes), "scene"),

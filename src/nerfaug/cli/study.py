@@ -19,9 +19,8 @@ from nerfaug.cli.run_size import per_cell, size_line
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
 from nerfaug.experiment.layout import StudyFolder
-from nerfaug.experiment.store import finished_runs
-from nerfaug.experiment.study import DEFAULT_PRESET, StudySpec
-from nerfaug.experiment.sweep import default_workers
+from nerfaug.experiment.study import DEFAULT_PRESET, StudySpec, table_keys
+from nerfaug.experiment.sweep import default_workers, finished_in_plan
 from nerfaug.registry import Presets
 from nerfaug.report import study_page, study_table
 from nerfaug.selection import METHODS
@@ -103,17 +102,21 @@ class Study(StudySpec):
         for engine, why in plan.left_out.items():
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)
         workers = self.workers if self.workers is not None else default_workers(plan.config)
-        print(study_size_line(plan, workers), flush=True)
+        print(study_size_line(plan, workers, previous), flush=True)
         outcomes = study_runs.run_study(plan, workers=workers, force=self.force, table=previous)
         return {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
 
 
-def study_size_line(plan, workers: int) -> str:
-    """How many runs the study makes, how big, and about how long on this device (`nerfaug.cli.run_size`)."""
+def study_size_line(plan, workers: int, table: dict | None = None) -> str:
+    """How many runs the study makes, how big, and about how long on this device (`nerfaug.cli.run_size`);
+    runs already finished are those of this plan in OUT or in `table` (the study's table)."""
     config = plan.config
     each = len(plan.scenes) * len(config.methods) * config.trials
     study = StudyFolder(Path(plan.out))
-    done = {engine: min(len(finished_runs(study.engine(engine).root)), each) for engine in plan.engines}
+    done = {
+        engine: finished_in_plan(plan.engine_config(engine), study.engine(engine).root, table_keys(table, engine))
+        for engine in plan.engines
+    }
     shape = " x ".join(
         (
             per_cell(len(plan.engines), "engine"),

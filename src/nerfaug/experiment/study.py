@@ -212,14 +212,19 @@ def run_study(
             force=force,
             progress=progress,
             command=plan.command,
-            recorded={
-                RunKey(r["scene"], r["method"], r["trial"]): r["fingerprint"]
-                for r in (table or {}).get("runs", [])
-                if r["engine"] == engine
-            },
+            recorded=table_keys(table, engine),
         )
         outcomes[engine] = {"failed": outcome.failed, "results": len(outcome.results)}
     return outcomes
+
+
+def table_keys(table: dict | None, engine: str) -> dict[RunKey, str]:
+    """The runs of `engine` a study's table records, by key, with their run fingerprints."""
+    return {
+        RunKey(r["scene"], r["method"], r["trial"]): r["fingerprint"]
+        for r in (table or {}).get("runs", [])
+        if r["engine"] == engine
+    }
 
 
 def with_design(record: dict, out: Path) -> dict:
@@ -388,4 +393,5 @@ __all__ = [
     "prepare_datasets",
     "run_study",
     "study_methods",
+    "table_keys",
 ]

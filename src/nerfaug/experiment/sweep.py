@@ -80,6 +80,15 @@ def plan_runs(config: ExperimentConfig) -> list[RunKey]:
     ]
 
 
+def finished_in_plan(config: ExperimentConfig, root: Path, recorded=None) -> int:
+    """How many of `config`'s runs a resume into `root` would not run again: those whose folder holds
+    a result, and those `recorded` elsewhere (a study's table, keyed by `RunKey`). An estimate for the
+    size line: fingerprints are checked when the sweep starts. Runs of other scenes, methods or
+    trials in the same folder do not count."""
+    root = Path(root)
+    return sum(read_result(key.folder(root)) is not None or key in (recorded or {}) for key in plan_runs(config))
+
+
 def scene_name(scene: str) -> str:
     """The name a scene has in results: a built-in name, or a dataset folder's name."""
     folder = scene_folder(scene)
