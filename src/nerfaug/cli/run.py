@@ -83,7 +83,7 @@ class Run:
     def __call__(self) -> None:
         config = self.config()
         workers = self.workers if self.workers is not None else sweep.default_workers(config)
-        sweep.check_config(config)  # a refusal comes before the plan it would contradict
+        checked = sweep.check_config(config)  # a refusal comes before the plan it would contradict
         print(run_size_line(config, self.out, workers), flush=True)
         try:
             outcome = sweep.run_sweep(
@@ -94,6 +94,7 @@ class Run:
                 address=self.address,
                 force=self.force,
                 command=["nerfaug", *sys.argv[1:]],
+                checked=checked,
             )
         except KeyboardInterrupt:
             raise Interrupted(

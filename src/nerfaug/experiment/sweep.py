@@ -295,6 +295,7 @@ def run_sweep(
     progress: bool = True,
     command: list[str] | None = None,
     recorded: dict[RunKey, str] | None = None,
+    checked: dict[str, dict] | None = None,
 ) -> SweepOutcome:
     """Run every missing run of the sweep and return all results.
 
@@ -314,7 +315,7 @@ def run_sweep(
     """
     root = Path(root)
     _need(isinstance(workers, int) and workers >= 1, "workers", workers, "must be an integer >= 1")
-    record = sweep_record(config, command, check_config(config))
+    record = sweep_record(config, command, check_config(config) if checked is None else checked)
     keys = plan_runs(config)
     for key in [] if force else keys:  # refuse before anything is written, removed or rendered
         folder = key.folder(root)
