@@ -118,8 +118,12 @@ class Format(ABC):
         """The keys a frame appended to an existing listing carries for its one `camera`."""
         return {}
 
+    def appended_keys(self, header: dict, camera: Cameras) -> dict:
+        """The keys a frame appended under the listing's `header` carries for its one `camera`."""
+        return self.frame_keys(camera)
+
     def lens_distortion(self, header: dict, frames: list) -> bool:
-        """Whether the listing records a lens distortion (kept only in its own format)."""
+        """Whether any frame of the listing has a lens distortion (its images are distorted photos)."""
         return False
 
     # -- writing --
@@ -155,7 +159,7 @@ class Format(ABC):
                 {
                     "file_path": self.file_path(folder, frame.stem, frame.suffix),
                     "transform_matrix": frame.pose,
-                    **self.frame_keys(camera),
+                    **self.appended_keys(header, camera),
                 }
             )
         self.write_listing(root, split, header, frames + added)
@@ -165,13 +169,20 @@ class Format(ABC):
         """Copy the frames of `source` (any format) into `out` as `split` of this format.
 
         Every image is found before anything is written; images are copied byte for byte,
-        except those this format's readers do not take (`png_only`), which become lossless PNGs.
+        except those this format's readers do not take (`png_only`), which become lossless PNGs,
+        and distorted photos going to another format, which are written undistorted (resampled).
         From the same format the listing's camera keys are kept as they are; from another the
         cameras are described anew (ValueError unless they fit).
 
         Returns the new listing's path.
         """
         header, frames = source.read()
+        if type(source.format) is not type(self) and source.format.lens_distortion(header, frames):
+            # Another format would describe distorted photos as pinhole images: write them undistorted.
+            views = source.load()
+            if not self.fits(views.cameras):
+                raise ValueError(f"these cameras do not fit the {self.name} format ({self.fits_rule})")
+            return self.write(out, split, views)
         files = source.frame_files(frames)
         if type(source.format) is type(self):
             header = {k: header[k] for k in self.camera_keys if k in header}

@@ -155,7 +155,13 @@ def read_mask(path: Path, json_path: Path, field: str) -> np.ndarray:
 
 
 def read_image(
-    path: Path, background: Tensor, downscale: int, json_path: Path, field: str, mask: Path | None = None
+    path: Path,
+    background: Tensor,
+    downscale: int,
+    json_path: Path,
+    field: str,
+    mask: Path | None = None,
+    warp: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[Tensor, Tensor | None]:
     """An image composited over `background`, as float32 (h, w, 3) in [0, 1], and its alpha (h, w).
 
@@ -164,6 +170,8 @@ def read_image(
         downscale: integer factor; the image is area-averaged (premultiplied) by it.
         mask: a mask image of the same size (`read_mask`) that becomes the alpha, over any
             alpha channel the image has (captured datasets keep masks beside the photos).
+        warp: resamples the full-size image, float32 (h, w, 3 or 4) in [0, 1], to the same size
+            before it is downscaled (a lens's undistortion, `nerfaug.data.lens`).
     """
     try:
         array = np.asarray(iio.imread(path))
@@ -206,6 +214,8 @@ def read_image(
         raise DatasetError(
             json_path, f"image {path} has an unsupported pixel type", field=field, value=str(array.dtype)
         )
+    if warp is not None:
+        image = torch.from_numpy(np.clip(warp(image.numpy()), 0.0, 1.0).astype(np.float32))
     alpha = image[..., 3] if image.shape[-1] == 4 else None
     rgb = image[..., :3]
     if alpha is not None:
@@ -295,6 +305,7 @@ def load_frames(
     lazy: bool,
     intrinsics_of: IntrinsicsOf,
     masks: Sequence[Path] | None = None,
+    warp_of: Callable[[int], Callable[[np.ndarray], np.ndarray] | None] | None = None,
 ) -> Views:
     """The views a listing's `frames` list describes, for any format.
 
@@ -308,6 +319,8 @@ def load_frames(
         intrinsics_of: `intrinsics_of(w, h, i)` gives (camera_angle_x, None) or
             (None, (fx, fy, cx, cy)) for frame i at the file's full resolution.
         masks: one mask file per frame (`read_image`), or None to take alpha from the images.
+        warp_of: `warp_of(i)` resamples frame i's full-size image (`read_image`'s `warp`), or is
+            None; `intrinsics_of` then gives the intrinsics of the resampled image.
     """
     background = torch.as_tensor(background, dtype=torch.float32)
     poses, paths, names = [], [], []
@@ -323,7 +336,8 @@ def load_frames(
 
     def load(i: int):
         mask = None if masks is None else masks[i]
-        return read_image(paths[i], background, downscale, json_path, f"frames[{i}].file_path", mask)
+        warp = None if warp_of is None else warp_of(i)
+        return read_image(paths[i], background, downscale, json_path, f"frames[{i}].file_path", mask, warp)
 
     first, first_alpha = load(0)
     height, width = first.shape[:2]

@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import Format
@@ -17,6 +19,7 @@ from nerfaug.data.frames import (
     require,
     write_image,
 )
+from nerfaug.data.lens import lens_of, undistort, undistortion
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
 
@@ -37,7 +40,6 @@ CAMERA_KEYS = (
     "p2",
     "camera_angle_x",
 )
-DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 
 def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int = 1, lazy: bool = False) -> Views:
@@ -58,14 +60,18 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
             value=frames if not isinstance(frames, list) else [],
         )
 
-    def intrinsics_of(width: int, height: int, i: int):
-        frame = frames[i]
+    def get_of(i: int):
+        frame = frames[i] if isinstance(frames[i], dict) else {}
+        return lambda key: frame.get(key, meta.get(key))
 
-        def get(key):
-            return frame.get(key, meta.get(key))
+    def field_of(i: int):
+        frame = frames[i] if isinstance(frames[i], dict) else {}
+        return lambda key: f"frames[{i}].{key}" if key in frame else key
 
-        def field(key):
-            return f"frames[{i}].{key}" if key in frame else key
+    lenses = [lens_of(get_of(i), field_of(i), json_path) for i in range(len(frames))]
+
+    def pinhole_of(width: int, height: int, i: int):
+        get, field = get_of(i), field_of(i)
 
         if get("fl_x") is None:
             if get("camera_angle_x") is None:
@@ -101,7 +107,34 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
                 )
         return None, scaled
 
-    return load_frames(root, json_path, frames, background, downscale, lazy, intrinsics_of)
+    def photo_intrinsics(width: int, height: int, i: int) -> tuple[float, float, float, float]:
+        angle, intrinsics = pinhole_of(width, height, i)
+        if intrinsics is None:
+            focal = 0.5 * width / math.tan(0.5 * angle)
+            return focal, focal, width / 2.0, height / 2.0
+        return intrinsics
+
+    def intrinsics_of(width: int, height: int, i: int):
+        """Frame i's camera at the file's size: the listing's, or the pinhole camera its photo is undistorted to."""
+        if lenses[i] is None:
+            return pinhole_of(width, height, i)
+        try:
+            return None, undistortion(lenses[i], photo_intrinsics(width, height, i), width, height)[0]
+        except ValueError as error:
+            raise DatasetError(json_path, str(error), field=f"frames[{i}]", value=lenses[i].describe()) from None
+
+    def warp_of(i: int):
+        if lenses[i] is None:
+            return None
+
+        def warp(image: np.ndarray) -> np.ndarray:
+            height, width = image.shape[:2]
+            intrinsics = photo_intrinsics(width, height, i)
+            return undistort(image, lenses[i], intrinsics, json_path, f"frames[{i}]")[0]
+
+        return warp
+
+    return load_frames(root, json_path, frames, background, downscale, lazy, intrinsics_of, warp_of=warp_of)
 
 
 def write_nerfstudio(root: str | Path, views: Views, image_folder: str = "images") -> Path:
@@ -172,9 +205,19 @@ class NerfstudioFormat(Format):
         return keys | {"w": camera.width, "h": camera.height}
 
     def lens_distortion(self, header: dict, frames: list) -> bool:
-        return any(float(header.get(k) or 0) != 0 for k in DISTORTION_KEYS) or any(
-            float(f.get(k) or 0) != 0 for f in frames if isinstance(f, dict) for k in DISTORTION_KEYS
-        )
+        def distorted(frame: dict) -> bool:
+            try:
+                return lens_of(lambda key: frame.get(key, header.get(key)), str, Path("transforms.json")) is not None
+            except DatasetError:
+                return True  # unreadable: kept in this format, whose reader names what is wrong
+
+        return any(distorted(f if isinstance(f, dict) else {}) for f in frames or [{}])
+
+    def appended_keys(self, header: dict, camera: Cameras) -> dict:
+        """A new frame's keys; under a header with a lens, the frame says it is a pinhole image (its
+        images are taken with the pinhole camera proposals give, not the lens the header describes)."""
+        keys = self.frame_keys(camera)
+        return keys | {"camera_model": "PINHOLE"} if self.lens_distortion(header, [{}]) else keys
 
     def write(self, root, split, views, background=(1.0, 1.0, 1.0)) -> Path:
         return write_nerfstudio(root, views)
