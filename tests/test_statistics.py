@@ -6,7 +6,13 @@ import pytest
 import torch
 from scipy import stats
 
-from nerfaug.coverage import mean_pairwise_angle, seen_half_start, unseen_half_share, view_coverage
+from nerfaug.coverage import (
+    mean_pairwise_angle,
+    outside_wedge_half_share,
+    seen_half_start,
+    unseen_half_share,
+    view_coverage,
+)
 from nerfaug.hemisphere import half_hemisphere_poses, pose_from_angles
 from nerfaug.statistics import (
     bootstrap_median_difference,
@@ -254,6 +260,22 @@ def test_view_coverage_of_poses():
     )
     assert coverage["spread_deg"] == pytest.approx(expected, abs=1e-4)
     assert view_coverage(initial, initial)["unseen_share"] == 0.0
+
+
+def test_a_wedge_of_cameras_is_split_by_the_half_its_initial_views_came_from():
+    # DTU-like: every camera within azimuth 300..20 degrees (a 80-degree wedge); the initial views
+    # came from its first half, 300..340. On the hemisphere's rule every chosen view is "seen".
+    half = {"start_deg": 300.0, "width_deg": 40.0}
+    initial = pose_from_angles(torch.tensor(np.radians([305.0, 320.0, 335.0])), torch.tensor(np.radians([50.0] * 3)))
+    chosen_deg = [310.0, 350.0, 5.0, 15.0]  # one in the initial half, three on the wedge's other side
+    chosen = pose_from_angles(torch.tensor(np.radians(chosen_deg)), torch.tensor(np.radians([50.0] * 4)))
+    assert outside_wedge_half_share(np.radians(chosen_deg), half) == pytest.approx(0.75)
+    assert view_coverage(chosen, initial, half=half)["unseen_share"] == pytest.approx(0.75)
+    assert view_coverage(chosen, initial)["unseen_share"] == 0.0  # the hemisphere's far half holds none
+    # A half-turn half keeps the hemisphere's rule (the procedural study's numbers stand).
+    full = {"start_deg": 90.0, "width_deg": 180.0}
+    six = half_hemisphere_poses(6)
+    assert view_coverage(chosen, six, half=full) == view_coverage(chosen, six)
 
 
 # ---- paired comparison (the study's pooled, secondary analysis) -------------------------------

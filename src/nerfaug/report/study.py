@@ -22,7 +22,14 @@ import numpy as np
 from nerfaug.coverage import view_coverage
 from nerfaug.metrics import HIGHER_IS_BETTER, METRICS
 from nerfaug.report.collect import Results
-from nerfaug.report.study_table import RunRow, engine_results, homogeneous, initial_poses_by_layout, table_rows
+from nerfaug.report.study_table import (
+    RunRow,
+    engine_results,
+    halves_by_layout,
+    homogeneous,
+    initial_poses_by_layout,
+    table_rows,
+)
 from nerfaug.statistics import paired_comparison, seed_level_comparison, summarise
 
 REFERENCE = "uniform"
@@ -125,10 +132,12 @@ class Study:
         return list(dict.fromkeys(c.engine for c in self.cells))
 
 
-def coverage_of(rows: list[RunRow], initial: dict[int, list]) -> list[dict]:
-    """Where each run's chosen views lie, relative to the initial views of its own layout."""
+def coverage_of(rows: list[RunRow], initial: dict[int, list], halves: dict[int, dict] | None = None) -> list[dict]:
+    """Where each run's chosen views lie, relative to the initial views (and half, where recorded)
+    of its own layout."""
     layouts = {layout: homogeneous(poses) for layout, poses in initial.items()}
-    return [{"trial": r.trial, **view_coverage(r.poses(), layouts[r.layout])} for r in rows]
+    halves = halves or {}
+    return [{"trial": r.trial, **view_coverage(r.poses(), layouts[r.layout], half=halves.get(r.layout))} for r in rows]
 
 
 def paired_with(mine: list[RunRow], theirs: list[RunRow], metric: str) -> tuple[list[float], list[float]]:
@@ -140,10 +149,17 @@ def paired_with(mine: list[RunRow], theirs: list[RunRow], metric: str) -> tuple[
 
 
 def make_cell(
-    rows: list[RunRow], scene: str, engine: str, methods: list[str], trials: int, initial: dict[int, list]
+    rows: list[RunRow],
+    scene: str,
+    engine: str,
+    methods: list[str],
+    trials: int,
+    initial: dict[int, list],
+    halves: dict[int, dict] | None = None,
 ) -> Cell:
     """The (scene, engine) cell of `rows` (the table's rows of that cell); `methods` and `trials`
-    are the plan's, `initial` the scene's initial views per layout (3x4 lists)."""
+    are the plan's, `initial` the scene's initial views per layout (3x4 lists), `halves` the
+    azimuth window each layout's initial views came from, where recorded."""
     by_method: dict[str, MethodResult] = {}
     for method in list(dict.fromkeys([*methods, *(r.method for r in rows)])):
         mine = sorted((r for r in rows if r.method == method), key=lambda r: r.trial)
@@ -155,7 +171,7 @@ def make_cell(
             values,
             [r.trial for r in mine],
             [r.seed for r in mine],
-            coverage=coverage_of(mine, initial),
+            coverage=coverage_of(mine, initial, halves),
             rows=mine,
         )
     compared = [m for m in by_method if m != REFERENCE]
@@ -218,6 +234,7 @@ def collect_study(table: dict) -> Study:
                 methods,
                 trials,
                 initial_poses_by_layout(table["scenes"][scene]),
+                halves_by_layout(table["scenes"][scene]),
             )
             for scene in scenes
             if any(r.engine == engine and r.scene == scene for r in rows)

@@ -366,7 +366,9 @@ def study_blocks(study: Study, figures: dict) -> list[Block]:
             f"seed {BOOTSTRAP_SEED}); won/tied/lost counts the seeds; p: two-sided Wilcoxon signed-rank, "
             "Bonferroni over the methods compared. Coverage: the share of a run's chosen views whose azimuth lies "
             "on the half of the hemisphere opposite to the initial views (centred on the initial views' mean "
-            "azimuth), and the mean angle between the chosen views' directions from the centre."
+            "azimuth; for a scene whose cameras cover a wedge of azimuths, as DTU's, the part of the wedge outside "
+            "the half its initial views were taken from), and the mean angle between the chosen views' directions "
+            "from the centre."
         )
     )
     for cell in study.cells:

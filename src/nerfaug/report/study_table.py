@@ -10,6 +10,7 @@ again). Written as JSON, one run per line, rows sorted by (engine, scene, method
     {"format": "nerfaug-study-table", "version": 1, "plan": {...study.json...},
      "methods": {name: {"label", "description", "definition"}},
      "scenes": {scene: {"initial_poses": [[3x4], ...], "layouts": {"1": [[3x4], ...], ...},
+                        "halves": {"0": {"start_deg", "width_deg"}, ...},
                         "test_views": [name, ...], "views": {"test_rule": ..., ...}}},
      "runs": [{"engine", "scene", "method", "trial", "seed", "psnr", "ssim", "lpips",
                "lpips_status", "chosen", "chosen_poses", "code_version", "fingerprint",
@@ -17,8 +18,9 @@ again). Written as JSON, one run per line, rows sorted by (engine, scene, method
 
 A scene's `initial_poses` are its first (or only) initial layout's; a study with several layouts
 lists the others under `layouts`, and a run started from one of them has its `layout` (absent: 0).
-`test_views` and `views` record which views the runs were scored on and how they were chosen
-(absent in tables of studies run before they were recorded).
+`halves` gives, per layout, the azimuth window its initial views were taken from; `test_views` and
+`views` record which views the runs were scored on and how they were chosen (each absent in tables
+of studies run before it was recorded).
 
 Poses are camera-to-world, the top 3x4 rows, rounded to `POSE_DECIMALS` (what the coverage numbers
 are computed from, so rounding never separates the table from its page).
@@ -162,6 +164,9 @@ def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dic
             if layouts.setdefault(str(row.layout), poses) != poses:
                 raise ReportError(f"{run.folder}: its initial views differ from other runs of scene {row.scene!r}")
             views = dict(run.result.get("views", {}))
+            half = views.get("half")
+            if half is not None and scene.setdefault("halves", {}).setdefault(str(row.layout), half) != half:
+                raise ReportError(f"{run.folder}: its initial half differs from other runs of scene {row.scene!r}")
             if "test" in views:
                 if scene.setdefault("test_views", views.pop("test")) != run.result["views"]["test"]:
                     raise ReportError(f"{run.folder}: its test views differ from other runs of scene {row.scene!r}")
@@ -180,7 +185,14 @@ def scene_record(found: dict) -> dict:
         record.pop("initial_poses")
     if layouts:
         record["layouts"] = dict(sorted(layouts.items()))
+    if "halves" in found:
+        found["halves"] = dict(sorted(found["halves"].items()))
     return record | found
+
+
+def halves_by_layout(scene: dict) -> dict[int, dict]:
+    """A table scene entry's initial half per layout ({"start_deg", "width_deg"}), where recorded."""
+    return {int(k): v for k, v in scene.get("halves", {}).items()}
 
 
 def initial_poses_by_layout(scene: dict) -> dict[int, list]:
@@ -227,10 +239,12 @@ def make_table(
     scenes = dict((previous or {}).get("scenes", {}))
     for scene, record in initial.items():
         merged = dict(scenes.get(scene, {}))
-        merged["layouts"] = {**merged.get("layouts", {}), **record.get("layouts", {})}
-        merged.update({k: v for k, v in record.items() if k != "layouts"})
-        if not merged["layouts"]:
-            del merged["layouts"]
+        for merged_by_layout in ("layouts", "halves"):
+            merged[merged_by_layout] = {**merged.get(merged_by_layout, {}), **record.get(merged_by_layout, {})}
+        merged.update({k: v for k, v in record.items() if k not in ("layouts", "halves")})
+        for merged_by_layout in ("layouts", "halves"):
+            if not merged[merged_by_layout]:
+                del merged[merged_by_layout]
         scenes[scene] = merged
     ordered = sorted(by_key.values(), key=lambda r: r.key)
     methods = list(dict.fromkeys([*plan.get("methods", []), *(r.method for r in ordered)]))
@@ -372,6 +386,7 @@ __all__ = [
     "RunRow",
     "engine_results",
     "homogeneous",
+    "halves_by_layout",
     "initial_poses_by_layout",
     "make_table",
     "read_table",
