@@ -172,3 +172,28 @@ def test_distorted_photos_leave_their_format_undistorted_and_frames_added_later_
     raw = iio.imread(tmp_path / "ns" / "images" / "a.png") / 255.0
     assert np.abs(grown.images[1].numpy() - raw).max() < 1e-6  # read as it is
     assert ns.lens_distortion(*find_split(tmp_path / "ns").read())
+
+
+def test_a_shrunk_distorted_photo_is_the_shrunk_camera_and_keeps_its_alpha(tmp_path):
+    # RGBA: the left of the image plane (x < 0) is opaque pattern, the right transparent (white).
+    lens, keys = RADIAL, {"camera_model": "OPENCV", "k1": -0.21, "k2": 0.05, "k3": 0.01, "p1": 0.003, "p2": -0.002}
+    intrinsics, width, height = (80.0, 78.0, 50.0, 40.0), 100, 80
+    colour = photograph(lens, intrinsics, width, height)
+    # The photo's own rays (solved as `photograph` does) decide the alpha: opaque where x < 0.
+    fx, _, cx, _ = intrinsics
+    u, _ = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    xd = (u - cx) / fx
+    alpha = (xd < 0).astype(np.float64)  # the ray's x has xd's sign but within ~0.002 (tangential terms)
+    write_listing(tmp_path, keys, photo=np.concatenate([colour, alpha[..., None]], -1))
+    full, half = load_dataset(tmp_path), load_dataset(tmp_path, downscale=2)
+    assert half.images.shape[1:3] == (40, 50)
+    for key in ("fx", "fy", "cx", "cy"):  # the shrunk photo's camera is the full photo's, shrunk
+        assert float(getattr(half.cameras, key)[0]) == pytest.approx(float(getattr(full.cameras, key)[0]) / 2, rel=1e-6)
+    cams = half.cameras
+    u2, v2 = np.meshgrid(np.arange(50) + 0.5, np.arange(40) + 0.5)
+    x, y = (u2 - float(cams.cx[0])) / float(cams.fx[0]), (v2 - float(cams.cy[0])) / float(cams.fy[0])
+    image = half.images[0].numpy()
+    opaque, clear = x < -0.08, x > 0.08
+    assert np.abs(image[opaque] - pattern(x, y)[opaque]).mean() < 6e-3
+    assert np.abs(image[clear] - 1.0).max() < 1e-6  # white background, no colour bled in
+    assert float(half.alphas[0].numpy()[opaque].min()) == pytest.approx(1.0)

@@ -170,8 +170,9 @@ def read_image(
         downscale: integer factor; the image is area-averaged (premultiplied) by it.
         mask: a mask image of the same size (`read_mask`) that becomes the alpha, over any
             alpha channel the image has (captured datasets keep masks beside the photos).
-        warp: resamples the full-size image, float32 (h, w, 3 or 4) in [0, 1], to the same size
-            before it is downscaled (a lens's undistortion, `nerfaug.data.lens`).
+        warp: resamples the image once downscaled, float32 (h, w, 3 or 4: colour premultiplied by
+            the alpha, then the alpha) in [0, 1], to the same size (a lens's undistortion,
+            `nerfaug.data.lens`, which is the same at any scale of the intrinsics).
     """
     try:
         array = np.asarray(iio.imread(path))
@@ -214,8 +215,6 @@ def read_image(
         raise DatasetError(
             json_path, f"image {path} has an unsupported pixel type", field=field, value=str(array.dtype)
         )
-    if warp is not None:
-        image = torch.from_numpy(np.clip(warp(image.numpy()), 0.0, 1.0).astype(np.float32))
     alpha = image[..., 3] if image.shape[-1] == 4 else None
     rgb = image[..., :3]
     if alpha is not None:
@@ -229,6 +228,12 @@ def read_image(
         rgb = pool(rgb)
         if alpha is not None:
             alpha = pool(alpha[..., None])[..., 0]
+    if warp is not None:  # after shrinking: d^2 fewer pixels to resample; premultiplied, so no halo
+        stacked = rgb if alpha is None else torch.cat([rgb, alpha[..., None]], dim=-1)
+        warped = torch.from_numpy(np.clip(warp(stacked.numpy()), 0.0, 1.0).astype(np.float32))
+        rgb, alpha = warped[..., :3], (None if alpha is None else warped[..., 3])
+        if alpha is not None:
+            rgb = torch.minimum(rgb, alpha[..., None])  # premultiplied colour never exceeds its alpha
     if alpha is not None:
         rgb = rgb + (1.0 - alpha[..., None]) * background
     return rgb.contiguous(), alpha
@@ -319,8 +324,8 @@ def load_frames(
         intrinsics_of: `intrinsics_of(w, h, i)` gives (camera_angle_x, None) or
             (None, (fx, fy, cx, cy)) for frame i at the file's full resolution.
         masks: one mask file per frame (`read_image`), or None to take alpha from the images.
-        warp_of: `warp_of(i)` resamples frame i's full-size image (`read_image`'s `warp`), or is
-            None; `intrinsics_of` then gives the intrinsics of the resampled image.
+        warp_of: `warp_of(i)` resamples frame i's image (`read_image`'s `warp`), or is None;
+            `intrinsics_of` then gives the intrinsics of the resampled image.
     """
     background = torch.as_tensor(background, dtype=torch.float32)
     poses, paths, names = [], [], []

@@ -122,18 +122,15 @@ def _photo_pixels(lens: Lens, intrinsics, new, u: np.ndarray, v: np.ndarray):
     return xd * fx + cx, yd * fy + cy
 
 
-@lru_cache(maxsize=4)  # frames mostly share one camera; maps are 2 floats a pixel
-def undistortion(lens: Lens, intrinsics: tuple[float, float, float, float], width: int, height: int):
-    """The pinhole camera an undistorted photo is taken with, and where each of its pixels lies in the photo.
+@lru_cache(maxsize=64)
+def undistorted_camera(lens: Lens, intrinsics: tuple[float, float, float, float], width: int, height: int):
+    """The pinhole camera (fx, fy, cx, cy) a photo of this lens is undistorted to.
 
-    The new camera keeps the photo's size and principal point; its focal lengths are the photo's
-    times the smallest s (at least 1/8) for which every pixel lies inside the photo and the
-    distortion does not fold over inside the frame (as OpenCV's "alpha = 0": no pixel made up).
-
-    Returns:
-        new: (fx, fy, cx, cy) of the pinhole camera.
-        rows, cols: float arrays (height, width): each pixel's position in the photo's array
-            (row, column), for `scipy.ndimage.map_coordinates`.
+    It keeps the photo's size and principal point; its focal lengths are the photo's times the
+    smallest s (at least 1/8) for which every pixel lies inside the photo and the distortion does
+    not fold over inside the frame (as OpenCV's "alpha = 0": no pixel made up). s is the same at
+    any image scale (the border's normalised coordinates do not change when the intrinsics and the
+    size scale together), so a shrunk photo's camera is the full photo's, shrunk.
 
     Raises:
         ValueError: no focal length keeps the frame inside the photo.
@@ -149,7 +146,14 @@ def undistortion(lens: Lens, intrinsics: tuple[float, float, float, float], widt
         if _folds(lens, corner / s):
             return False
         pu, pv = _photo_pixels(lens, intrinsics, (fx * s, fy * s, cx, cy), border_u, border_v)
-        return bool(np.all((pu >= -1e-6) & (pu <= width + 1e-6) & (pv >= -1e-6) & (pv <= height + 1e-6)))
+        return bool(
+            np.all(
+                (pu >= -1e-6 * width)
+                & (pu <= width * (1 + 1e-6))
+                & (pv >= -1e-6 * height)
+                & (pv <= height * (1 + 1e-6))
+            )
+        )
 
     low, high = 1.0 / 8, 1.0  # fits(high) holds and fits(low) does not, after these two loops
     while not fits(high):
@@ -162,10 +166,26 @@ def undistortion(lens: Lens, intrinsics: tuple[float, float, float, float], widt
         for _ in range(50):  # bisection to ~1e-15 relative
             middle = 0.5 * (low + high)
             low, high = (low, middle) if fits(middle) else (middle, high)
-    new = (fx * high, fy * high, cx, cy)
+    return fx * high, fy * high, cx, cy
+
+
+@lru_cache(maxsize=2)  # frames mostly share one camera; a map is two float32 a pixel
+def undistortion(lens: Lens, intrinsics: tuple[float, float, float, float], width: int, height: int):
+    """The pinhole camera an undistorted photo is taken with (`undistorted_camera`), and where each
+    of its pixels lies in the photo.
+
+    Returns:
+        new: (fx, fy, cx, cy) of the pinhole camera.
+        rows, cols: float32 arrays (height, width): each pixel's position in the photo's array
+            (row, column), for `scipy.ndimage.map_coordinates`.
+
+    Raises:
+        ValueError: no focal length keeps the frame inside the photo.
+    """
+    new = undistorted_camera(lens, intrinsics, width, height)
     u, v = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
     pu, pv = _photo_pixels(lens, intrinsics, new, u, v)
-    return new, pv - 0.5, pu - 0.5
+    return new, (pv - 0.5).astype(np.float32), (pu - 0.5).astype(np.float32)
 
 
 def _folds(lens: Lens, largest_radius: float) -> bool:
@@ -200,4 +220,4 @@ def undistort(array: np.ndarray, lens: Lens, intrinsics, json_path: Path, field:
     return np.stack(channels, axis=-1), new
 
 
-__all__ = ["DISTORTION_KEYS", "Lens", "lens_of", "undistort", "undistortion"]
+__all__ = ["DISTORTION_KEYS", "Lens", "lens_of", "undistort", "undistorted_camera", "undistortion"]

@@ -19,7 +19,7 @@ from nerfaug.data.frames import (
     require,
     write_image,
 )
-from nerfaug.data.lens import lens_of, undistort, undistortion
+from nerfaug.data.lens import lens_of, undistort, undistorted_camera
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
 
@@ -119,7 +119,7 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
         if lenses[i] is None:
             return pinhole_of(width, height, i)
         try:
-            return None, undistortion(lenses[i], photo_intrinsics(width, height, i), width, height)[0]
+            return None, undistorted_camera(lenses[i], photo_intrinsics(width, height, i), width, height)
         except ValueError as error:
             raise DatasetError(json_path, str(error), field=f"frames[{i}]", value=lenses[i].describe()) from None
 
