@@ -430,7 +430,7 @@ def sign_flip_p(values: Iterable[float]) -> float:
         0.25
     """
     x = _values(values, "sign_flip_p")
-    if not np.any(x):
+    if not np.any(x) or x.size < 2:  # one value: both of its sign patterns reach |mean|, so p = 1
         return 1.0
     exact = x.size <= 16
     result = stats.permutation_test(

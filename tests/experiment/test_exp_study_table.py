@@ -235,3 +235,27 @@ def test_the_real_scene_hypotheses_are_judged_from_the_table_as_planned():
     assert r1(flat)[0] == "open"  # one engine of two complete: not yet decided
     assert r3(flat)[0] == "not supported"  # nerfacto-cpu complete, no gain
     assert hypotheses_of(collect_study(synthetic_table({"ours": 1.0}))) is not REAL_HYPOTHESES
+
+
+def test_a_one_trial_study_of_a_users_own_scene_has_its_page_without_the_projects_plan(tmp_path):
+    """One trial per method is a sign-flip test of one value (p = 1, scipy refuses n < 2), and a
+    scene of the user's own is in neither of this project's plans: no hypotheses of them, no
+    planned scenes named as not run."""
+    from nerfaug.report.study_hypotheses import hypotheses_of
+    from nerfaug.report.study_page import write_study
+    from nerfaug.statistics import sign_flip_p
+
+    assert sign_flip_p([0.7]) == 1.0
+    near = poses_at([10, 20, 30])
+    rows = [
+        RunRow(ENGINE, "my_capture", method, 0, 0, psnr, 0.8, 0.2, "ok", [0, 1, 2], near, "v", "f")
+        for method, psnr in (("uniform", 18.0), ("ours", 19.0))
+    ]
+    plan = {"engines": [ENGINE], "scenes": ["my_capture"], "methods": ["uniform", "ours"], "trials": 1}
+    initial = rounded_poses(half_hemisphere_poses(6).numpy())
+    table = make_table(plan, rows, {"my_capture": {"initial_poses": initial}})
+    study = collect_study(table)
+    assert hypotheses_of(study) == ()
+    text = write_study(tmp_path, table)[0].read_text()
+    assert "my_capture" in text and "+1.00" in text
+    assert "planned hypotheses" not in text and "moldGoldCape" not in text and "maryRose" not in text

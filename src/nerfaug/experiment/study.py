@@ -235,8 +235,12 @@ def with_design(record: dict, out: Path) -> dict:
     device = record.get("config", {}).get("device", "cpu")
     engines, _ = default_engines("cuda" if device == "cuda" else "cpu")
     ran = list(record.get("scenes", []))
-    # A study of any scene beyond the procedural three is the real-scene study: its planned scenes.
-    planned = PROCEDURAL_SCENES if set(ran) <= set(PROCEDURAL_SCENES) else REAL_STUDY_SCENES
+    # The procedural or the real-scene study: its planned scenes (those not run yet are named); a
+    # study of other scenes (a user's own) plans just the scenes it ran.
+    if set(ran) <= set(PROCEDURAL_SCENES):
+        planned = PROCEDURAL_SCENES
+    else:
+        planned = REAL_STUDY_SCENES if set(ran) <= set(REAL_STUDY_SCENES) else ()
     design = {"engines": engines, "scenes": list(dict.fromkeys([*planned, *ran]))}
     record = {**record, "design": record.get("design") or design}
     settings = dict(record.get("engine_settings", {}))

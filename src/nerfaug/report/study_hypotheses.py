@@ -244,13 +244,18 @@ REAL_HYPOTHESES = (
 
 
 def hypotheses_of(study: Study) -> tuple:
-    """The planned hypotheses of this study: the real-scene plan's when it ran any scene beyond
-    the procedural three, else the procedural plan's."""
+    """The planned hypotheses of this study: the procedural plan's when it ran only the procedural
+    three scenes, the real-scene plan's when it ran only that plan's scenes, else none (a study of
+    a user's own scenes has no plan of this project's to judge)."""
     scenes = {c.scene for c in study.cells}
-    return HYPOTHESES if scenes <= set(PLAN_SCENES) else REAL_HYPOTHESES
+    if scenes <= set(PLAN_SCENES):
+        return HYPOTHESES
+    return REAL_HYPOTHESES if scenes <= {*REAL_SCENES, HELD_BACK} else ()
 
 
 def hypotheses_blocks(study: Study) -> list[Block]:
+    if not hypotheses_of(study):
+        return []
     rows = []
     for name, text, judge in hypotheses_of(study):
         verdict, evidence = judge(study)
