@@ -259,3 +259,8 @@ def test_a_one_trial_study_of_a_users_own_scene_has_its_page_without_the_project
     text = write_study(tmp_path, table)[0].read_text()
     assert "my_capture" in text and "+1.00" in text
     assert "planned hypotheses" not in text and "moldGoldCape" not in text and "maryRose" not in text
+    # Where every method loses on average, the page does not call a loss the "largest gain".
+    rows[1] = RunRow(ENGINE, "my_capture", "ours", 0, 0, 17.0, 0.8, 0.2, "ok", [0, 1, 2], near, "v", "f")
+    worse = make_table(plan, rows, {"my_capture": {"initial_poses": initial}})
+    text = write_study(tmp_path / "worse", worse)[0].read_text()
+    assert "none gains on average (the closest is ours, -1.00 dB" in text and "the largest mean gain is" not in text

@@ -142,9 +142,14 @@ def _which_method(study: Study) -> list[Block]:
             lines.append(
                 f"engine {engine} (background {background(study, engine)}): no method beats uniform across its scenes "
                 f"(one value per seed, p x "
-                f"{entry['n_comparisons']} < {ALPHA:g}); the largest mean gain is {best}'s, "
-                f"{entry['difference']:+.2f} dB "
-                f"({entry['wins']} of {entry['n_seeds']} seeds)."
+                f"{entry['n_comparisons']} < {ALPHA:g}); "
+                + (
+                    f"the largest mean gain is {best}'s, {entry['difference']:+.2f} dB "
+                    f"({entry['wins']} of {entry['n_seeds']} seeds)."
+                    if entry["difference"] > 0
+                    else f"none gains on average (the closest is {best}, {entry['difference']:+.2f} dB, better on "
+                    f"{entry['wins']} of {entry['n_seeds']} seeds)."
+                )
             )
             lines[-1] += (
                 " Uniform selection is as good a choice here."
