@@ -51,8 +51,9 @@ class Run:
         preset: the experiment's protocol, which the other options change: quick (lego at 100x100
             on the CPU, minutes), paper (Sec. IV: three scenes, 10 trials, 10k steps), ablation
             (Tables I and II), tiny (seconds; a smoke test).
-        data: a Blender-format dataset folder to run on (its train split is the candidate pool,
-            its test split the evaluation); shorthand for --scenes DATA.
+        data: a dataset folder to run on: Blender format (its train split is the candidate pool,
+            its test split the evaluation) or a captured set (nerfstudio, LLFF, IDR/DTU: split
+            into test, initial and candidate views by direction); shorthand for --scenes DATA.
         backend: local (this machine) or ray (one task per run; --address joins a cluster).
         workers: concurrent runs (local backend) or Ray CPUs to start (local Ray).
         address: the Ray cluster to join.

@@ -67,8 +67,9 @@ def train(
     existing session until step N: give a larger N to train further.
 
     Args:
-        path: a Blender (transforms_{split}.json) or nerfstudio (transforms.json) dataset folder,
-            or an existing run folder.
+        path: a dataset folder (Blender: transforms_{split}.json; nerfstudio: transforms.json, lens
+            distortion undone; LLFF: poses_bounds.npy; IDR/DTU: cameras_sphere.npz), or an
+            existing run folder.
         out: the run folder to create (or, holding a session made by the same command, to resume).
         steps: train until the session's step count reaches this.
         split: the Blender split holding the captured views (a dataset `nerfaug scene render`

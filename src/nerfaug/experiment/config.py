@@ -45,7 +45,8 @@ class ExperimentConfig:
     """
 
     scenes: Annotated[tuple[str, ...], tyro.conf.arg(metavar="SCENE [SCENE ...]")] = ("lego",)
-    """built-in scene names (rendered with Blender) or Blender-format dataset folders."""
+    """built-in scene names (rendered with Blender) or dataset folders (Blender format, or captured
+    sets: nerfstudio, LLFF, IDR/DTU)."""
     methods: Annotated[tuple[str, ...], tyro.conf.arg(metavar="METHOD [METHOD ...]")] = MAIN_COMPARISON
     """selection methods (see `nerfaug methods`); the first is compared with the others."""
     trials: int = 3
