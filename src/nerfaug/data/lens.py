@@ -105,7 +105,7 @@ def lens_of(get, field, json_path: Path) -> Lens | None:
         raise DatasetError(
             json_path,
             "k4 under the OPENCV model is read differently by nerfstudio (a radial term) and OpenCV "
-            "(a rational one); give the photos undistorted, or as FULL_OPENCV-free k1, k2, k3, p1, p2",
+            "(a rational one); give the photos undistorted, or a calibration without k4 (k1, k2, k3, p1, p2)",
             field=field("k4"),
             value=get("k4"),
         )
