@@ -237,6 +237,24 @@ def test_the_real_scene_hypotheses_are_judged_from_the_table_as_planned():
     assert hypotheses_of(collect_study(synthetic_table({"ours": 1.0}))) is not REAL_HYPOTHESES
 
 
+def test_a_regime_part_way_through_decides_no_real_scene_hypothesis():
+    """The plan tests the mean over the four scenes: one complete scene whose ten seeds all favour
+    ours (significant on its own) or reverse the paper's ranking leaves R1-R4 open."""
+    from nerfaug.report.study_hypotheses import r1, r1_winners, r2, r3, r4
+
+    for engine in ("nerfacto-cpu", "nerfacto-cpu-last-sample"):
+        offsets = {"ours-batch-sharp": 1.0, "ours": -1.0, "entropy-sampling": 0.0, "fisherrf-sampling": 1.0}
+        table = real_table(offsets, engine=engine)
+        whole = collect_study(table)
+        assert r1(whole)[0] == "supported" and r2(whole)[0] == "contradicted"
+        table["runs"] = [r for r in table["runs"] if r["scene"] == "mic"]
+        part = collect_study(table)
+        assert "ours-batch-sharp +1.06 dB (10/10 seeds, p x 4 = 0.008)" in r1(part)[1]  # mic alone: significant ...
+        assert r1_winners(part) == {"nerfacto-cpu": [], "nerfacto-cpu-last-sample": []}
+        assert r1(part)[0] == "open" and r2(part)[0] == "open" and r3(part)[0] == "open"  # ... decides nothing
+        assert r4(part)[0] == "open"
+
+
 def test_a_one_trial_study_of_a_users_own_scene_has_its_page_without_the_projects_plan(tmp_path):
     """One trial per method is a sign-flip test of one value (p = 1, scipy refuses n < 2), and a
     scene of the user's own is in neither of this project's plans: no hypotheses of them, no
