@@ -255,6 +255,34 @@ def test_a_regime_part_way_through_decides_no_real_scene_hypothesis():
         assert r4(part)[0] == "open"
 
 
+def test_the_held_back_scene_is_judged_on_its_own_never_in_the_mean_across_scenes(tmp_path):
+    """The plan's regime test is the mean over its four scenes; the held-back scene replicates it.
+    Its runs (ours far ahead there) move neither the regime nor the advice's scenes."""
+    from nerfaug.experiment.study import with_design
+
+    engine = "nerfacto-cpu"
+
+    four = real_table({"ours": 0.5})
+    held = real_table({"ours": 5.0})
+    four["runs"] += [dict(run, scene="moldGoldCape") for run in held["runs"] if run["scene"] == "mic"]
+    four["scenes"]["moldGoldCape"] = four["scenes"]["mic"]
+    four["plan"]["scenes"].append("moldGoldCape")
+    record = {"scenes": ["mic", "moldGoldCape"], "engines": [], "design": {"engines": [engine], "scenes": ["mic"]}}
+    four["plan"]["design"] = with_design(record, tmp_path)["design"]
+    assert four["plan"]["design"] == {"engines": [engine], "scenes": ["mic"], "held_back": ["moldGoldCape"]}
+    study = collect_study(four)
+    assert study.held_back == ("moldGoldCape",)
+    regime = study.regimes[engine]["ours"]
+    assert regime["n_cells"] == 4 and regime["difference"] < 1.0  # the four scenes' +0.5, not +5 pulled in
+    text = to_markdown(study_blocks(study, {}), tmp_path)
+    assert "moldGoldCape: held back" in text and "moldGoldCape not run" not in text
+    pooled = collect_study({**four, "plan": {**four["plan"], "design": {"engines": [engine], "scenes": ["mic"]}}})
+    assert pooled.regimes[engine]["ours"]["n_cells"] == 5  # a study without a held-back scene pools all
+    # The procedural study and a user's own scenes hold nothing back.
+    for scenes in (["lego"], ["my_capture"]):
+        assert "held_back" not in with_design({"scenes": scenes, "engines": []}, tmp_path)["design"]
+
+
 def test_a_one_trial_study_of_a_users_own_scene_has_its_page_without_the_projects_plan(tmp_path):
     """One trial per method is a sign-flip test of one value (p = 1, scipy refuses n < 2), and a
     scene of the user's own is in neither of this project's plans: no hypotheses of them, no

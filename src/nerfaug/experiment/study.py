@@ -190,6 +190,8 @@ mesh, and real captures are given by name or folder, as the real-scene study doe
 REAL_STUDY_SCENES = ("mic", "maryRose", "dtu_scan24", "cow", "moldGoldCape")
 """The real-scene study's planned scenes (docs/study-plan.md; the last is held back for
 replication; `nerfaug.report.study_hypotheses` judges its hypotheses on the same names)."""
+REAL_STUDY_HELD_BACK = ("moldGoldCape",)
+"""The real-scene study's replication scene: judged per cell, kept out of the means across scenes."""
 
 
 def run_study(
@@ -242,7 +244,11 @@ def with_design(record: dict, out: Path) -> dict:
     else:
         planned = REAL_STUDY_SCENES if set(ran) <= set(REAL_STUDY_SCENES) else ()
     design = {"engines": engines, "scenes": list(dict.fromkeys([*planned, *ran]))}
-    record = {**record, "design": record.get("design") or design}
+    if planned == REAL_STUDY_SCENES:
+        design["held_back"] = list(REAL_STUDY_HELD_BACK)
+    # A design recorded by an earlier sitting stands; one recorded before held-back scenes were
+    # part of it gains them (the plan named its held-back scene before any run).
+    record = {**record, "design": {**design, **(record.get("design") or {})}}
     settings = dict(record.get("engine_settings", {}))
     for engine in record.get("engines", []):
         try:

@@ -115,6 +115,8 @@ class Study:
     """engine -> method -> `seed_level_comparison` of its PSNR differences to uniform."""
     missing_cells: list[str] = field(default_factory=list)
     """"scene, engine" of the study's design (the plan's "design") an engine run has no runs of."""
+    held_back: tuple[str, ...] = ()
+    """Scenes the design holds back for replication: judged per cell, outside the regimes."""
 
     @property
     def plan(self) -> dict:
@@ -224,6 +226,7 @@ def collect_study(table: dict) -> Study:
     not_run.update({e: "not run yet (no runs in the table)" for e in planned if e not in ran})
     scenes = list(dict.fromkeys([*plan.get("scenes", []), *(r.scene for r in rows)]))
     methods, trials = list(plan.get("methods", [])), int(plan.get("trials", 0))
+    held_back = tuple(design.get("held_back", []))
     cells, regimes = [], {}
     for engine in engines:
         mine = [
@@ -241,8 +244,10 @@ def collect_study(table: dict) -> Study:
         ]
         cells += mine
         # Over complete cells only: the seeds must be common to every cell, so one cell part-way
-        # through would cut every scene down to its few seeds.
-        regimes[engine] = regime_comparisons([c for c in mine if c.complete] or mine)
+        # through would cut every scene down to its few seeds. A held-back scene replicates what
+        # the others found; it is not part of their mean.
+        pooled = [c for c in mine if c.scene not in held_back]
+        regimes[engine] = regime_comparisons([c for c in pooled if c.complete] or pooled)
     results = {engine: engine_results(table, engine) for engine in engines}
     design_scenes = list(dict.fromkeys([*design.get("scenes", []), *scenes]))
     missing_cells = [
@@ -251,7 +256,7 @@ def collect_study(table: dict) -> Study:
         for scene in design_scenes
         if not any(c.engine == engine and c.scene == scene for c in cells)
     ]
-    return Study(table, cells, not_run, results, regimes, missing_cells)
+    return Study(table, cells, not_run, results, regimes, missing_cells, held_back)
 
 
 __all__ = ["Cell", "MethodResult", "Study", "collect_study", "make_cell", "regime_comparisons"]

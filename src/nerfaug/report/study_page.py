@@ -107,13 +107,17 @@ def _which_method(study: Study) -> list[Block]:
     rows, lines = [], []
     for engine in study.engines:
         regime = study.regimes.get(engine, {})
-        cells = [c for c in study.cells if c.engine == engine]
+        cells = [c for c in study.cells if c.engine == engine and c.scene not in study.held_back]
         if not regime:
             continue
         best, entry = max(regime.items(), key=lambda kv: kv[1]["difference"])
         better = [m for m, e in regime.items() if e["significant"] and e["better"]]
         worse = [m for m, e in regime.items() if e["significant"] and not e["better"]]
-        not_yet = [m.split(",")[0] for m in study.missing_cells if m.endswith(f", {engine}")]
+        not_yet = [
+            scene
+            for m in study.missing_cells
+            if m.endswith(f", {engine}") and (scene := m.split(",")[0]) not in study.held_back
+        ]
         complete = all(c.complete for c in cells) and not not_yet
         used = [c.scene for c in cells if c.complete] or [c.scene for c in cells]  # as the regime test
         partial = [c.scene for c in cells if not c.complete]
@@ -174,6 +178,11 @@ def _which_method(study: Study) -> list[Block]:
         "Bonferroni over the methods compared. gain: the mean over seeds (dB); seeds: seeds whose mean favours "
         "the method."
     )
+    if study.held_back:
+        note += (
+            f" {', '.join(study.held_back)}: held back to replicate what the other scenes find; judged per scene "
+            "(the table below), never part of this mean."
+        )
     table = Table(
         [
             "engine",
@@ -258,7 +267,8 @@ def _regime_section(study: Study, figures: dict) -> list[Block]:
         Paragraph(
             "Trial k of every cell shares its seed (hence uniform's picks and the NeRF's initialisation), so the "
             "cells' pairs are not independent units. Per engine, each seed's paired PSNR differences are averaged "
-            "over the scenes whose cells are complete (over every cell while none is); the sign-flip test "
+            "over the scenes whose cells are complete (over every cell while none is; a scene held back for "
+            "replication never); the sign-flip test "
             "(exact, every sign pattern of the per-seed values) and the "
             "Wilcoxon signed-rank test on the same values are shown, each Bonferroni-corrected over the methods."
         ),
