@@ -166,7 +166,18 @@ def _draw(
     reach = max([float(np.linalg.norm(points, axis=-1).max()) for points in drawn if len(points)], default=0.0)
     limit = max(1.18, reach + 0.1)
     if reach > 1.0 + 1e-6:
-        ax.text(0.0, -limit, "beyond the rim: below the horizon", ha="center", va="bottom", fontsize=6, color="0.3")
+        # In axes units: side-by-side panels later share the widest panel's limits, and the note
+        # must stay at the bottom of each.
+        ax.text(
+            0.5,
+            0.0,
+            "beyond the rim: below the horizon",
+            ha="center",
+            va="bottom",
+            fontsize=6,
+            color="0.3",
+            transform=ax.transAxes,
+        )
     ax.set_xlim(-limit, limit)
     ax.set_ylim(-limit, limit)
     ax.set_aspect("equal")
