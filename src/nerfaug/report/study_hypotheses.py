@@ -123,9 +123,12 @@ RANKING = (("ours", "entropy-sampling"), ("entropy-sampling", "fisherrf-sampling
 
 
 def _real_cells(study: Study, engine: str) -> tuple[list, bool]:
-    """The engine's cells of the four planned real scenes, and whether all four are complete."""
+    """The engine's cells of the four planned real scenes that the evidence is computed on (the
+    complete ones, as the page's regime tables; every one while none is), and whether all four
+    are complete."""
     cells = [c for c in study.cells if c.engine == engine and c.scene in REAL_SCENES]
-    return cells, len(cells) == len(REAL_SCENES) and all(c.complete for c in cells)
+    done = len(cells) == len(REAL_SCENES) and all(c.complete for c in cells)
+    return [c for c in cells if c.complete] or cells, done
 
 
 def _says(method: str, entry: dict | None) -> str:
