@@ -11,6 +11,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "results.md"
 TABLE = ROOT / "docs" / "results" / "study-table.json"
 FISHER = ROOT / "docs" / "results" / "fisher-stability.json"
+REAL_PAGE = ROOT / "docs" / "results-real.md"
+REAL_TABLE = ROOT / "docs" / "results" / "real-study-table.json"
 NUMBER = re.compile(r"[-+]?\d+\.\d+")
 
 pytestmark = pytest.mark.skipif(not TABLE.is_file(), reason="no committed study table yet")
@@ -38,10 +40,6 @@ def test_the_committed_page_is_what_the_committed_table_gives(tmp_path):
     page = write_results_doc(read_table(TABLE), TABLE.relative_to(ROOT), tmp_path / "results.md")
     generated, _ = split_page(PAGE.read_text())
     assert without_provenance(page.read_text()).split() == without_provenance(generated).split()
-
-
-REAL_PAGE = ROOT / "docs" / "results-real.md"
-REAL_TABLE = ROOT / "docs" / "results" / "real-study-table.json"
 
 
 @pytest.mark.slow
@@ -110,7 +108,7 @@ def test_the_user_facing_advice_says_what_it_rests_on(where):
     from nerfaug.report.study import collect_study
     from nerfaug.report.study_table import read_table
 
-    real = collect_study(read_table(ROOT / "docs" / "results" / "real-study-table.json"))
+    real = collect_study(read_table(REAL_TABLE))
     text = " ".join(findings(where).lower().split())
     if not all(cell.complete for cell in real.cells) or len(real.cells) < 8:
         assert "procedural stand-ins" in text and "measured on stand-ins only" in text, where
@@ -125,7 +123,7 @@ def test_the_user_facing_texts_state_what_the_real_scene_study_found_per_complet
     from nerfaug.report.study_hypotheses import REAL_ENGINES, REAL_SCENES
     from nerfaug.report.study_table import read_table
 
-    real = collect_study(read_table(ROOT / "docs" / "results" / "real-study-table.json"))
+    real = collect_study(read_table(REAL_TABLE))
     text = " ".join(findings(where).lower().split())
     for engine in REAL_ENGINES:
         cells = [c for c in real.cells if c.engine == engine and c.scene in REAL_SCENES]
