@@ -144,6 +144,7 @@ def test_rows_of_a_changed_configuration_replace_the_old_rows_of_that_method():
         (lambda t: t["runs"].append(dict(t["runs"][0])), "a second row for nerfacto-cpu-last-sample/chair/ours/0"),
         (lambda t: t["runs"][0].update(scene="kitchen"), "runs[0].scene: 'kitchen' has no initial views"),
         (lambda t: t.update(runs={}), "runs: missing or not a list"),
+        (lambda t: t["runs"][0].update(uniform_fill="6"), "runs[0].uniform_fill: '6' is not a int"),
     ],
 )
 def test_a_damaged_table_is_refused_naming_the_field(tmp_path, change, message):
@@ -310,3 +311,43 @@ def test_a_one_trial_study_of_a_users_own_scene_has_its_page_without_the_project
     worse = make_table(plan, rows, {"my_capture": {"initial_poses": initial}})
     text = write_study(tmp_path / "worse", worse)[0].read_text()
     assert "none gains on average (the closest is ours, -1.00 dB" in text and "the largest mean gain is" not in text
+
+
+def test_runs_whose_views_were_partly_drawn_uniformly_are_kept_and_named_on_the_page(tmp_path):
+    """A sampler that found fewer positive scores than views (a NeRF that renders nothing) drew the
+    rest uniformly: the table keeps how many, and the page says which runs."""
+    table = synthetic_table({"ours": 1.0, "fisherrf": -2.0})
+    filled = [r for r in table["runs"] if r["method"] == "fisherrf" and r["scene"] == "chair"][:3]
+    for run, views in zip(filled, (6, 6, 2)):
+        run["uniform_fill"] = views
+    back = read_table(write_table(tmp_path / "t.json", table))
+    assert [r.uniform_fill for r in table_rows(back) if r.method == "fisherrf" and r.scene == "chair"][:4] == [
+        6,
+        6,
+        2,
+        0,
+    ]
+    assert sum("uniform_fill" in r for r in back["runs"]) == 3  # 0 stays implicit
+    text = to_markdown(study_blocks(collect_study(back), {}), tmp_path)
+    assert f"drew the others uniformly: 3 (fisherrf on chair, {ENGINE}: 3 runs, 14 views)" in text
+    plain = to_markdown(study_blocks(collect_study(synthetic_table({"ours": 1.0})), {}), tmp_path)
+    assert "uniformly:" not in plain
+
+
+def test_a_run_folders_row_carries_its_selections_uniform_fill(tmp_path):
+    from nerfaug.experiment.runfolder import write_selection
+    from nerfaug.report.collect import Run
+    from nerfaug.report.study_table import row_of
+    from nerfaug.selection import Selection
+
+    pool = half_hemisphere_poses(8)
+    result = {"seed": 3, "metrics": {"psnr": 14.0}, "code_version": "v", "fingerprint": "f", "chosen": [1, 4]}
+    rows = []
+    for name, fill in (("filled", 2), ("chosen", 0)):
+        folder = tmp_path / name
+        folder.mkdir()
+        selection = Selection(torch.tensor([1, 4]), torch.zeros(8), {}, "fisherrf-sampling", fill)
+        write_selection(folder, selection.to_dict(), ["a", "b"], pool, pool[:2])
+        row, _ = row_of(ENGINE, Run("mic", "fisherrf-sampling", 3, folder, result))
+        rows.append(row)
+    assert [r.uniform_fill for r in rows] == [2, 0]

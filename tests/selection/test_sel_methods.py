@@ -1,6 +1,7 @@
 import dataclasses
 import json
 import math
+import warnings
 
 import pytest
 import torch
@@ -17,6 +18,7 @@ from nerfaug.selection import (
     hemisphere_candidates,
     select_views,
 )
+from nerfaug.selection.selectors import UniformFill
 
 EXPECTED = {
     "ours",
@@ -403,3 +405,34 @@ def test_families_name_registered_methods_and_experiments_share_them():
     assert any(METHODS[m].selector == "batch-sampling" for m in STUDY_METHODS)
     assert experiment_config.TABLE_I is TABLE_I and experiment_config.STUDY_METHODS is STUDY_METHODS
     assert len({method_label(m) for m in METHODS}) == len(METHODS)  # labels tell methods apart
+
+
+def seed_one() -> torch.Generator:
+    return torch.Generator().manual_seed(1)
+
+
+def test_a_sampler_with_too_few_positive_scores_fills_uniformly_and_says_so(scene):
+    """A NeRF that renders nothing gives FisherRF's gain 0 to every candidate: the sampling
+    variant still returns n distinct views (drawn uniformly), warns, and records how many."""
+    _, train, candidates = scene
+    empty = BlobNerf()
+    with torch.no_grad():
+        empty.log_density.fill_(-math.inf)  # density 0 everywhere: no gradient, no information
+    with pytest.warns(UniformFill, match="only 0 of 60 eligible candidates have a positive score"):
+        selection = select_views(
+            "fisherrf-sampling", empty, train, candidates, 4, torch.Generator().manual_seed(1), FAST
+        )
+    assert (selection.scores == 0).all()
+    assert selection.uniform_fill == 4 and len(set(selection.indices.tolist())) == 4
+    record = selection.to_dict()
+    assert record["uniform_fill"] == 4 and Selection.from_dict(json.loads(json.dumps(record))).uniform_fill == 4
+
+
+def test_a_sampler_with_enough_positive_scores_records_no_fill(scene):
+    model, train, candidates = scene
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        selection = select_views(
+            "fisherrf-sampling", model, train, candidates, 4, torch.Generator().manual_seed(1), FAST
+        )
+    assert selection.uniform_fill == 0 and "uniform_fill" not in selection.to_dict()

@@ -11,6 +11,7 @@ from nerfaug.hemisphere import pose_from_angles
 from nerfaug.selection.selectors import (
     greedy_farthest,
     rejection_sample,
+    sample_then_fill,
     select_top_k,
     select_uniform,
 )
@@ -125,3 +126,34 @@ def test_greedy_farthest_spreads_views_away_from_training_and_each_other():
     assert chosen[0] == 6  # opposite the training view
     assert sorted(chosen[1:]) == [3, 9]  # then halfway between
     assert greedy_farthest(candidates, training[:0], 1).tolist() == [0]
+
+
+def test_sample_then_fill_takes_every_positive_score_first_then_the_rest_uniformly():
+    """The limit of the paper's sampler on scores + eps: positives first, in score-weighted order,
+    then uniform among the zero scores (checked against the expected frequencies with scipy)."""
+    scores = torch.tensor([0.0, 3.0, 0.0, 0.0, 1.0, 0.0, 0.0])
+    n = 4000
+    firsts, fills = Counter(), Counter()
+    for seed in range(n):
+        chosen = sample_then_fill(scores, 4, torch.Generator().manual_seed(seed)).tolist()
+        assert len(set(chosen)) == 4 and set(chosen[:2]) == {1, 4}
+        firsts[chosen[0]] += 1
+        fills.update(chosen[2:])
+    assert stats.binomtest(firsts[1], n, 0.75).pvalue > 0.01  # 3 / (3 + 1)
+    zeros = [0, 2, 3, 5, 6]
+    assert set(fills) == set(zeros)
+    assert stats.chisquare([fills[i] for i in zeros]).pvalue > 0.01
+
+
+def test_sample_then_fill_keeps_to_the_eligible_candidates_and_refuses_what_it_cannot_do():
+    scores = torch.tensor([0.0, 2.0, 0.0, 0.0, 0.0])
+    eligible = torch.tensor([True, False, True, True, False])
+    for seed in range(50):
+        chosen = sample_then_fill(scores, 3, torch.Generator().manual_seed(seed), eligible).tolist()
+        assert sorted(chosen) == [0, 2, 3]  # 1 is positive but not eligible; 4 is not eligible
+    with pytest.raises(ValueError, match="only 3 of 5 candidates are eligible"):
+        sample_then_fill(scores, 4, None, eligible)
+    with pytest.raises(ValueError, match="sample 1 of them with rejection_sample"):
+        sample_then_fill(scores, 1)
+    a = sample_then_fill(torch.zeros(6), 3, torch.Generator().manual_seed(5))
+    assert torch.equal(a, sample_then_fill(torch.zeros(6), 3, torch.Generator().manual_seed(5)))

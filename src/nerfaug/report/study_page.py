@@ -87,7 +87,29 @@ def _header(study: Study) -> list[Block]:
         ),
         f"runs in the table: {len(study.table['runs'])}",
     ]
+    if filled := _uniform_fill_text(study):
+        items.append(filled)
     return [Bullets(items)]
+
+
+def _uniform_fill_text(study: Study) -> str:
+    """Which runs' samplers found fewer positive scores than views to add (the model gave the
+    candidates no information, e.g. a NeRF that renders nothing) and drew the rest uniformly;
+    "" when none did."""
+    filled: dict[tuple[str, str, str], list[int]] = {}
+    for run in study.table["runs"]:
+        if run.get("uniform_fill", 0):
+            filled.setdefault((run["method"], run["scene"], run["engine"]), []).append(run["uniform_fill"])
+    if not filled:
+        return ""
+    parts = [
+        f"{method} on {scene}, {engine}: {len(views)} runs, {sum(views)} views"
+        for (method, scene, engine), views in sorted(filled.items())
+    ]
+    return (
+        f"runs whose method found fewer candidates with a positive score than views to add, and drew the "
+        f"others uniformly: {sum(len(v) for v in filled.values())} ({'; '.join(parts)})"
+    )
 
 
 def _pool_text(study: Study, config: dict) -> str:

@@ -14,10 +14,12 @@ again). Written as JSON, one run per line, rows sorted by (engine, scene, method
                         "test_views": [name, ...], "views": {"test_rule": ..., ...}}},
      "runs": [{"engine", "scene", "method", "trial", "seed", "psnr", "ssim", "lpips",
                "lpips_status", "chosen", "chosen_poses", "code_version", "fingerprint",
-               "layout"?}, ...]}
+               "layout"?, "uniform_fill"?}, ...]}
 
 A scene's `initial_poses` are its first (or only) initial layout's; a study with several layouts
 lists the others under `layouts`, and a run started from one of them has its `layout` (absent: 0).
+A run whose sampler found fewer positive scores than views to choose has `uniform_fill`: how many
+of its views were drawn uniformly (absent: 0).
 `halves` gives, per layout, the azimuth window its initial views were taken from; `test_views` and
 `views` record which views the runs were scored on and how they were chosen (each absent in tables
 of studies run before it was recorded).
@@ -57,7 +59,7 @@ ROW_FIELDS = (
     "code_version",
     "fingerprint",
 )
-OPTIONAL_ROW_FIELDS = ("layout",)
+OPTIONAL_ROW_FIELDS = ("layout", "uniform_fill")
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,7 @@ class RunRow:
     code_version: str
     fingerprint: str
     layout: int = 0
+    uniform_fill: int = 0
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -137,6 +140,7 @@ def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
         code_version=str(result["code_version"]),
         fingerprint=str(result["fingerprint"]),
         layout=int(result.get("layout", 0)),
+        uniform_fill=int(selection.raw.get("uniform_fill", 0)),
     )
     return row, rounded_poses(selection.train_poses)
 
@@ -204,11 +208,12 @@ def initial_poses_by_layout(scene: dict) -> dict[int, list]:
 
 
 def row_dict(row: RunRow) -> dict:
-    """A row as the table stores it: `layout` only where it is not 0, so tables of one layout
-    read as they always have."""
+    """A row as the table stores it: `layout` and `uniform_fill` only where they are not 0, so
+    tables of one layout, whose methods always chose by their scores, read as they always have."""
     record = asdict(row)
-    if record["layout"] == 0:
-        del record["layout"]
+    for optional in OPTIONAL_ROW_FIELDS:
+        if record[optional] == 0:
+            del record[optional]
     return record
 
 
@@ -305,6 +310,7 @@ def _check_row(path: Path, index: int, run) -> RunRow:
         ("trial", int),
         ("seed", int),
         ("layout", int),
+        ("uniform_fill", int),
     ):
         if name not in run:  # an optional field
             continue
