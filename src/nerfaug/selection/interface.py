@@ -123,6 +123,8 @@ class Estimate:
         uncertainty: Tensor with shape (n_candidates,), the scores before a sampler sharpened
             them to `scores`; None when they were not.
         exponent: the exponent 1/T that sharpened them; None when they were not.
+        uniform_fill: how many of the chosen views a sampler drew uniformly because fewer
+            candidates than asked for had a positive score (`selectors.sample_then_fill`).
     """
 
     scores: Tensor
@@ -131,6 +133,7 @@ class Estimate:
     min_angle: Tensor | None = None
     uncertainty: Tensor | None = None
     exponent: float | None = None
+    uniform_fill: int = 0
 
     def components(self) -> dict[str, Tensor]:
         """The named terms behind `scores`, each a Tensor with shape (n_candidates,), as saved with

@@ -28,12 +28,15 @@ class Selection:
         components: name -> Tensor with shape (n_candidates,), the terms behind `scores`
             (e.g. "entropy", "distance" raw, before normalisation).
         method: the method's name.
+        uniform_fill: how many of the chosen views were drawn uniformly because fewer candidates
+            than asked for had a positive score (0: all chosen by the method's scores).
     """
 
     indices: Tensor
     scores: Tensor
     components: dict[str, Tensor] = field(default_factory=dict)
     method: str = ""
+    uniform_fill: int = 0
 
     def to_dict(self) -> dict:
         """Plain lists and numbers (JSON-serialisable)."""
@@ -42,7 +45,7 @@ class Selection:
             "indices": [int(i) for i in self.indices.tolist()],
             "scores": [float(s) for s in self.scores.tolist()],
             "components": {k: [float(x) for x in v.tolist()] for k, v in self.components.items()},
-        }
+        } | ({"uniform_fill": self.uniform_fill} if self.uniform_fill else {})
 
     @classmethod
     def from_dict(cls, data: dict) -> Selection:
@@ -51,6 +54,7 @@ class Selection:
             torch.tensor(data["scores"]),
             {k: torch.tensor(v) for k, v in data.get("components", {}).items()},
             data.get("method", ""),
+            int(data.get("uniform_fill", 0)),
         )
 
 
@@ -124,4 +128,4 @@ def select_views(
     else:
         indices, estimate = selector(request, estimate)
     components = {k: v.detach().cpu() for k, v in estimate.components().items()}
-    return Selection(indices.cpu(), estimate.scores.detach().cpu(), components, spec.name)
+    return Selection(indices.cpu(), estimate.scores.detach().cpu(), components, spec.name, estimate.uniform_fill)

@@ -4,6 +4,7 @@
 - `select_top_k`: the k highest scores, next-best-view style ("NBV").
 - `rejection_sample`: the paper's sampler (Sec. III-C): draw a candidate uniformly, accept it with
   probability w / M, never draw an accepted candidate again; or the authors' code's variant.
+- `sample_then_fill`: the paper's sampler where fewer than k scores are positive (its limit).
 - `greedy_farthest`: "maximally apart", each pick the candidate farthest (geodesic angle) from
   the training views and the views picked so far.
 
@@ -26,6 +27,12 @@ from nerfaug.selection.interface import Estimate, Request
 from nerfaug.selection.posterior import posterior_exponent, sharpen
 from nerfaug.uncertainty.fisher import fisherrf_greedy
 from nerfaug.uncertainty.so3 import min_geodesic_angle
+
+
+class UniformFill(UserWarning):
+    """A sampler found fewer candidates with a positive score than views to choose and drew the
+    rest uniformly (`sample_then_fill`)."""
+
 
 # The authors' sampler draws nu ~ U[0.05, 1] per visit (accept if w > AUTHORS_THRESHOLD * nu).
 AUTHORS_NU_RANGE = (0.05, 1.0)
@@ -221,6 +228,40 @@ def _authors_sample(w: Tensor, k: int, generator, max_draws: int, threshold: flo
     return torch.tensor(chosen, dtype=torch.long)
 
 
+def sample_then_fill(
+    scores: Tensor, k: int, generator: torch.Generator | None = None, eligible: Tensor | None = None
+) -> Tensor:
+    """k distinct candidates when fewer than k eligible ones have a positive score: all the
+    positive ones, in an order drawn as the paper's sampler draws (each next one with probability
+    proportional to its score among those left), then uniformly among the other eligible ones.
+
+    This is the limit of the paper's sampler on scores + eps as eps -> 0: a zero-score candidate
+    is then accepted only once no positive one is left, and among equal scores every draw is
+    uniform. (torch.multinomial without replacement draws that order directly, with no rejection
+    loop that tiny positive scores could make arbitrarily long.)
+
+    Args:
+        scores: Tensor with shape (n_candidates,), w >= 0, fewer than k of them positive.
+        k: number of views to choose.
+        generator: random source.
+        eligible: bool Tensor with shape (n_candidates,); None for all.
+
+    Returns:
+        Tensor with shape (k,), candidate indices: the positive ones first.
+    """
+    w = _check_scores(scores)
+    _check_k(w.numel(), k)
+    allowed = _check_eligible(eligible, w.numel(), k)
+    positive = (w > 0) & allowed
+    first = torch.nonzero(positive).reshape(-1)
+    if first.numel() >= k:
+        raise ValueError(f"{first.numel()} candidates have a positive score: sample {k} of them with rejection_sample")
+    if first.numel():
+        first = first[torch.multinomial(w[first], first.numel(), replacement=False, generator=generator)]
+    rest = select_uniform(w.numel(), k - first.numel(), generator, allowed & ~positive)
+    return torch.cat([first, rest])
+
+
 def greedy_farthest(
     candidate_rotations: Tensor, training_rotations: Tensor, k: int, eligible: Tensor | None = None
 ) -> Tensor:
@@ -270,9 +311,28 @@ def sampling_density(request: Request, estimate: Estimate) -> Estimate:
 
 
 def sample_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate]:
-    """The paper's rejection sampler (or the authors' sweep, `config.sampler`)."""
+    """The paper's rejection sampler (or the authors' sweep, `config.sampler`).
+
+    When fewer than n eligible candidates have a positive density (a NeRF that renders nothing
+    gives FisherRF's gain 0 everywhere), the paper's sampler cannot choose n: then every
+    positive one is taken and the rest are drawn uniformly from the other eligible candidates,
+    with a warning, and the estimate's `uniform_fill` counts them (see `sample_then_fill`).
+    """
     config = request.config
     estimate = sampling_density(request, estimate)
+    if config.sampler == "paper":
+        allowed = _check_eligible(request.eligible, estimate.scores.shape[0], request.n)
+        positive = int(((_check_scores(estimate.scores) > 0) & allowed).sum())
+        if positive < request.n:
+            warnings.warn(
+                f"method {request.method!r}: only {positive} of {int(allowed.sum())} eligible candidates "
+                f"have a positive score, so {request.n - positive} of the {request.n} views are drawn "
+                "uniformly from the others (the model gives them no information to choose by)",
+                UniformFill,
+                stacklevel=2,
+            )
+            indices = sample_then_fill(estimate.scores, request.n, request.generator, allowed)
+            return indices, replace(estimate, uniform_fill=request.n - positive)
     indices = rejection_sample(
         estimate.scores,
         request.n,
