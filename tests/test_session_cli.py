@@ -283,3 +283,29 @@ def test_an_estimated_pole_is_one_setting_of_the_session(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["train", str(run), "--up", "0", "0", "1", "--steps", "3", "--device", "cpu"])
     assert "--up 0 0 1 (the session's: estimated)" in capsys.readouterr().err
+
+
+def test_a_proposal_drawn_partly_uniformly_says_so_in_one_line(capsys):
+    """`propose` shows the sampler's fill (the model gave too few candidates a positive score) as
+    one `warning:` line, not Python's two-line warning with a source path."""
+    import torch
+
+    from nerfaug.cameras import Cameras
+    from nerfaug.cli.train_work import warning_lines
+    from nerfaug.hemisphere import half_hemisphere_poses
+    from nerfaug.selection import SelectionConfig
+    from nerfaug.selection.interface import Estimate, Request
+    from nerfaug.selection.selectors import sample_views
+
+    cameras = Cameras.from_fov(half_hemisphere_poses(8), BLENDER_CAMERA_ANGLE_X, 8, 8)
+    request = Request(
+        "fisherrf-sampling", None, cameras, cameras, 3, torch.Generator().manual_seed(0), SelectionConfig()
+    )
+    capsys.readouterr()
+    with warning_lines():
+        _, estimate = sample_views(request, Estimate(torch.tensor([0.0, 2.0, 0, 0, 0, 0, 0, 0])))
+    assert estimate.uniform_fill == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: method 'fisherrf-sampling': 1 of 8 eligible candidates score above 0, fewer than the 3 views "
+        "asked for, so 2 views are drawn uniformly from the others (the model gives them no information to choose by)"
+    ]

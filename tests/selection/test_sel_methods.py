@@ -418,7 +418,7 @@ def test_a_sampler_with_too_few_positive_scores_fills_uniformly_and_says_so(scen
     empty = BlobNerf()
     with torch.no_grad():
         empty.log_density.fill_(-math.inf)  # density 0 everywhere: no gradient, no information
-    with pytest.warns(UniformFill, match="only 0 of 60 eligible candidates have a positive score"):
+    with pytest.warns(UniformFill, match="0 of 60 eligible candidates score above 0, fewer than the 4 views"):
         selection = select_views(
             "fisherrf-sampling", empty, train, candidates, 4, torch.Generator().manual_seed(1), FAST
         )

@@ -27,7 +27,7 @@ from nerfaug.capture.requests import replaced_by
 from nerfaug.capture.simulate import render_proposals as simulated_capture
 from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train import THREADS, Device, RunFolder
-from nerfaug.cli.train_work import configure, open_session
+from nerfaug.cli.train_work import configure, open_session, warning_lines
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 
 FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
@@ -63,7 +63,8 @@ def propose(
     check_poses_out(out, force)
     configure(threads)
     session = open_session(run, device, changing="propose")
-    proposal = session.propose(request)
+    with warning_lines():
+        proposal = session.propose(request)
     path = proposal.write(out)
     session.save()
     print(

@@ -325,9 +325,9 @@ def sample_views(request: Request, estimate: Estimate) -> tuple[Tensor, Estimate
         positive = int(((_check_scores(estimate.scores) > 0) & allowed).sum())
         if positive < request.n:
             warnings.warn(
-                f"method {request.method!r}: only {positive} of {int(allowed.sum())} eligible candidates "
-                f"have a positive score, so {request.n - positive} of the {request.n} views are drawn "
-                "uniformly from the others (the model gives them no information to choose by)",
+                f"method {request.method!r}: {positive} of {int(allowed.sum())} eligible candidates score "
+                f"above 0, fewer than the {request.n} views asked for, so {request.n - positive} views are "
+                "drawn uniformly from the others (the model gives them no information to choose by)",
                 UniformFill,
                 stacklevel=2,
             )
