@@ -75,3 +75,26 @@ def test_nerfaug_propose_takes_a_minimum_separation(session_dir, tmp_path, capsy
     assert done.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]  # after the scoring's progress lines
     assert err.startswith("nerfaug: cannot choose 4 views at least 120 degrees apart among 100 candidates")
+
+
+def test_a_proposal_from_a_model_that_gives_no_information_says_how_many_views_are_uniform(session_dir, monkeypatch):
+    """A NeRF that renders nothing gives FisherRF's gain 0 everywhere: the proposal still has its
+    views, drawn uniformly, and its file and the session's history say how many."""
+    from nerfaug.selection import registry
+    from nerfaug.selection.interface import Estimate
+    from nerfaug.selection.selectors import UniformFill
+
+    monkeypatch.setitem(registry.ESTIMATORS, "fisher", lambda request: Estimate(torch.zeros(len(request.candidates))))
+    session = CaptureSession.open(session_dir)
+    with pytest.warns(UniformFill):
+        proposal = session.propose(ProposalRequest(n=4, n_candidates=60, method="fisherrf-sampling", seed=3), map=False)
+    assert len(proposal) == 4 and proposal.uniform_fill == 4
+    assert session.proposals[-1].model_extra["uniform_fill"] == 4
+    written = json.loads((session_dir / session.proposals[-1].file).read_text())
+    assert written["nerfaug"]["uniform_fill"] == 4
+    assert (
+        "uniform_fill"
+        not in CaptureSession.open(session_dir)
+        .propose(ProposalRequest(n=4, n_candidates=60, selection=FAST, seed=3), map=False)
+        .transforms()["nerfaug"]
+    )

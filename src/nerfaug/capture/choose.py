@@ -245,6 +245,7 @@ def propose(
         camera_angle_x=float(world.camera_angle_x[0]),
         hemisphere=hemisphere,
         min_separation=request.min_separation,
+        uniform_fill=selection.uniform_fill,
     )
     record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
     record = ProposalRecord(
@@ -264,6 +265,7 @@ def propose(
         selection=used_config.to_dict(),
         **constraints_record(request.constraints),
         **separation_record(request.min_separation),
+        **({"uniform_fill": selection.uniform_fill} if selection.uniform_fill else {}),
     )
     return proposal, record
 

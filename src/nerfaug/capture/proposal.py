@@ -53,6 +53,8 @@ class Proposal:
         hemisphere: the session's hemisphere.
         min_separation: the least angle, degrees about the hemisphere's centre, between two of
             its views; 0 when not asked for.
+        uniform_fill: how many of the views were drawn uniformly because fewer candidates than
+            asked for had a positive score (the model gave them no information); 0 when none.
     """
 
     number: int
@@ -71,6 +73,7 @@ class Proposal:
     camera_angle_x: float
     hemisphere: Hemisphere
     min_separation: float = 0.0
+    uniform_fill: int = 0
 
     def __len__(self) -> int:
         return self.poses.shape[0]
@@ -108,6 +111,8 @@ class Proposal:
         }
         if self.min_separation > 0:
             info["min_separation"] = self.min_separation
+        if self.uniform_fill:
+            info["uniform_fill"] = self.uniform_fill
         if include_candidates:
             info["candidates"] = {
                 "transform_matrix": c.camera_to_world.tolist(),

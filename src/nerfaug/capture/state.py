@@ -141,8 +141,8 @@ class Record(Stored):
 
 
 class ProposalRecord(Record):
-    """One `propose` call, as kept in the history (with "selection", "constraints" and
-    "min_separation" among its further keys)."""
+    """One `propose` call, as kept in the history (with "selection", "constraints",
+    "min_separation" and "uniform_fill" among its further keys)."""
 
     number: int
     method: str
