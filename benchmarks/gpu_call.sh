@@ -9,14 +9,15 @@
 #          (the GPU image lacks them)
 #   there: PART=trials bash benchmarks/gpu_call.sh, then PART=checks (device tool: carry data/gpu data/lego100 .whl)
 #
-# Two parts, one device call each (PART=trials, then PART=checks on the still-warm machine):
+# Parts, one device call each (PART=trials, then PART=checks on the still-warm machine; PART=solo
+# is one mic trial alone, PART=solo-checks that trial and then the checks in the time left):
 # trials: one paper-scale trial (400 px, 10k steps, 200 test views) of the paper preset as it now
 #   is (fixed background, float32) on lego and one on mic, both at once on the GPU (their times
 #   are shared, their quality is not);
-# checks: whether fp16 autocast trains the paper preset with the field's density network kept in
-#   float32 (bench_precision.py; on 2026-11-26 fp16 stalled at 21.5 dB with or without the proposal
-#   networks in float32, and two fifths of the table's gradient entries underflowed with the
-#   density network in fp16), then the dense-view check of the paper preset in the time left.
+# checks: fp16 autocast with the field's colour network kept in float32 (bench_precision.py; on
+#   2026-11-26 this alone trained as float32 does, while fp16 with the proposal or density networks
+#   in float32 stalled at 21.5 dB; BENCHMARKS.md), then the dense-view check of the paper preset in
+#   the time left.
 # Everything lands in $OUT/gpu.tgz, re-packed after each stage, so a call cut short still
 # brings back what finished.
 set -u
@@ -45,16 +46,22 @@ trial() {  # scene, seconds
 }
 
 PART=${PART:-trials}
+if [ "$PART" = solo ] || [ "$PART" = solo-checks ]; then
+    # One paper-scale trial with the GPU to itself: the clean time of a trial (the 2026-11-26
+    # trials shared the GPU two at a time).
+    trial mic 300
+    [ "$PART" = solo ] || [ "$(left)" -lt 150 ] || PART=checks
+fi
 if [ "$PART" = trials ]; then
     trial lego $(($(left) - 20)) &
     sleep 5
     trial mic $(($(left) - 20))
     wait
     pack
-else
-    echo "== half precision, density network in float32, $(left) s left"
-    timeout 200 python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
-        --at-steps 1000 --train-half 1000 --train-keep density --json "$RES/precision.json" | tail -16
+elif [ "$PART" = checks ]; then
+    echo "== half precision, colour network in float32, $(left) s left"
+    timeout $(( $(left) < 200 ? $(left) - 60 : 200 )) python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
+        --at-steps 1000 --train-half 1000 --train-keep color --json "$RES/precision.json" | tail -16
     pack
     echo "== dense-view check of paper, $(left) s left"
     timeout 120 python3 benchmarks/bench_dense.py --data data/lego100 --presets paper --device cuda \
