@@ -153,3 +153,52 @@ def test_what_the_pool_refuses(root, tmp_path):
     with pytest.raises(FileNotFoundError):  # a failed creation leaves no session behind
         pool.require("x")
     assert pool.ids() == []
+
+
+def test_a_request_waits_for_at_most_the_chunk_under_way_while_the_session_trains(root):
+    """Requests to a training session are served between the job's chunks: each waits at most for
+    the chunk under way and one that began as it arrived (CHUNK_STEPS steps each). A plain lock
+    lets the worker take it back after every chunk, so a request could wait thousands of steps."""
+    from nerfaug.capture.session import CHUNK_STEPS
+
+    pool = SessionPool(root, checkpoint_every=3600.0)
+    try:
+        new_session(pool, "s")
+        pool.train("s", 5000)
+        waited = []
+        for _ in range(20):
+            before = pool.state("s").step  # the step after the last finished chunk
+            waited.append(pool.run("s", lambda session: session.step) - before)
+        running = pool.state("s").running
+    finally:
+        pool.shutdown()
+    assert running, "the job ended before the requests were made: the test measured nothing"
+    assert max(waited) <= 2 * CHUNK_STEPS, waited
+
+
+def test_a_waiting_request_goes_before_the_workers_next_chunk():
+    """The turn itself, without timing: a worker that ends a chunk while a request waits cannot
+    take the next chunk before it (a plain lock would let it, and usually does)."""
+    import threading
+
+    from nerfaug.capture.pool import _Turns
+
+    turns, order = _Turns(), []
+
+    def ask() -> None:
+        with turns:
+            order.append("request")
+
+    turns.chunk.__enter__()  # the worker is in a chunk
+    request = threading.Thread(target=ask)
+    request.start()
+    for _ in range(2000):  # until the request waits (bounded: 10 s)
+        if turns.waiting:
+            break
+        time.sleep(0.005)
+    assert turns.waiting == 1
+    turns.chunk.__exit__()
+    with turns.chunk:  # the worker's next chunk
+        order.append("chunk")
+    request.join(10)
+    assert order == ["request", "chunk"] and turns.waiting == 0

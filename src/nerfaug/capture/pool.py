@@ -12,7 +12,8 @@ that a pool made again on the same root (a restarted service) resumes it (`resum
       .service/jobs/<id>.json   the session's training job: target step, state
 
 Training (`CaptureSession.train_for`, the loop the commands run) holds the session's lock for a
-chunk of steps at a time, so other requests to the session wait at most one chunk; the state
+chunk of steps at a time and takes its next chunk only when no request is waiting (`_Turns`), so
+other requests to the session wait at most about one chunk; the state
 (`state`) is a snapshot taken after each chunk (or, for a session not opened yet, read from its
 files), never waiting for a lock or a worker.
 
@@ -96,12 +97,69 @@ def one_line(error: BaseException) -> str:
     return " ".join(str(error).split()) or type(error).__name__
 
 
+class _Turns:
+    """A session's lock with requests served before the training worker's next chunk.
+
+    `threading.RLock` is not fair: a training worker that releases the lock after a chunk and takes
+    it again at once can keep a request waiting for thousands of chunks (a capture waited over a
+    minute on a busy 2-core machine). So requests count themselves while they wait, and the worker
+    takes its next chunk only when none is waiting: a request waits at most for the chunk under way
+    (and one that began as it arrived). `with turns:` is a request's turn, `with turns.chunk:` the
+    worker's."""
+
+    def __init__(self):
+        self.lock = threading.RLock()
+        self._waiting = 0
+        self._changed = threading.Condition(threading.Lock())
+        self.chunk = _ChunkTurn(self)
+
+    def __enter__(self):
+        with self._changed:
+            self._waiting += 1
+        try:
+            self.lock.acquire()
+        finally:
+            with self._changed:
+                self._waiting -= 1
+                self._changed.notify_all()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.lock.release()
+
+    @property
+    def waiting(self) -> int:
+        """Requests waiting for the lock now."""
+        with self._changed:
+            return self._waiting
+
+    def wait_for_requests(self) -> None:
+        """Return once no request is waiting for the lock."""
+        with self._changed:
+            self._changed.wait_for(lambda: self._waiting == 0)
+
+
+class _ChunkTurn:
+    """The training worker's turn: after every waiting request (`_Turns`)."""
+
+    def __init__(self, turns: _Turns):
+        self.turns = turns
+
+    def __enter__(self):
+        self.turns.wait_for_requests()
+        self.turns.lock.acquire()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.turns.lock.release()
+
+
 class _Slot:
     """One session's place in the pool: its lock, the open session, its job and its snapshot."""
 
     def __init__(self, session_id: str):
         self.id = session_id
-        self.lock = threading.RLock()
+        self.lock = _Turns()
         self.session: CaptureSession | None = None
         self.job: Job | None = None
         self.thread: threading.Thread | None = None
@@ -309,7 +367,9 @@ class SessionPool:
             with slot.lock:
                 session = self._opened(slot)
             stop = self._stopping.is_set
-            session.train_for(job.target - session.step, self.checkpoint_every, stop, hold=slot.lock, each=chunk_done)
+            session.train_for(
+                job.target - session.step, self.checkpoint_every, stop, hold=slot.lock.chunk, each=chunk_done
+            )
             with slot.lock:
                 self._snapshot(slot)
                 if not stop():  # stopped by a shutdown: left running, resumed on restart
