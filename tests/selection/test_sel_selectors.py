@@ -9,6 +9,7 @@ from scipy import stats
 
 from nerfaug.hemisphere import pose_from_angles
 from nerfaug.selection.selectors import (
+    DirectDraw,
     greedy_farthest,
     rejection_sample,
     sample_then_fill,
@@ -88,9 +89,42 @@ def test_nothing_acceptable_is_a_clear_error():
 
 
 def test_endless_loops_are_cut_off():
+    """The paper's loop ends after max_draws by drawing directly (saying so); the authors' sweep,
+    which has no such distribution to draw from, gives up."""
     scores = torch.tensor([1e-9, 0.0, 0.0])
-    with pytest.raises(RuntimeError, match="gave up after 500 draws"):
-        rejection_sample(scores, 1, torch.Generator().manual_seed(0), scale_m=1.0, max_draws=500)
+    with pytest.warns(DirectDraw, match="0 of 1 views in 500 draws"):
+        chosen = rejection_sample(scores, 1, torch.Generator().manual_seed(0), scale_m=1.0, max_draws=500)
+    assert chosen.tolist() == [0]  # the only candidate that can ever be accepted
+    with pytest.raises(RuntimeError, match="gave up after 50 draws"):
+        rejection_sample(torch.tensor([0.8, 0.0]), 1, torch.Generator().manual_seed(0), variant="authors", max_draws=50)
+
+
+def test_drawing_directly_after_max_draws_keeps_the_samplers_distribution():
+    """Pairs chosen with a loop cut off after a single proposal (then drawn directly) follow the
+    sampler's law: first i with w_i / sum w, then j with w_j / (sum w - w_i)."""
+    scores = torch.tensor([1.0, 2.0, 3.0, 4.0])
+    generator = torch.Generator().manual_seed(3)
+    n = 6000
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DirectDraw)
+        pairs = Counter(tuple(rejection_sample(scores, 2, generator, max_draws=1).tolist()) for _ in range(n))
+    assert all(i != j for i, j in pairs)
+    total = scores.sum().item()
+    keys = [(i, j) for i in range(4) for j in range(4) if i != j]
+    expected = [n * scores[i].item() / total * scores[j].item() / (total - scores[i].item()) for i, j in keys]
+    assert stats.chisquare([pairs[k] for k in keys], expected).pvalue > 0.01
+    uniform = [n / len(keys)] * len(keys)
+    assert stats.chisquare([pairs[k] for k in keys], uniform).pvalue < 1e-6  # the test can tell
+
+
+def test_a_loop_that_finishes_is_not_changed_by_the_cut_off():
+    """The choice for a seed is the loop's whenever it accepts k within max_draws."""
+    for seed in range(20):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DirectDraw)
+            a = rejection_sample(TOY, 3, torch.Generator().manual_seed(seed))
+            b = rejection_sample(TOY, 3, torch.Generator().manual_seed(seed), max_draws=10_000)
+        assert a.tolist() == b.tolist()
 
 
 def test_authors_variant_accepts_only_scores_above_fifteen_times_nu():

@@ -24,7 +24,7 @@ from nerfaug.cli.option_names import as_options, checked, option
 from nerfaug.data import load_dataset
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
-from nerfaug.selection.selectors import UniformFill
+from nerfaug.selection.selectors import DirectDraw, UniformFill
 
 
 def train(path: Path, out: Path | None, steps: int, given, split, device: str, checkpoint_every: float, threads: int):
@@ -85,8 +85,8 @@ def _lock(run: Path, command: str) -> None:
 @contextlib.contextmanager
 def warning_lines():
     """Show the capture's warnings (`DuplicateViews`, `TiltedPole`, `UnverifiedCheckpoint`, and a
-    sampler's `UniformFill`) as one line each, `warning: ...` on stderr."""
-    kinds = (DuplicateViews, TiltedPole, UnverifiedCheckpoint, UniformFill)
+    sampler's `UniformFill` and `DirectDraw`) as one line each, `warning: ...` on stderr."""
+    kinds = (DuplicateViews, TiltedPole, UnverifiedCheckpoint, UniformFill, DirectDraw)
     with warnings.catch_warnings():
         for kind in kinds:
             warnings.simplefilter("always", kind)
