@@ -177,7 +177,8 @@ class SelectionConfig:
             threshold).
         authors_threshold: the "authors" sampler accepts a candidate whose score exceeds this
             times a random number in [0.05, 1].
-        max_draws: draws after which the rejection sampler gives up with an error.
+        max_draws: draws after which the paper's rejection sampler draws its remaining views
+            directly from the distribution it samples (the authors' sampler gives up with an error).
         fisher_method: how FisherRF's information is estimated: "random-sign" (random probes,
             unbiased, fast) or "exact" (slow; for checking); docs/methods.md.
         fisher_train_pixels: training pixels FisherRF's estimate of what the training views

@@ -34,6 +34,11 @@ class UniformFill(UserWarning):
     rest uniformly (`sample_then_fill`)."""
 
 
+class DirectDraw(UserWarning):
+    """The paper's rejection sampler reached `max_draws` and drew its remaining views directly from
+    the distribution it samples (`rejection_sample`): the same distribution, without the loop."""
+
+
 # The authors' sampler draws nu ~ U[0.05, 1] per visit (accept if w > AUTHORS_THRESHOLD * nu).
 AUTHORS_NU_RANGE = (0.05, 1.0)
 # Random numbers are drawn in blocks (same stream for a seed, far fewer calls).
@@ -116,6 +121,13 @@ def rejection_sample(
     index has probability w_i / sum_j w_j; for k > 1 each draw is from the density restricted to
     the candidates not chosen yet.
 
+    Each acceptance picks candidate i with probability a_i / sum_j a_j over the candidates left
+    (a = min(w / M, 1), the acceptance probability), whatever M is. When acceptances are so rare
+    that `max_draws` proposals are spent (a few candidates with nearly all the score, the rest
+    tiny), the remaining views are drawn from exactly that distribution by torch.multinomial
+    without replacement, with a `DirectDraw` warning: the same distribution without an unbounded
+    loop. Until then the draws, and so the choice for a seed, are the loop's.
+
     M defaults to max(w), the smallest valid scale (fewest rejections). A given M below max(w)
     makes w / M exceed 1 for some candidates: a warning names the smallest valid M and those
     acceptance probabilities are clipped to 1 (the result then no longer follows the scores).
@@ -133,7 +145,9 @@ def rejection_sample(
         k: number of views to choose.
         generator: random source; the same seed gives the same choice.
         scale_m: M; None for max(w). Ignored by "authors".
-        max_draws: give up (RuntimeError) after this many proposals.
+        max_draws: proposals after which the remaining views are drawn directly ("paper"), or
+            the sampler gives up with a RuntimeError ("authors", whose sweep has no such
+            distribution).
         variant: "paper" or "authors".
         threshold: the authors' factor 15 ("authors" only).
         eligible: bool Tensor with shape (n_candidates,): candidates that may be accepted
@@ -145,7 +159,7 @@ def rejection_sample(
 
     Raises:
         ValueError: fewer than k candidates can ever be accepted (e.g. all scores 0), or bad input.
-        RuntimeError: `max_draws` proposals were not enough.
+        RuntimeError: `max_draws` proposals were not enough ("authors").
     """
     check_name("sampler variant", variant, REJECTION_SAMPLERS)
     w = _check_scores(scores)
@@ -179,11 +193,7 @@ def rejection_sample(
         us = torch.rand(_BLOCK, generator=generator, dtype=torch.float64)
         for pick, u in zip(picks.tolist(), us.tolist()):
             if draws >= max_draws:
-                raise RuntimeError(
-                    f"rejection sampling gave up after {max_draws} draws with {len(chosen)} of {k} "
-                    f"views accepted; the remaining candidates' mean acceptance probability is "
-                    f"{float(accept_prob[remaining].mean()):.3g} (lower M or raise max_draws)"
-                )
+                return _draw_directly(accept_prob, chosen, remaining, k, max_draws, generator)
             draws += 1
             candidate = remaining[min(int(pick * len(remaining)), len(remaining) - 1)]
             if u < probs[candidate]:
@@ -192,6 +202,26 @@ def rejection_sample(
                 if len(chosen) == k:
                     break
     return torch.tensor(chosen, dtype=torch.long)
+
+
+def _draw_directly(
+    accept_prob: Tensor, chosen: list[int], remaining: list[int], k: int, max_draws: int, generator
+) -> Tensor:
+    """`chosen` and k - len(chosen) more of `remaining`, drawn in order with probability
+    proportional to `accept_prob` among those left: the distribution of the rejection loop's next
+    acceptances (see `rejection_sample`), for when the loop spent `max_draws`."""
+    left = torch.tensor(remaining, dtype=torch.long)
+    weights = accept_prob[left]
+    warnings.warn(
+        f"rejection sampling accepted {len(chosen)} of {k} views in {max_draws} draws (the remaining "
+        f"candidates' mean acceptance probability is {float(weights.mean()):.3g}), so the other "
+        f"{k - len(chosen)} are drawn directly from the same distribution (score-weighted, without "
+        "replacement)",
+        DirectDraw,
+        stacklevel=3,
+    )
+    rest = left[torch.multinomial(weights, k - len(chosen), replacement=False, generator=generator)]
+    return torch.cat([torch.tensor(chosen, dtype=torch.long), rest])
 
 
 def _authors_sample(w: Tensor, k: int, generator, max_draws: int, threshold: float, allowed: Tensor) -> Tensor:
