@@ -309,3 +309,28 @@ def test_a_proposal_drawn_partly_uniformly_says_so_in_one_line(capsys):
         "warning: method 'fisherrf-sampling': 1 of 8 eligible candidates score above 0, fewer than the 3 views "
         "asked for, so 2 views are drawn uniformly from the others (the model gives them no information to choose by)"
     ]
+
+
+def test_a_proposal_whose_sampler_drew_directly_says_so_in_one_line(capsys):
+    """`propose` shows the sampler's direct draw after `max_draws` (one candidate holds nearly all
+    the score) as one `warning:` line, and the views are still distinct."""
+    import torch
+
+    from nerfaug.cameras import Cameras
+    from nerfaug.cli.train_work import warning_lines
+    from nerfaug.hemisphere import half_hemisphere_poses
+    from nerfaug.selection import SelectionConfig
+    from nerfaug.selection.interface import Estimate, Request
+    from nerfaug.selection.selectors import sample_views
+
+    cameras = Cameras.from_fov(half_hemisphere_poses(8), BLENDER_CAMERA_ANGLE_X, 8, 8)
+    config = SelectionConfig(max_draws=1000)
+    request = Request("fisherrf-sampling", None, cameras, cameras, 3, torch.Generator().manual_seed(0), config)
+    capsys.readouterr()
+    with warning_lines():
+        indices, _ = sample_views(
+            request, Estimate(torch.tensor([1.0, 1e-12, 2e-12, 3e-12, 1e-12, 1e-12, 1e-12, 1e-12]))
+        )
+    assert len(set(indices.tolist())) == 3 and indices[0] == 0
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("warning: rejection sampling accepted 1 of 3 views in 1000 draws")
