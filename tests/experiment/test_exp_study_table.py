@@ -236,6 +236,13 @@ def test_the_real_scene_hypotheses_are_judged_from_the_table_as_planned():
     assert r1(flat)[0] == "open"  # one engine of two complete: not yet decided
     assert r3(flat)[0] == "not supported"  # nerfacto-cpu complete, no gain
     assert hypotheses_of(collect_study(synthetic_table({"ours": 1.0}))) is not REAL_HYPOTHESES
+    both = real_table({"ours-batch-sharp": 0.0, "ours": 0.0})
+    other = real_table({"ours-batch-sharp": 0.0, "ours": 0.0}, engine="nerfacto-cpu-last-sample")
+    both["runs"] += other["runs"]
+    both["plan"]["engines"] += other["plan"]["engines"]
+    decided = collect_study(both)
+    assert r1(decided)[0] == "not supported"  # both engines complete, no gain on either
+    assert r4(decided) == ("not applicable", "no method passed R1: there is nothing to replicate")
 
 
 def test_a_regime_part_way_through_decides_no_real_scene_hypothesis():

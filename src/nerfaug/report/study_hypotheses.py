@@ -215,7 +215,9 @@ def r4(study: Study) -> tuple[str, str]:
     two-sided Wilcoxon, Bonferroni over those methods)."""
     planned = [(engine, m) for engine, methods in r1_winners(study).items() for m in methods]
     if not planned:
-        return ("not applicable" if r1(study)[0] == "not supported" else "open"), "no method passed R1 (yet)"
+        if r1(study)[0] == "not supported":
+            return "not applicable", "no method passed R1: there is nothing to replicate"
+        return "open", "no method has passed R1 yet"
     held = {c.engine: c for c in study.cells if c.scene == HELD_BACK}
     parts, passed, decided = [], 0, 0
     for engine, method in planned:
