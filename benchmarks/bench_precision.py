@@ -20,7 +20,11 @@ land in no fixed order); float32 with another batch at the same step gives the g
 noise, against which a change is read. With `--train-half N`, the engine is also trained N steps from scratch
 under autocast with a GradScaler, as the trainer does, and its scale, skipped steps and training
 views' PSNR recorded beside a float32 training of the same seed; with `--train-keep proposal` (etc.)
-once more with those networks in float32.
+once more with those networks in float32 (`--train-each`: once per network named; `sigmoid` keeps
+only the colour network's output activation in float32), and with `--train-scales 23` (etc.) once
+more per exponent with the loss scale starting at 2^23 (`--probe-scales 20 24`: the probes once
+more with the loss scaled by 2^20, 2^24). `--exact-fp16-sums` forbids cuBLAS's
+float16 partial sums in half-precision matrix products (a GPU's default allows them).
 
     python benchmarks/bench_precision.py --data data/lego100 --engine nerfacto-cpu --at-steps 400
     python benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \\
@@ -36,6 +40,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -55,7 +60,8 @@ LOSS_SCALE = 2.0**16  # GradScaler's initial scale
 
 @contextlib.contextmanager
 def float32_parts(parts: tuple[str, ...], device_type: str):
-    """Run the named networks ("proposal", "density", "color") outside autocast while inside.
+    """Run the named networks ("proposal", "density", "color") outside autocast while inside;
+    "sigmoid" keeps only the colour network's output activation in float32.
 
     Patches the classes' methods for the duration (a diagnostic: the engine has no switch for
     this, and must not grow one only for it)."""
@@ -75,8 +81,17 @@ def float32_parts(parts: tuple[str, ...], device_type: str):
 
         return wrapped
 
+    def sigmoid_float32(self, geometry, directions):
+        # the colour network under autocast, its output activation (and that activation's
+        # backward, which PyTorch computes from the output) in float32
+        features = torch.cat([field.spherical_harmonics(directions, self.sh_levels), geometry], dim=-1)
+        return torch.sigmoid(self.color_mlp(features).float())
+
     try:
         for part in parts:
+            if part == "sigmoid":
+                field.NerfField.color = sigmoid_float32
+                continue
             cls, name = originals[part]
             setattr(cls, name, outside_autocast(saved[part]))
         yield
@@ -91,7 +106,12 @@ def group_of(name: str) -> str:
 
 
 def step_gradients(
-    trainer, cpu_state: torch.Tensor, dtype: torch.dtype | None, parts: tuple[str, ...] = (), other_batch: bool = False
+    trainer,
+    cpu_state: torch.Tensor,
+    dtype: torch.dtype | None,
+    parts: tuple[str, ...] = (),
+    other_batch: bool = False,
+    loss_scale: float = LOSS_SCALE,
 ):
     """One training step's gradients, colour MSE and sample edges, without updating anything.
 
@@ -120,8 +140,8 @@ def step_gradients(
     with float32_parts(parts, device_type), autocast:
         output = trainer.model(origins, directions, background, generator=generator)
     mse = torch.nn.functional.mse_loss(output.rgb.float(), target)
-    ((mse + trainer.model.auxiliary_loss(output)) * LOSS_SCALE).backward()
-    gradients = {n: p.grad.detach() / LOSS_SCALE for n, p in trainer.model.named_parameters() if p.grad is not None}
+    ((mse + trainer.model.auxiliary_loss(output)) * loss_scale).backward()
+    gradients = {n: p.grad.detach() / loss_scale for n, p in trainer.model.named_parameters() if p.grad is not None}
     return gradients, float(mse.detach()), output.t_starts.detach()
 
 
@@ -143,8 +163,9 @@ def compare(reference: dict, other: dict) -> dict[str, dict[str, float]]:
     }
 
 
-def probe(trainer, dtype: torch.dtype) -> dict:
-    """Every variant's gradients against float32's at the trainer's current step."""
+def probe(trainer, dtype: torch.dtype, scale_exponents: tuple[int, ...] = ()) -> dict:
+    """Every variant's gradients against float32's at the trainer's current step; and half
+    everywhere once more per exponent e with the loss scaled by 2^e instead of 2^16."""
     state = trainer.generator.get_state()
     reference, mse, t_ref = step_gradients(trainer, state, None)
     repeat, _, _ = step_gradients(trainer, state, None)
@@ -163,24 +184,38 @@ def probe(trainer, dtype: torch.dtype) -> dict:
             "samples_moved_max": float((t_half - t_ref).abs().max()),
             "groups": compare(reference, gradients),
         }
+    for exponent in scale_exponents:
+        gradients, half_mse, t_half = step_gradients(trainer, state, dtype, loss_scale=2.0**exponent)
+        result["variants"][f"half everywhere, loss x 2^{exponent}"] = {
+            "mse": half_mse,
+            "samples_moved_max": float((t_half - t_ref).abs().max()),
+            "groups": compare(reference, gradients),
+        }
     trainer.generator.set_state(state)
     return result
 
 
 def train_half(
-    data, engine: str, seed: int, steps: int, device: str, dtype: torch.dtype | None, keep: tuple[str, ...] = ()
+    data,
+    engine: str,
+    seed: int,
+    steps: int,
+    device: str,
+    dtype: torch.dtype | None,
+    keep: tuple[str, ...] = (),
+    init_scale: float = LOSS_SCALE,
 ) -> dict:
     """Train `steps` steps on the initial views under autocast to `dtype` (None: float32) with a
-    GradScaler for float16, as the trainer's fp16 does, with the networks named in `keep` (see
-    `float32_parts`) in float32, and record the scale, the skipped steps and the training views'
-    PSNR."""
+    GradScaler for float16 starting at `init_scale` (the trainer's: 2^16), as the trainer's fp16
+    does, with the networks named in `keep` (see `float32_parts`) in float32, and record the
+    scale, the skipped steps and the training views' PSNR."""
     from bench_engine_walk import view_metrics
     from nerfaug.nerf.config import NerfConfig
     from nerfaug.nerf.trainer import Trainer
 
     trainer = Trainer(data.initial, NerfConfig.preset(engine), seed=seed, device=device, progress=False)
     trainer._autocast = dtype  # the trainer refuses half precision on a CPU; this diagnostic wants it
-    trainer.scaler = torch.amp.GradScaler(trainer.device.type) if dtype == torch.float16 else None
+    trainer.scaler = torch.amp.GradScaler(trainer.device.type, init_scale) if dtype == torch.float16 else None
     skipped, trace = 0, []
     while trainer.step < steps:
         scale = trainer.scaler.get_scale() if trainer.scaler else 1.0
@@ -195,6 +230,7 @@ def train_half(
         "precision": str(dtype).removeprefix("torch.") if dtype is not None else "float32",
         "steps": steps,
         "float32": list(keep),
+        "init_scale": init_scale if dtype == torch.float16 else None,
         "skipped": skipped,
         "train_psnr": train_psnr,
         "opacity": opacity,
@@ -214,8 +250,31 @@ def main(argv: list[str] | None = None) -> dict:
         "--train-keep",
         nargs="*",
         default=[],
-        choices=["proposal", "density", "color"],
+        choices=["proposal", "density", "color", "sigmoid"],
         help="and once more with these networks in float32 (e.g. proposal)",
+    )
+    parser.add_argument(
+        "--train-each", action="store_true", help="one training per network named in --train-keep, not one for all"
+    )
+    parser.add_argument(
+        "--train-scales",
+        type=int,
+        nargs="*",
+        default=[],
+        help="and once more in half precision per exponent e, the loss scale starting at 2^e (the trainer's: 16)",
+    )
+    parser.add_argument(
+        "--probe-scales",
+        type=int,
+        nargs="*",
+        default=[],
+        help="also probe half everywhere with the loss scaled by 2^e, per exponent e (the probes use 2^16)",
+    )
+    parser.add_argument(
+        "--exact-fp16-sums",
+        action="store_true",
+        help="on cuda, forbid cuBLAS's float16 partial sums in half-precision matrix products "
+        "(torch.backends.cuda.matmul.allow_fp16_reduced_precision_reduction = False)",
     )
     parser.add_argument("--resolution", type=int, default=100)
     parser.add_argument("--device", default="cpu")
@@ -228,28 +287,43 @@ def main(argv: list[str] | None = None) -> dict:
     from nerfaug.nerf.trainer import Trainer
 
     torch.set_num_threads(args.threads)
+    # PyTorch lets cuBLAS add float16 products' partial sums in float16 unless told not to; a
+    # weight gradient sums over every sample of a batch (4096 rays x 48 samples at paper scale)
+    torch.backends.cuda.matmul.allow_fp16_reduced_precision_reduction = not args.exact_fp16_sums
     dtype = torch.float16 if args.half == "fp16" else torch.bfloat16
     data = load_data(args.data, 2, args.resolution)
     trainer = Trainer(data.initial, NerfConfig.preset(args.engine), seed=args.seed, device=args.device, progress=False)
-    report = {"engine": args.engine, "seed": args.seed, "half": args.half, "device": str(trainer.device), "probes": []}
+    report = {
+        "engine": args.engine,
+        "seed": args.seed,
+        "half": args.half,
+        "device": str(trainer.device),
+        "exact_fp16_sums": args.exact_fp16_sums,
+        "probes": [],
+    }
     for step in sorted(args.at_steps):
         start = time.perf_counter()
         trainer.train(step)
-        probe_result = probe(trainer, dtype)
+        probe_result = probe(trainer, dtype, tuple(args.probe_scales))
         probe_result["seconds"] = time.perf_counter() - start
         report["probes"].append(probe_result)
         print_probe(probe_result)
     # float32 first: the baseline the half-precision trainings are read against
-    plans = [(None, ())] + [(dtype, ())] + ([(dtype, tuple(args.train_keep))] if args.train_keep else [])
+    kept = [(part,) for part in args.train_keep] if args.train_each else [tuple(args.train_keep)]
+    kept = [parts for parts in kept if parts]
+    plans = [(None, (), LOSS_SCALE), (dtype, (), LOSS_SCALE)] + [(dtype, parts, LOSS_SCALE) for parts in kept]
+    plans += [(dtype, (), 2.0**exponent) for exponent in args.train_scales]
     report["train_half"] = [
-        train_half(data, args.engine, args.seed, args.train_half, args.device, kind, keep)
-        for kind, keep in (plans if args.train_half else [])
+        train_half(data, args.engine, args.seed, args.train_half, args.device, kind, keep, scale)
+        for kind, keep, scale in (plans if args.train_half else [])
     ]
-    for half, (kind, _) in zip(report["train_half"], plans):
+    for half, (kind, _, scale) in zip(report["train_half"], plans):
         kept = ", ".join(half["float32"]) or "none"
         precision = args.half if kind is not None else "float32"
         print(
-            f"trained {half['steps']} steps in {precision} (networks kept in float32: {kept}): "
+            f"trained {half['steps']} steps in {precision} (networks kept in float32: {kept}"
+            + (f", loss scale from 2^{math.log2(scale):.0f}" if kind == torch.float16 else "")
+            + "): "
             f"train PSNR {half['train_psnr']:.2f} dB, {half['skipped']} steps skipped by the scaler"
         )
     if args.json:

@@ -14,10 +14,13 @@
 # trials: one paper-scale trial (400 px, 10k steps, 200 test views) of the paper preset as it now
 #   is (fixed background, float32) on lego and one on mic, both at once on the GPU (their times
 #   are shared, their quality is not);
-# checks: fp16 autocast with the field's colour network kept in float32 (bench_precision.py; on
-#   2026-11-26 this alone trained as float32 does, while fp16 with the proposal or density networks
-#   in float32 stalled at 21.5 dB; BENCHMARKS.md), then the dense-view check of the paper preset in
-#   the time left.
+# checks: why fp16 autocast stalls the paper preset (on 2026-11-26 fp16 trained as float32 does
+#   only with the field's colour network kept in float32; BENCHMARKS.md). On the CPU the colour
+#   network's float16 gradient is mostly underflow at 4096 rays a step, yet training does not
+#   stall there, so two GPU-only suspects are measured: the loss scale (from 2^23, the scale
+#   tiny-cuda-nn's float16 modules work at: 2^16 times their own 128) and cuBLAS's float16
+#   partial sums (--exact-fp16-sums); then the dense-view check of the paper preset in the time
+#   left.
 # Everything lands in $OUT/gpu.tgz, re-packed after each stage, so a call cut short still
 # brings back what finished.
 set -u
@@ -59,9 +62,13 @@ if [ "$PART" = trials ]; then
     wait
     pack
 elif [ "$PART" = checks ]; then
-    echo "== half precision, colour network in float32, $(left) s left"
+    echo "== half precision: the loss scale from 2^23, $(left) s left"
     timeout $(( $(left) < 200 ? $(left) - 60 : 200 )) python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
-        --at-steps 1000 --train-half 1000 --train-keep color --json "$RES/precision.json" | tail -16
+        --at-steps 20 --train-half 1000 --train-scales 23 --json "$RES/precision-scale.json" | tail -10
+    pack
+    echo "== half precision: float32 partial sums in float16 products, $(left) s left"
+    timeout $(( $(left) < 200 ? $(left) - 60 : 200 )) python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
+        --at-steps 20 --train-half 1000 --exact-fp16-sums --json "$RES/precision-exact-sums.json" | tail -10
     pack
     echo "== dense-view check of paper, $(left) s left"
     timeout 120 python3 benchmarks/bench_dense.py --data data/lego100 --presets paper --device cuda \

@@ -45,3 +45,39 @@ def test_compare_counts_lost_entries_and_relative_error(bench):
     (group,) = bench.compare(reference, other).values()
     assert group["underflow"] == pytest.approx(1 / 2)  # 3.0 became 0 (of 2 non-zero entries)
     assert group["rel_error"] == pytest.approx((9 + 1) ** 0.5 / 5)
+
+
+def test_each_kept_part_and_each_loss_scale_is_its_own_training(bench, dataset):
+    report = bench.main(
+        ["--data", str(dataset), "--engine", "nerfacto-cpu", "--at-steps", "1", "--resolution", "24"]
+        + ["--train-half", "2", "--train-keep", "color", "sigmoid", "--train-each", "--train-scales", "20"]
+        + ["--probe-scales", "20"]
+    )
+    variants = report["probes"][0]["variants"]
+    # a power-of-two scale changes float16's rounding only where values underflow: never worse
+    scaled, plain = variants["half everywhere, loss x 2^20"]["groups"], variants["half everywhere"]["groups"]
+    assert scaled["field.color_mlp"]["rel_error"] <= plain["field.color_mlp"]["rel_error"] + 1e-6
+    trainings = report["train_half"]
+    assert [t["float32"] for t in trainings] == [[], [], ["color"], ["sigmoid"], []]
+    assert [t["init_scale"] for t in trainings] == [None, 2.0**16, 2.0**16, 2.0**16, 2.0**20]
+    assert trainings[-1]["trace"][0]["scale"] == 2.0**20
+
+
+def test_the_sigmoid_part_keeps_only_the_colour_output_in_float32(bench):
+    from nerfaug.nerf.config import NerfConfig
+    from nerfaug.nerf.registry import build_field
+
+    torch.manual_seed(0)
+    nerf_field = build_field(NerfConfig.preset("test"))
+    geometry = torch.randn(5, nerf_field.geo_feat_dim)
+    directions = torch.nn.functional.normalize(torch.randn(5, 3), dim=-1)
+    with torch.autocast("cpu", dtype=torch.float16):
+        half = nerf_field.color(geometry, directions)
+        with bench.float32_parts(("sigmoid",), "cpu"):
+            output_float32 = nerf_field.color(geometry, directions)
+        with bench.float32_parts(("color",), "cpu"):
+            all_float32 = nerf_field.color(geometry, directions)
+    assert half.dtype == torch.float16 and output_float32.dtype == torch.float32
+    # the network itself still ran in float16: its output differs from a float32 network's
+    assert torch.allclose(output_float32, all_float32, atol=2e-3) and not torch.equal(output_float32, all_float32)
+    assert nerf_field.color(geometry, directions).dtype == torch.float32  # restored outside
