@@ -13,6 +13,8 @@
 #           recorded run); the frozen code may not know row fields added later, so drop them:
 #           python3 -c "import json,sys; t=json.load(open(sys.argv[1])); [r.pop('uniform_fill', None) for r in t['runs']]; json.dump(t, open(sys.argv[2], 'w'))" docs/results/real-study-table.json "$TABLE"
 #   NERFAUG the nerfaug entry point of an environment with the project's dependencies
+#   WITH_CPU 1 to go on with the plan's optional engine, `cpu`, after both (the four scenes, then
+#           the held-back one), once every cell of the two planned engines is complete
 #
 # Afterwards, from main: `nerfaug study --summary-only --out OUT --table
 # docs/results/real-study-table.json --results-doc docs/results-real.md` records the new runs in
@@ -35,3 +37,8 @@ done
 for engine in nerfacto-cpu nerfacto-cpu-last-sample; do
     cell "$engine" "$DATA/moldGoldCape"
 done
+if [ "${WITH_CPU:-0}" = 1 ]; then
+    for scene in "$DATA/mic" "$DATA/maryRose" "$DATA/dtu_scan24" cow "$DATA/moldGoldCape"; do
+        cell cpu "$scene"
+    done
+fi
