@@ -263,6 +263,34 @@ def test_a_regime_part_way_through_decides_no_real_scene_hypothesis():
         assert r4(part)[0] == "open"
 
 
+def test_the_optional_cpu_engine_decides_nothing_until_its_four_scenes_are_complete():
+    """Both planned engines complete without a winner; `cpu`, run after them, with a winner: part
+    of its scenes leaves the verdicts as they were (and says so), all four make R1 supported."""
+    from nerfaug.report.study_hypotheses import r1, r1_winners, r2, r4
+
+    def study_with_cpu(cpu_scenes):
+        flat = {"ours-batch-sharp": 0.0, "ours": 0.0, "entropy-sampling": 0.0, "fisherrf-sampling": 0.0}
+        table = real_table(flat)
+        for engine, offsets in (
+            ("nerfacto-cpu-last-sample", flat),
+            ("cpu", {"ours-batch-sharp": 1.0, "ours": -1.0, "entropy-sampling": 0.0, "fisherrf-sampling": 1.0}),
+        ):
+            other = real_table(offsets, engine=engine)
+            table["runs"] += [r for r in other["runs"] if engine != "cpu" or r["scene"] in cpu_scenes]
+            table["plan"]["engines"] += other["plan"]["engines"]
+        return collect_study(table)
+
+    part = study_with_cpu({"mic", "maryRose"})
+    assert r1(part)[0] == "not supported" and "cpu: 2 of 4 scenes complete, decides nothing yet" in r1(part)[1]
+    assert "cpu" not in r1_winners(part)
+    assert r2(part)[0] != "contradicted" and "decides nothing yet" in r2(part)[1]
+    assert r4(part)[0] == "not applicable"
+    whole = study_with_cpu({"mic", "maryRose", "dtu_scan24", "cow"})
+    assert r1_winners(whole)["cpu"] == ["ours-batch-sharp"] and r1(whole)[0] == "supported"
+    assert r2(whole)[0] == "contradicted"  # entropy-sampling below fisherrf-sampling on every seed
+    assert r4(whole)[0] == "open" and "ours-batch-sharp on cpu: not run yet" in r4(whole)[1]
+
+
 def test_the_held_back_scene_is_judged_on_its_own_never_in_the_mean_across_scenes(tmp_path):
     """The plan's regime test is the mean over its four scenes; the held-back scene replicates it.
     Its runs (ours far ahead there) move neither the regime nor the advice's scenes."""
