@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -112,8 +113,11 @@ def test_a_session_saved_before_digests_opens_with_a_warning_naming_its_checkpoi
     (run / "session.json").write_text(json.dumps(data))
     with pytest.warns(UserWarning, match="checkpoint.pt: session.json records no digest"):
         session = CaptureSession.open(run)
-    session.save()  # records the digest: no warning from now on
-    CaptureSession.open(run)
+    session.save()  # records the digest, although the model did not change: no warning from now on
+    assert json.loads((run / "session.json").read_text())["integrity"]["checkpoint"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        CaptureSession.open(run)
 
 
 def test_a_command_scope_releases_what_it_held_and_holding_twice_does_not_wait(run):

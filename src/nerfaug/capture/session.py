@@ -293,6 +293,9 @@ class CaptureSession(SessionFolder):
         frames = self.frames()
         if state.integrity.checkpoint is None:
             integrity.check_unrecorded_checkpoint(checkpoint, trainer, state.seed, state.engine, frames)
+            # Accepted as found: its digest goes into session.json at the next save, even one that
+            # has no new model to write (else every open would warn again).
+            state.integrity.checkpoint = integrity.sha256_file(checkpoint)
         if len(frames) < in_model:
             raise SessionError(
                 f"{self.dataset_split().listing} lists {len(frames)} frames but the checkpoint was "
