@@ -81,11 +81,14 @@ def float32_parts(parts: tuple[str, ...], device_type: str):
 
         return wrapped
 
-    def sigmoid_float32(self, geometry, directions):
-        # the colour network under autocast, its output activation (and that activation's
-        # backward, which PyTorch computes from the output) in float32
-        features = torch.cat([field.spherical_harmonics(directions, self.sh_levels), geometry], dim=-1)
-        return torch.sigmoid(self.color_mlp(features).float())
+    def sigmoid_float32(self, *tensors):
+        # the colour network under autocast, its output handed on in float32, so the field's own
+        # sigmoid (and that activation's backward, computed from its output) runs in float32
+        hook = self.color_mlp.register_forward_hook(lambda _module, _inputs, output: output.float())
+        try:
+            return saved["color"](self, *tensors)
+        finally:
+            hook.remove()
 
     try:
         for part in parts:

@@ -62,14 +62,15 @@ if [ "$PART" = trials ]; then
     wait
     pack
 elif [ "$PART" = checks ]; then
+    precision() {  # name, then bench_precision.py's options beyond float32 and plain fp16
+        timeout $(( $(left) < 200 ? $(left) - 60 : 200 )) python3 benchmarks/bench_precision.py --data data/lego100 \
+            --engine paper --device cuda --at-steps 20 --train-half 1000 "${@:2}" --json "$RES/precision-$1.json" | tail -10
+        pack
+    }
     echo "== half precision: the loss scale from 2^23, $(left) s left"
-    timeout $(( $(left) < 200 ? $(left) - 60 : 200 )) python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
-        --at-steps 20 --train-half 1000 --train-scales 23 --json "$RES/precision-scale.json" | tail -10
-    pack
+    precision scale --train-scales 23
     echo "== half precision: float32 partial sums in float16 products, $(left) s left"
-    timeout $(( $(left) < 200 ? $(left) - 60 : 200 )) python3 benchmarks/bench_precision.py --data data/lego100 --engine paper --device cuda \
-        --at-steps 20 --train-half 1000 --exact-fp16-sums --json "$RES/precision-exact-sums.json" | tail -10
-    pack
+    precision exact-sums --exact-fp16-sums
     echo "== dense-view check of paper, $(left) s left"
     timeout 120 python3 benchmarks/bench_dense.py --data data/lego100 --presets paper --device cuda \
         --out "$RES/dense-paper.json" | tail -4

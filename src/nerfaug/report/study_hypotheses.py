@@ -136,8 +136,8 @@ def _pending(study: Study) -> list[str]:
     lines = []
     for engine in OPTIONAL_REAL_ENGINES:
         cells = [c for c in study.cells if c.engine == engine and c.scene in REAL_SCENES]
-        if cells and not _real_cells(study, engine)[1]:
-            complete = sum(c.complete for c in cells)
+        complete = sum(c.complete for c in cells)
+        if cells and complete < len(REAL_SCENES):
             lines.append(f"{engine}: {complete} of {len(REAL_SCENES)} scenes complete, decides nothing yet")
     return lines
 
