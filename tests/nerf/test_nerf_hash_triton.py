@@ -118,3 +118,40 @@ def test_no_points_give_no_features_and_no_gradient():
         """
     )
     assert result == {"shape": [0, 6], "gradient": 0.0}
+
+
+def test_a_trial_batchs_stacked_table_through_the_fused_kernels():
+    """Each run's points read and train only their own block of a stacked table."""
+    result = run_interpreted(
+        """
+        import json, torch
+        from nerfaug.nerf import hash_triton
+        from nerfaug.nerf.batch import StackedHashEncoding
+        from nerfaug.nerf.encoding import HashEncoding
+        hash_triton.BLOCK = 1024
+        g = torch.Generator().manual_seed(0)
+        parts = [HashEncoding(4, 2, 12, 8, 128, kernel="triton") for _ in range(3)]
+        for part in parts:
+            with torch.no_grad():
+                part.table.normal_(generator=g)
+        reference = StackedHashEncoding(parts)
+        reference.kernel = "torch"
+        fused = StackedHashEncoding(parts)
+        x = torch.rand(3, 700, 3, generator=g)
+        grad = torch.randn(3, 700, 8, generator=g)
+        expected, got = reference(x), fused(x)
+        expected.backward(grad)
+        got.backward(grad)
+        alone = parts[1](x[1])
+        print(json.dumps({
+            "fused": fused.fused(x),
+            "features": (got - expected).abs().max().item(),
+            "run": (got[1] - alone).abs().max().item(),
+            "gradient": (fused.table.grad - reference.table.grad).abs().max().item(),
+            "gradient_scale": reference.table.grad.abs().max().item(),
+        }))
+        """
+    )
+    assert result["fused"] is True
+    assert result["features"] <= 1e-5 and result["run"] <= 1e-5
+    assert result["gradient"] <= 1e-5 * result["gradient_scale"]

@@ -11,8 +11,8 @@ from typing import Annotated, Literal
 import tyro
 
 from nerfaug.device import device_kind
+from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
 from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
-from nerfaug.nerf.config import NerfConfig
 from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
 
@@ -95,6 +95,12 @@ class ExperimentConfig:
     device: Literal["auto", "cpu", "cuda"] = "auto"
     """where runs train, select and evaluate: auto (cuda when there is a GPU, else cpu), cpu or cuda."""
 
+    # Trial batches train K runs in lockstep, one kernel serving all (`nerfaug.nerf.batch`): on a
+    # GPU many times the runs a second; on a CPU about 1.1x (BENCHMARKS.md, "Trial batches"). Their
+    # engine rounds otherwise than a run alone, so it is fingerprinted as its own engine version.
+    batch: int = 0
+    """runs trained together as one trial batch; 1: each run alone; 0: auto (1 on a CPU, more on a GPU)."""
+
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     """options of the selection methods (every one fingerprinted); a method's own settings apply over them."""
     # Fingerprinted when set: compiled kernels round differently.
@@ -129,9 +135,19 @@ class ExperimentConfig:
             record["compile"] = self.compile
         if self.layouts != 1:  # likewise: one layout is what every earlier result ran
             record["layouts"] = self.layouts
+        if self.batched():  # likewise: the reference engine is what every earlier result ran
+            record["engine_version"] = BATCH_ENGINE_VERSION
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).to_dict().items()})
         return json.loads(json.dumps(record, default=str))
+
+    def batched(self) -> bool:
+        """Whether runs train as trial batches: `batch` > 1, or 0 (auto) on a GPU with an engine
+        that batches (`nerfaug.nerf.config.batch_support`). The batch's size does not change a
+        run's numbers beyond rounding; only this choice is fingerprinted."""
+        if self.batch != 0:
+            return self.batch > 1
+        return device_kind(self.device) == "cuda" and batch_support(NerfConfig.preset(self.engine)) is None
 
     def replace(self, **changes) -> ExperimentConfig:
         return dataclasses.replace(self, **changes)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 import importlib.metadata
 import inspect
+import json
 import platform
 import time
 from dataclasses import asdict, dataclass, field
@@ -40,6 +41,8 @@ from nerfaug.experiment.store import (
 )
 from nerfaug.hemisphere import angles_from_pose
 from nerfaug.maps import plot_hemisphere_map
+from nerfaug.nerf.batch_trainer import BatchTrainer
+from nerfaug.nerf.config import BATCH_ENGINE_VERSION
 from nerfaug.nerf.trainer import Trainer
 from nerfaug.oracle import PoolOracle
 from nerfaug.scenes import BUILTIN_SCENES
@@ -258,56 +261,104 @@ def save_view_uncertainty(folder: Path, trainer, test: Views, selection_config, 
     )
 
 
-def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Path, progress: bool = False) -> dict:
-    """Run one (scene, method, trial) and write its folder; result.json is written last.
+@dataclass
+class RunStart:
+    """A run's folder, seed, views and engine, from which it trains (alone or in a batch)."""
 
-    Returns the result record (also in result.json).
-    """
-    # A sweep worker's entry point (in-process, pool or Ray): its process-wide torch settings.
-    configure_process(threads=config.threads_per_run)
+    key: RunKey
+    folder: Path
+    seed: int
+    data: SceneData
+    engine: object  # NerfConfig
+
+
+def start_run(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Path) -> RunStart:
+    """Create run `key`'s folder and load its views (the first steps of every run)."""
     folder = key.folder(root)
     start_run_folder(folder)
-    seed = config.seed + key.trial
-    timing: dict[str, float] = {}
-
-    start = time.perf_counter()
     data = load_scene_data(dataset_dir, config, cache_dir=dataset_cache_dir(root), layout=key.trial)
-    engine = config.engine_config(key.scene)
-    trainer = Trainer(data.initial, engine, seed=seed, device=config.device, progress=progress, compile=config.compile)
-    timing["setup"] = time.perf_counter() - start
+    return RunStart(key, folder, config.seed + key.trial, data, config.engine_config(key.scene))
 
-    start = time.perf_counter()
-    train_with_progress(trainer, config.add_at_step, folder)
-    timing["train_before"] = time.perf_counter() - start
 
+def choose_views(run: RunStart, trained, config: ExperimentConfig, timing: dict) -> tuple[object, list[int], Views]:
+    """The method's views for `run` at the add step, from `trained` (a `Trainer` or a batch's
+    `TrainedRun`), and the oracle's images of them; times both phases into `timing`.
+
+    Returns:
+        the `Selection`, the chosen pool indices, and the new views.
+    """
     start = time.perf_counter()
-    generator = torch.Generator().manual_seed(seed)
+    generator = torch.Generator().manual_seed(run.seed)
     selection = select_views(
-        key.method,
-        trainer.model,
-        trainer.train_views.cameras,
-        data.pool.cameras,
+        run.key.method,
+        trained.model,
+        trained.train_views.cameras,
+        run.data.pool.cameras,
         config.n_new,
         generator,
         config.selection,
     )
     timing["selection"] = time.perf_counter() - start
-
     start = time.perf_counter()
     chosen = [int(i) for i in selection.indices]
     # The experiment's oracle is its pool: asked for the chosen poses, it answers with the pool's
     # images of them, as a robot's camera would with new ones (`nerfaug.oracle`).
-    new_views = PoolOracle(data.pool).capture(data.pool.cameras.camera_to_world[chosen])
+    new_views = PoolOracle(run.data.pool).capture(run.data.pool.cameras.camera_to_world[chosen])
     timing["oracle"] = time.perf_counter() - start
+    return selection, chosen, new_views
+
+
+def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Path, progress: bool = False) -> dict:
+    """Run one (scene, method, trial) alone and write its folder; result.json is written last.
+
+    Returns the result record (also in result.json).
+    """
+    # A sweep worker's entry point (in-process, pool or Ray): its process-wide torch settings.
+    configure_process(threads=config.threads_per_run)
+    timing: dict[str, float] = {}
+
+    start = time.perf_counter()
+    run = start_run(key, dataset_dir, config, root)
+    trainer = Trainer(
+        run.data.initial, run.engine, seed=run.seed, device=config.device, progress=progress, compile=config.compile
+    )
+    timing["setup"] = time.perf_counter() - start
+
+    start = time.perf_counter()
+    train_with_progress(trainer, config.add_at_step, run.folder)
+    timing["train_before"] = time.perf_counter() - start
+
+    selection, chosen, new_views = choose_views(run, trainer, config, timing)
     trainer.add_views(new_views)
 
     start = time.perf_counter()
-    train_with_progress(trainer, config.steps, folder)
+    train_with_progress(trainer, config.steps, run.folder)
     timing["train_after"] = time.perf_counter() - start
+    return finish_run(run, trainer, config, selection, chosen, timing, progress)
 
+
+def finish_run(
+    run: RunStart,
+    trained,
+    config: ExperimentConfig,
+    selection,
+    chosen: list[int],
+    timing: dict,
+    progress: bool = False,
+    batch: dict | None = None,
+) -> dict:
+    """Evaluate a trained run on its test views and write its folder, result.json last.
+
+    Args:
+        trained: a `Trainer`, or a trial batch's `TrainedRun` (model, train_views, history, device).
+        batch: for a run of a trial batch, {"size", "engine_version"}, kept in its record.
+
+    Returns the result record (also in result.json).
+    """
+    key, folder, data, seed = run.key, run.folder, run.data, run.seed
     start = time.perf_counter()
     evaluation = evaluate_views(
-        lambda cameras, index: trainer.model.render_image(cameras, index)["rgb"],
+        lambda cameras, index: trained.model.render_image(cameras, index)["rgb"],
         data.test,
         lpips=cached_lpips(),
         save_dir=folder / FILES.renders,
@@ -318,7 +369,7 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
 
     if config.view_uncertainty:
         start = time.perf_counter()
-        save_view_uncertainty(folder, trainer, data.test, config.selection, seed)
+        save_view_uncertainty(folder, trained, data.test, config.selection, seed)
         timing["view_uncertainty"] = time.perf_counter() - start
     timing["total"] = sum(timing.values())
 
@@ -339,13 +390,13 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
         train_label="initial views",
     )
     write_metrics(folder, evaluation.to_dict())
-    write_history(folder, trainer.history)
+    write_history(folder, trained.history)
     spec = get_method(key.method)  # the settings the method ran with: the sweep's, with the method's own over them
     write_config(
         folder,
         asdict(config),
-        asdict(engine),
-        device=describe_device(trainer.device),
+        asdict(run.engine),
+        device=describe_device(trained.device),
         selection=spec.effective_config(config.selection).to_dict(),
         method=spec.definition(),
     )
@@ -364,7 +415,94 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
         "timing": timing,
         "host": platform.node(),
         "torch": torch.__version__,
-        "device": describe_device(trainer.device),
+        "device": describe_device(trained.device),
     }
+    if batch is not None:
+        result["engine_version"], result["batch_size"] = batch["engine_version"], batch["size"]
     write_result(folder, result)
     return result
+
+
+def run_trial_batch(
+    keys: list[RunKey], dataset_dirs: dict[str, Path], config: ExperimentConfig, root: Path, progress: bool = False
+) -> dict[RunKey, dict | BaseException]:
+    """Run (scene, method, trial) runs of one engine as one trial batch, trained in lockstep
+    (`nerfaug.nerf.batch_trainer.BatchTrainer`), and write each run's folder as `run_trial` does.
+
+    Every run's record is what it would be alone (its seed, views, selection, evaluation and
+    fingerprint), with the batched engine's version and the batch's size. A run that fails
+    (at its start, in training, selection or evaluation) fails alone.
+
+    Args:
+        dataset_dirs: each scene's dataset folder, by the scene name in `keys`.
+
+    Returns:
+        Per key, its result record, or the exception it failed with.
+    """
+    configure_process(threads=config.threads_per_run)
+    outcomes: dict[RunKey, dict | BaseException] = {}
+    timings: dict[RunKey, dict] = {}
+    runs: list[RunStart] = []
+    start = time.perf_counter()
+    for key in keys:
+        try:
+            runs.append(start_run(key, dataset_dirs[key.scene], config, root))
+        except Exception as error:  # noqa: BLE001 (one run's failure is its own)
+            outcomes[key] = error
+    if not runs:
+        return outcomes
+    engines = {json.dumps(asdict(run.engine), sort_keys=True) for run in runs}
+    if len(engines) != 1:
+        raise ValueError("a trial batch trains runs of one engine configuration; group runs by engine first")
+    trainer = BatchTrainer(
+        [run.data.initial for run in runs], runs[0].engine, [run.seed for run in runs], config.device, progress=progress
+    )
+    batch = {"size": len(runs), "engine_version": BATCH_ENGINE_VERSION}
+    setup = (time.perf_counter() - start) / len(runs)
+    for run in runs:
+        timings[run.key] = {"setup": setup}
+
+    def train_to(step: int, phase: str) -> None:
+        begin = time.perf_counter()
+        trainer.train(step, callback=lambda at: _batch_progress(runs, trainer, at))
+        _batch_progress(runs, trainer, trainer.step)
+        for run in runs:  # each run's share of the batch's time
+            timings[run.key][phase] = (time.perf_counter() - begin) / len(runs)
+
+    def alive(index: int, run: RunStart) -> bool:
+        failure = trainer.failure(index)
+        if failure is not None and run.key not in outcomes:
+            outcomes[run.key] = failure
+        return run.key not in outcomes
+
+    train_to(config.add_at_step, "train_before")
+    chosen_by_run = {}
+    for index, run in enumerate(runs):
+        if not alive(index, run):
+            continue
+        try:
+            selection, chosen, new_views = choose_views(run, trainer.trained_run(index), config, timings[run.key])
+            trainer.add_views(index, new_views)
+            chosen_by_run[run.key] = (selection, chosen)
+        except Exception as error:  # noqa: BLE001
+            outcomes[run.key] = error
+    train_to(config.steps, "train_after")
+    for index, run in enumerate(runs):
+        if not alive(index, run):
+            continue
+        selection, chosen = chosen_by_run[run.key]
+        try:
+            outcomes[run.key] = finish_run(
+                run, trainer.trained_run(index), config, selection, chosen, timings[run.key], progress, batch
+            )
+        except Exception as error:  # noqa: BLE001
+            outcomes[run.key] = error
+    return outcomes
+
+
+def _batch_progress(runs: list[RunStart], trainer: BatchTrainer, step: int) -> None:
+    """Every run of a batch records the step in its folder, as `train_with_progress` does."""
+    for run in runs:
+        write_progress(run.folder, step)
+    if on_progress is not None:
+        on_progress()

@@ -24,7 +24,7 @@ from nerfaug.data import find_split, has_split, require_split
 from nerfaug.device import device_kind
 from nerfaug.experiment import protocol
 from nerfaug.experiment.config import ExperimentConfig
-from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, scene_folder
+from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, run_trial_batch, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.scene_views import split_captured
 from nerfaug.experiment.store import (
@@ -40,7 +40,7 @@ from nerfaug.experiment.store import (
     read_result,
     run_fingerprint,
 )
-from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.config import NerfConfig, batch_support
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
 from nerfaug.selection import METHODS, get_method
@@ -139,6 +139,10 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
     ):
         value = getattr(config, name)
         _need(isinstance(value, int) and value >= 1, name, value, "must be an integer >= 1")
+    _need(isinstance(config.batch, int) and config.batch >= 0, "batch", config.batch, "must be an integer >= 0")
+    if config.batch > 1:
+        reason = batch_support(NerfConfig.preset(config.engine))
+        _need(reason is None, "batch", config.batch, f"engine {config.engine!r}: {reason}")
     _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
     _need(config.add_at_step >= 0, "add_at_step", config.add_at_step, "must be >= 0")
     _need(
@@ -280,9 +284,56 @@ def sweep_record(config: ExperimentConfig, command: list[str] | None = None, dat
     }
 
 
-def _run_and_report(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Path) -> dict:
-    """A run as a backend executes it (top-level so process pools and Ray can pickle it)."""
-    return run_trial(key, dataset_dir, config, root, progress=False)
+def _run_unit(keys: list[RunKey], datasets: dict[str, Path], config: ExperimentConfig, root: Path) -> list[tuple]:
+    """Runs as a backend executes them (top-level so process pools and Ray can pickle it): one run
+    alone, or a trial batch. Returns (key, result, None) or (key, None, (error text, traceback))
+    per run: a failed run fails alone."""
+    if not config.batched():
+        (key,) = keys
+        try:
+            return [(key, run_trial(key, datasets[key.scene], config, root, progress=False), None)]
+        except Exception as error:  # noqa: BLE001 (one failed run must not end the sweep)
+            return [(key, None, _failure_text(error))]
+    try:
+        outcomes = run_trial_batch(keys, datasets, config, root, progress=False)
+    except Exception as error:  # noqa: BLE001 (the batch as a whole failed: each of its runs did)
+        return [(key, None, _failure_text(error)) for key in keys]
+    return [
+        (key, outcome, None) if isinstance(outcome, dict) else (key, None, _failure_text(outcome))
+        for key, outcome in outcomes.items()
+    ]
+
+
+def _failure_text(error: BaseException) -> tuple[str, str]:
+    """An error's one-line text and its traceback."""
+    text = "".join(traceback.format_exception_only(type(error), error)).strip()
+    return text, "".join(traceback.format_exception(error))
+
+
+def plan_units(todo: list[RunKey], config: ExperimentConfig, size: int) -> list[list[RunKey]]:
+    """The runs to do as the backend's units of work: one run each, or, when `config.batched()`,
+    trial batches of at most `size` runs of one engine configuration (scenes whose field learning
+    rate differs train apart), in plan order, so a sweep stopped part-way leaves whole trials."""
+    if not config.batched():
+        return [[key] for key in todo]
+    groups: dict[str, list[RunKey]] = {}
+    for key in todo:
+        groups.setdefault(repr(config.engine_config(key.scene)), []).append(key)
+    units = [group[i : i + size] for group in groups.values() for i in range(0, len(group), size)]
+    return sorted(units, key=lambda unit: todo.index(unit[0]))
+
+
+def batch_size(config: ExperimentConfig, runs: int) -> int:
+    """How many runs a trial batch holds: `config.batch` when set, else as many as the device's
+    free memory holds by `nerfaug.nerf.batch.estimated_run_bytes` (at most `runs` and
+    `MAX_AUTO_BATCH`), with a line saying so."""
+    if config.batch > 1:
+        return config.batch
+    from nerfaug.nerf.batch import auto_batch_size  # torch, only where runs are batched
+
+    size, text = auto_batch_size(NerfConfig.preset(config.engine), config.device, runs)
+    console.print(text)
+    return size
 
 
 def run_sweep(
@@ -348,8 +399,11 @@ def run_sweep(
         kept = f"{skipped} completed run(s) kept" + (f", {elsewhere} recorded in the table" if elsewhere else "")
         console.print(f"{kept}, {len(todo)} to run")
 
+    units = plan_units(todo, config, batch_size(config, len(todo)) if config.batched() and todo else 1)
+    if config.batched() and todo:
+        console.print(f"{len(todo)} run(s) in {len(units)} trial batch(es) of up to {max(map(len, units))}")
     execute = {"local": _execute_local, "ray": _execute_ray}[backend]
-    new_results, failed = execute(todo, datasets, config, root, workers, address, progress)
+    new_results, failed = execute(units, datasets, config, root, workers, address, progress)
     return SweepOutcome(results + new_results, failed, skipped)
 
 
@@ -409,60 +463,62 @@ class _Display:
         return f"runs: {self.done} done, {len(self.running)} running, {self.failed} failed"
 
 
-def _execute_local(todo, datasets, config, root, workers, address, progress):
+def _execute_local(units, datasets, config, root, workers, address, progress):
     results, failed = [], {}
-    with _Display(len(todo), root, config.steps, progress) as display:
+    total = sum(len(unit) for unit in units)
+    with _Display(total, root, config.steps, progress) as display:
         if workers <= 1:
-            for key in todo:
-                display.started(key)
+            for unit in units:
+                for key in unit:
+                    display.started(key)
+                protocol.on_progress = display.poll  # the display is live here: poll it from the runs' writes
                 try:
-                    results.append(_run_in_process(key, datasets[key.scene], config, root, display))
-                    display.finished(key, True)
-                except Exception as error:  # one failed run must not end the sweep
-                    failed[str(key)] = _describe_failure(key, error, root)
-                    display.finished(key, False)
+                    outcomes = _run_unit(unit, datasets, config, root)
+                finally:
+                    protocol.on_progress = None
+                _collect(outcomes, results, failed, root, display)
             return results, failed
         # Spawned workers: each run sets its own thread count; fork would inherit torch's pools.
         context = multiprocessing.get_context("spawn")
         with futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
             pending = {}
-            for key in todo:
-                pending[pool.submit(_run_and_report, key, datasets[key.scene], config, root)] = key
-                display.queue(key)
+            for unit in units:
+                pending[pool.submit(_run_unit, unit, datasets, config, root)] = unit
+                for key in unit:
+                    display.queue(key)
             while pending:
                 done, _ = futures.wait(pending, timeout=0.5, return_when=futures.FIRST_COMPLETED)
                 display.poll()
                 for future in done:
-                    key = pending.pop(future)
+                    unit = pending.pop(future)
                     try:
-                        results.append(future.result())
-                        display.finished(key, True)
-                    except Exception as error:
-                        failed[str(key)] = _describe_failure(key, error, root)
-                        display.finished(key, False)
+                        outcomes = future.result()
+                    except Exception as error:  # the worker itself died (e.g. killed for memory)
+                        outcomes = [(key, None, _failure_text(error)) for key in unit]
+                    _collect(outcomes, results, failed, root, display)
     return results, failed
 
 
-def _run_in_process(key, dataset_dir, config, root, display: _Display) -> dict:
-    # In this process the display is live, so poll it from the run's own progress writes.
-    protocol.on_progress = lambda: display.poll()
-    try:
-        return run_trial(key, dataset_dir, config, root, progress=False)
-    finally:
-        protocol.on_progress = None
+def _collect(outcomes: list[tuple], results: list, failed: dict, root: Path, display: _Display) -> None:
+    """File a unit's outcomes: results kept, failures printed and kept in their run folders."""
+    for key, result, failure in outcomes:
+        if failure is None:
+            results.append(result)
+        else:
+            failed[str(key)] = _record_failure(key, *failure, root)
+        display.finished(key, failure is None)
 
 
-def _describe_failure(key: RunKey, error: BaseException, root: Path) -> str:
+def _record_failure(key: RunKey, text: str, trace: str, root: Path) -> str:
     """Print why a run failed and keep the reason in its folder (the report shows it)."""
-    text = "".join(traceback.format_exception_only(type(error), error)).strip()
     console.print(f"[red]run {key} failed: {text}")
     folder = key.folder(root)
     if folder.exists():
-        write_error(folder, text, "".join(traceback.format_exception(error)))
+        write_error(folder, text, trace)
     return text
 
 
-def _execute_ray(todo, datasets, config, root, workers, address, progress):
+def _execute_ray(units, datasets, config, root, workers, address, progress):
     try:
         import ray
     except ImportError as error:
@@ -480,7 +536,7 @@ def _execute_ray(todo, datasets, config, root, workers, address, progress):
 
     # A run asks Ray for a GPU exactly when it will compute on one.
     use_gpu = device_kind(config.device) == "cuda" and ray.cluster_resources().get("GPU", 0) > 0
-    remote = ray.remote(_run_and_report).options(
+    remote = ray.remote(_run_unit).options(
         num_cpus=config.threads_per_run,
         num_gpus=1 if use_gpu else 0,
         max_retries=2,
@@ -488,22 +544,22 @@ def _execute_ray(todo, datasets, config, root, workers, address, progress):
     )
     results, failed = [], {}
     try:
-        with _Display(len(todo), root, config.steps, progress) as display:
+        with _Display(sum(len(unit) for unit in units), root, config.steps, progress) as display:
             refs = {}
-            for key in todo:
-                refs[remote.remote(key, datasets[key.scene], config, root)] = key
-                display.queue(key)
+            for unit in units:
+                refs[remote.remote(unit, datasets, config, root)] = unit
+                for key in unit:
+                    display.queue(key)
             while refs:
                 ready, _ = ray.wait(list(refs), num_returns=1, timeout=0.5)
                 display.poll()
                 for ref in ready:
-                    key = refs.pop(ref)
+                    unit = refs.pop(ref)
                     try:
-                        results.append(ray.get(ref))
-                        display.finished(key, True)
-                    except Exception as error:
-                        failed[str(key)] = _describe_failure(key, error, root)
-                        display.finished(key, False)
+                        outcomes = ray.get(ref)
+                    except Exception as error:  # the task itself failed (after Ray's retries)
+                        outcomes = [(key, None, _failure_text(error)) for key in unit]
+                    _collect(outcomes, results, failed, root, display)
     finally:
         if started_here:
             ray.shutdown()

@@ -267,6 +267,19 @@ PRESETS["nerfacto-cpu-last-sample"] = replace(PRESETS["nerfacto-cpu"], backgroun
 VARIANT_SEPARATOR = "+"
 
 
+BATCH_ENGINE_VERSION = "batched-1"
+"""The arithmetic of trial batches (`nerfaug.nerf.batch`), recorded with every run they train: a
+run alone (`Trainer`, the reference engine) rounds otherwise, so results of the two are never
+mixed in one cell of a study."""
+
+
+def batch_support(config: NerfConfig) -> str | None:
+    """Why engine `config` cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
+    if config.sampler != "proposal":
+        return f"trial batches need the proposal sampler; this engine uses {config.sampler!r}: run it with batch 1"
+    return None
+
+
 def _setting(base: NerfConfig, name: str, text: str, where: str):
     """`text` as a value of the field `name`, typed like the base preset's value."""
     known = {f.name for f in fields(NerfConfig)}

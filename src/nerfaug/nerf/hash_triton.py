@@ -50,9 +50,13 @@ def vertex(sx, sy, sz, res, fx, fy, fz, dense, mask, offset, corner: tl.constexp
 
 
 @triton.jit
-def level_setup(x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, BLOCK: tl.constexpr):
+def level_setup(
+    x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS: tl.constexpr, BLOCK: tl.constexpr
+):
     """This program's level, points (indices, validity), the points scaled to the level's
-    grid, and the level's constants (resolution, factors per axis, dense or not, offset)."""
+    grid, and the level's constants (resolution, factors per axis, dense or not), and each
+    point's offset in the table: its run's tables (a trial batch's run k holds points
+    k * per_run to (k + 1) * per_run - 1 and the k-th block of LEVELS tables), then the level's."""
     level = tl.program_id(1)
     points = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     valid = points < n
@@ -62,16 +66,17 @@ def level_setup(x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, BLOCK: tl.
     sy = scale * tl.load(x_ptr + points * 3 + 1, mask=valid, other=0.0)
     sz = scale * tl.load(x_ptr + points * 3 + 2, mask=valid, other=0.0)
     fx, fy, fz = tl.load(fac_ptr + level * 3), tl.load(fac_ptr + level * 3 + 1), tl.load(fac_ptr + level * 3 + 2)
-    return level, points, valid, res, sx, sy, sz, fx, fy, fz, level < dense_levels, level * table_size
+    offset = ((points // per_run) * LEVELS + level) * table_size
+    return level, points, valid, res, sx, sy, sz, fx, fy, fz, level < dense_levels, offset
 
 
 @triton.jit
 def forward_kernel(
-    x_ptr, table_ptr, res_ptr, fac_ptr, out_ptr, n, dense_levels, table_size, mask,
+    x_ptr, table_ptr, res_ptr, fac_ptr, out_ptr, n, dense_levels, table_size, mask, per_run,
     LEVELS: tl.constexpr, F: tl.constexpr, F_BLOCK: tl.constexpr, BLOCK: tl.constexpr,
 ):  # fmt: skip
     level, points, valid, res, sx, sy, sz, fx, fy, fz, dense, offset = level_setup(
-        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, BLOCK
+        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS, BLOCK
     )
     features = tl.arange(0, F_BLOCK)
     where = valid[:, None] & (features < F)[None, :]
@@ -85,11 +90,11 @@ def forward_kernel(
 
 @triton.jit
 def backward_kernel(
-    x_ptr, grad_ptr, res_ptr, fac_ptr, grad_table_ptr, n, dense_levels, table_size, mask,
+    x_ptr, grad_ptr, res_ptr, fac_ptr, grad_table_ptr, n, dense_levels, table_size, mask, per_run,
     LEVELS: tl.constexpr, F: tl.constexpr, F_BLOCK: tl.constexpr, BLOCK: tl.constexpr,
 ):  # fmt: skip
     level, points, valid, res, sx, sy, sz, fx, fy, fz, dense, offset = level_setup(
-        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, BLOCK
+        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS, BLOCK
     )
     features = tl.arange(0, F_BLOCK)
     where = valid[:, None] & (features < F)[None, :]
@@ -99,11 +104,13 @@ def backward_kernel(
         tl.atomic_add(grad_table_ptr + row[:, None] * F + features[None, :], grad * weight[:, None], mask=where)
 
 
-def _launch(kernel, x: Tensor, tensor: Tensor, out: Tensor, encoding) -> None:
-    """Run `kernel` over every (block of points, level) with the encoding's constants."""
+def _launch(kernel, x: Tensor, tensor: Tensor, out: Tensor, encoding, per_run: int | None = None) -> None:
+    """Run `kernel` over every (block of points, level) with the encoding's constants; points
+    `per_run` at a time belong to the successive runs of a trial batch (None: one run)."""
     levels, features = encoding.num_levels, encoding.features_per_level
     if x.shape[0] == 0:  # no points (no live sample in a batch): nothing to launch
         return
+    per_run = x.shape[0] if per_run is None else per_run
     grid = (triton.cdiv(x.shape[0], BLOCK), levels)
     kernel[grid](
         x,
@@ -115,6 +122,7 @@ def _launch(kernel, x: Tensor, tensor: Tensor, out: Tensor, encoding) -> None:
         encoding.dense_levels,
         encoding.table_size,
         encoding.table_size - 1,
+        max(per_run, 1),
         LEVELS=levels,
         F=features,
         F_BLOCK=triton.next_power_of_2(features),
@@ -124,21 +132,24 @@ def _launch(kernel, x: Tensor, tensor: Tensor, out: Tensor, encoding) -> None:
 
 class FusedHashInterpolation(torch.autograd.Function):
     """`HashEncoding`'s features of points (n, 3) in [0, 1] -> (n, levels * features), through
-    the Triton kernels. Gradients reach the table only (the positions' are not computed)."""
+    the Triton kernels. Gradients reach the table only (the positions' are not computed).
+
+    For a trial batch's stacked encoding (`nerfaug.nerf.batch.StackedHashEncoding`), `per_run`
+    points at a time belong to the successive runs, each reading its own block of the table."""
 
     @staticmethod
-    def forward(ctx, x: Tensor, table: Tensor, encoding) -> Tensor:
+    def forward(ctx, x: Tensor, table: Tensor, encoding, per_run: int | None = None) -> Tensor:
         x = x.contiguous().float()
         out = torch.empty(x.shape[0], encoding.output_dim, device=x.device, dtype=torch.float32)
-        _launch(forward_kernel, x, table.contiguous(), out, encoding)
+        _launch(forward_kernel, x, table.contiguous(), out, encoding, per_run)
         ctx.save_for_backward(x)
-        ctx.encoding = encoding
+        ctx.encoding, ctx.per_run = encoding, per_run
         return out
 
     @staticmethod
-    def backward(ctx, grad: Tensor) -> tuple[None, Tensor, None]:
+    def backward(ctx, grad: Tensor) -> tuple[None, Tensor, None, None]:
         (x,) = ctx.saved_tensors
         encoding = ctx.encoding
         grad_table = torch.zeros_like(encoding.table)
-        _launch(backward_kernel, x, grad.contiguous().float(), grad_table, encoding)
-        return None, grad_table, None
+        _launch(backward_kernel, x, grad.contiguous().float(), grad_table, encoding, ctx.per_run)
+        return None, grad_table, None, None

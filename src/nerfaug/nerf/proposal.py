@@ -53,12 +53,29 @@ def interlevel_loss(
     Returns:
         scalar Tensor, summed over levels, mean over rays and samples.
     """
-    edges, weights = edges.detach(), weights.detach()
     loss = weights.new_zeros(())
+    for term in _interlevel_terms(edges, weights, proposal_edges, proposal_weights):
+        loss = loss + term.mean()
+    return loss
+
+
+def interlevel_loss_per_ray(
+    edges: Tensor, weights: Tensor, proposal_edges: list[Tensor], proposal_weights: list[Tensor]
+) -> Tensor:
+    """`interlevel_loss` of each ray alone: Tensor with shape (n_rays,), whose mean over rays is
+    `interlevel_loss` (up to rounding). For trial batches, whose runs each need their own loss."""
+    loss = weights.new_zeros(weights.shape[0])
+    for term in _interlevel_terms(edges, weights, proposal_edges, proposal_weights):
+        loss = loss + term.mean(dim=-1)
+    return loss
+
+
+def _interlevel_terms(edges, weights, proposal_edges, proposal_weights):
+    """Per proposal level, the interlevel penalty of every final sample: Tensors (n_rays, n)."""
+    edges, weights = edges.detach(), weights.detach()
     for p_edges, p_weights in zip(proposal_edges, proposal_weights):
         bound = outer_measure(edges, p_edges, p_weights)
-        loss = loss + ((weights - bound).clamp(min=0) ** 2 / (weights + _EPS)).mean()
-    return loss
+        yield (weights - bound).clamp(min=0) ** 2 / (weights + _EPS)
 
 
 def distortion_loss(edges: Tensor, weights: Tensor) -> Tensor:
@@ -74,12 +91,17 @@ def distortion_loss(edges: Tensor, weights: Tensor) -> Tensor:
     Returns:
         scalar Tensor, mean over rays.
     """
+    return distortion_per_ray(edges, weights).mean()
+
+
+def distortion_per_ray(edges: Tensor, weights: Tensor) -> Tensor:
+    """`distortion_loss` of each ray: Tensor with shape (n_rays,) (shapes as there)."""
     span = (edges[:, -1:] - edges[:, :1]).clamp_min(_EPS)
     t = (edges - edges[:, :1]) / span
     mids = 0.5 * (t[:, 1:] + t[:, :-1])
     widths = t[:, 1:] - t[:, :-1]
     pairwise = (weights[:, :, None] * weights[:, None, :] * (mids[:, :, None] - mids[:, None, :]).abs()).sum((1, 2))
-    return (pairwise + (weights**2 * widths).sum(-1) / 3.0).mean()
+    return pairwise + (weights**2 * widths).sum(-1) / 3.0
 
 
 def proposal_anneal(step: int, anneal_steps: int, slope: float) -> float:

@@ -47,6 +47,71 @@ def exponential_lr(initial: float, final: float, step: int, decay_steps: int) ->
     return math.exp(math.log(initial) * (1.0 - fraction) + math.log(final) * fraction)
 
 
+def seeded_model(
+    config: NerfConfig, generator: torch.Generator, background=(1.0, 1.0, 1.0), field: str | nn.Module = DEFAULT_FIELD
+) -> NerfModel:
+    """A fresh `NerfModel` on the CPU whose parameters are drawn from a seed that is `generator`'s
+    next draw; the caller's global RNG state is left as it was. `field`: a name in
+    `nerfaug.nerf.registry.FIELDS`, or a field module built by the caller."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(torch.randint(2**62, (1,), generator=generator)))
+        built = build_field(config, field) if isinstance(field, str) else field
+        return NerfModel(config, background, built)
+
+
+def grown_views(current: Views, added: Views) -> Views:
+    """The training views `current` followed by `added` (materialised), which must have their
+    image size."""
+    added = added.materialised()
+    have, new = current.cameras, added.cameras
+    if (new.width, new.height) != (have.width, have.height):
+        raise ValueError(
+            f"added views are {new.width}x{new.height}, the training views {have.width}x{have.height}; "
+            "resize them first"
+        )
+    merged = Views.cat([current, added])
+    if (current.alphas is None) != (added.alphas is None):
+        merged.alphas = None  # mixed sources: fall back to the composited images only
+    return merged
+
+
+def sample_training_rays(
+    cameras: Cameras,
+    pixels: Tensor,
+    alphas: Tensor | None,
+    config: NerfConfig,
+    background: Tensor,
+    generator: torch.Generator,
+) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+    """`config.batch_size` rays drawn uniformly over all pixels of all training views.
+
+    Args:
+        cameras: the training views' cameras, on the training device.
+        pixels: Tensor with shape (n_views * height * width, 3), their colours, view-major.
+        alphas: Tensor with shape (n_views * height * width,), or None.
+        background: Tensor with shape (3,), the colour the images were composited over.
+        generator: the source of the draw (on the CPU or on the training device).
+
+    Returns:
+        origins, directions (B, 3), target colours (B, 3), and the background to render them
+        over: (3,), (B, 3) (random backgrounds) or None (the model's last-sample colour).
+    """
+    per_view = cameras.width * cameras.height
+    index = torch.randint(pixels.shape[0], (config.batch_size,), generator=generator, device=generator.device)
+    view, pixel = index // per_view, index % per_view
+    origins, directions = generate_rays(cameras, view, pixel % cameras.width, pixel // cameras.width)
+    index = index.to(pixels.device)
+    target = pixels[index]
+    ray_background = None if config.background_mode != "fixed" else background
+    if config.random_background and alphas is not None:
+        # Swap the stored background behind each pixel for a random colour the model must
+        # learn to see through, so empty space cannot hide in the background colour.
+        ray_background = torch.rand((index.shape[0], 3), generator=generator, device=generator.device).to(pixels.device)
+        transparency = 1.0 - alphas[index, None]
+        target = target + transparency * (ray_background - background)
+    return origins, directions, target, ray_background
+
+
 def psnr_from_mse(mse: float) -> float:
     """PSNR in dB of images in [0, 1] with mean squared error `mse`."""
     return -10.0 * math.log10(max(mse, 1e-10))
@@ -94,11 +159,8 @@ class Trainer:
         self.progress = progress
         self.generator = torch.Generator().manual_seed(seed)
         self._checkpoint_path: Path | None = None
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(int(torch.randint(2**62, (1,), generator=self.generator)))
-            self.field_name = field if isinstance(field, str) else None
-            built = build_field(config, field) if isinstance(field, str) else field
-            self.model = NerfModel(config, self.background, built).to(self.device)
+        self.field_name = field if isinstance(field, str) else None
+        self.model = seeded_model(config, self.generator, self.background, field).to(self.device)
         self.compile_backend = compile
         if compile is not None:
             self._compile_networks(compile)
@@ -144,17 +206,7 @@ class Trainer:
     def add_views(self, views: Views) -> None:
         """Train on `views` too, from the next step on. The model, the optimiser state and the
         step count are untouched. The new views must have the training views' image size."""
-        views = views.materialised()
-        current = self.train_views.cameras
-        if (views.cameras.width, views.cameras.height) != (current.width, current.height):
-            raise ValueError(
-                f"added views are {views.cameras.width}x{views.cameras.height}, the training views "
-                f"{current.width}x{current.height}; resize them first"
-            )
-        merged = Views.cat([self.train_views, views])
-        if (self.train_views.alphas is None) != (views.alphas is None):
-            merged.alphas = None  # mixed sources: fall back to the composited images only
-        self._set_views(merged)
+        self._set_views(grown_views(self.train_views, views))
 
     def sample_batch(self, generator: torch.Generator | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """A batch of rays drawn uniformly over all pixels of all training views, from
@@ -164,24 +216,10 @@ class Trainer:
             origins, directions (B, 3), target colours (B, 3), and the background to render
             them over: (3,), (B, 3) (random backgrounds) or None (the model's last-sample colour).
         """
-        cameras = self._cameras
-        per_view = cameras.width * cameras.height
         generator = self.generator if generator is None else generator
-        index = torch.randint(
-            self._pixels.shape[0], (self.config.batch_size,), generator=generator, device=generator.device
+        return sample_training_rays(
+            self._cameras, self._pixels, self._alphas, self.config, self.model.background, generator
         )
-        view, pixel = index // per_view, index % per_view
-        origins, directions = generate_rays(cameras, view, pixel % cameras.width, pixel // cameras.width)
-        index = index.to(self.device)
-        target = self._pixels[index]
-        background = None if self.config.background_mode != "fixed" else self.model.background
-        if self.config.random_background and self._alphas is not None:
-            # Swap the stored background behind each pixel for a random colour the model must
-            # learn to see through, so empty space cannot hide in the background colour.
-            background = torch.rand((index.shape[0], 3), generator=generator, device=generator.device).to(self.device)
-            transparency = 1.0 - self._alphas[index, None]
-            target = target + transparency * (background - self.model.background)
-        return origins, directions, target, background
 
     def _set_learning_rates(self) -> None:
         for group, initial in zip(self.optimizer.param_groups, self._initial_lrs):
