@@ -21,6 +21,7 @@ from nerfaug.statistics import (
     min_attainable_p,
     min_attainable_paired_p,
     paired_comparison,
+    paired_equivalence,
     seed_level_comparison,
     sign_flip_p,
     summarise,
@@ -382,3 +383,40 @@ def test_compare_with_one_trial_each_and_a_tie_answers():
     assert found["p_value"] == pytest.approx(stats.mannwhitneyu([1.0], [1.0], method="asymptotic").pvalue)
     assert found["too_small"] and not found["significant"]
     assert compare([1.0], [1.0, 2.0])["test_method"].startswith("asymptotic")
+
+
+def test_paired_equivalence_by_hand():
+    x = np.array([20.1, 21.4, 19.8, 22.0, 20.9, 21.7])
+    d = np.array([0.05, -0.1, 0.12, 0.0, -0.04, 0.08])
+    result = paired_equivalence(x + d, x, bound=0.2)
+    n, mean = d.size, d.mean()
+    sem = d.std(ddof=1) / math.sqrt(n)
+    # The two one-sided t statistics and their tails, from the t distribution's survival function.
+    p_lower = stats.t.sf((mean + 0.2) / sem, n - 1)
+    p_upper = stats.t.sf((0.2 - mean) / sem, n - 1)
+    assert result["p_lower"] == pytest.approx(p_lower, rel=1e-9)
+    assert result["p_upper"] == pytest.approx(p_upper, rel=1e-9)
+    assert result["p_value"] == pytest.approx(max(p_lower, p_upper), rel=1e-9)
+    assert result["mean"] == pytest.approx(mean)
+    assert result["max_abs_difference"] == pytest.approx(0.12)
+    assert result["equivalent"] is True
+    # TOST at alpha is the 90% interval inside the bounds.
+    assert -0.2 < result["low"] < result["high"] < 0.2
+
+
+@pytest.mark.parametrize(
+    "d, why",
+    [([0.45, 0.5, 0.55, 0.5, 0.48], "shifted past the bound"), ([0.6, -0.6, 0.5, -0.5, 0.05, -0.05], "too noisy")],
+)
+def test_paired_equivalence_is_not_shown_when_it_does_not_hold(d, why):
+    d = np.array(d)
+    result = paired_equivalence(d + 10.0, np.full(d.size, 10.0), bound=0.2)
+    assert result["equivalent"] is False, why
+    assert not (-0.2 < result["low"] and result["high"] < 0.2)
+
+
+def test_paired_equivalence_refuses_bad_input():
+    with pytest.raises(ValueError, match="at least two pairs"):
+        paired_equivalence([1.0], [1.0], bound=0.2)
+    with pytest.raises(ValueError, match="bound must be > 0"):
+        paired_equivalence([1.0, 2.0], [1.0, 2.0], bound=0.0)

@@ -232,3 +232,37 @@ def test_engines_without_the_proposal_sampler_are_refused_by_name():
                 seeded_model(NerfConfig.preset("nerfacto-cpu"), torch.Generator().manual_seed(0)),
             ]
         )
+
+
+def test_the_batched_engine_is_equivalent_to_runs_alone_by_paired_seeds(sphere_views):
+    """The acceptance rule of a new engine version, at test size: over paired seeds, the mean
+    difference of held-out PSNR inside +-0.2 dB by a TOST at alpha 0.05, and no seed more than
+    1 dB apart (the full check, at the study's size, is BENCHMARKS.md's "Trial batches")."""
+    from nerfaug.statistics import paired_equivalence
+
+    train = sphere_views([0.0, 1.2, 2.4, 3.6, 4.8], [0.9, 1.1, 0.8, 1.2, 1.0], size=16)
+    held_out = sphere_views([0.6, 1.8, 3.0, 4.2], [1.0, 0.9, 1.1, 0.8], size=16)
+    seeds = list(range(6))
+
+    def held_out_psnr(model) -> float:
+        errors = [
+            float((model.render_image(held_out.cameras, i)["rgb"] - held_out.images[i]).square().mean())
+            for i in range(len(held_out))
+        ]
+        return -10.0 * math.log10(sum(errors) / len(errors))
+
+    batch = BatchTrainer([train] * len(seeds), SMALL, seeds, progress=False)
+    batch.train(150)
+    together = [held_out_psnr(batch.run_model(k)) for k in range(len(seeds))]
+    alone = []
+    for seed in seeds:
+        trainer = Trainer(train, SMALL, seed=seed, progress=False)
+        trainer.train(150)
+        alone.append(held_out_psnr(trainer.model))
+    result = paired_equivalence(together, alone, bound=0.2)
+    assert result["equivalent"], result
+    assert result["max_abs_difference"] <= 1.0, result
+    # The runs learned something (an empty field would make every seed equal, and the test vacuous).
+    blank = -10.0 * math.log10(float((held_out.images - 1.0).square().mean()))
+    assert min(alone) > blank + 3.0
+    assert max(alone) - min(alone) > 0.05  # the seeds differ: pairing by seed is what is tested

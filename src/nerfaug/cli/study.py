@@ -40,6 +40,7 @@ Workers = Annotated[
     int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one on a GPU)")
 ]
 ResultsDoc = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")]
+BudgetSeconds = Annotated[float | None, tyro.conf.arg(metavar="SECONDS", help_behavior_hint="(default: no limit)")]
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,8 @@ class Study(StudySpec):
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
         results_doc: also write this Markdown page (e.g. docs/results.md), figures beside it.
+        budget_s: start no run that would end more than this many seconds from now (by the
+            longest run or trial batch so far); the same command goes on with the rest.
         selection: options of the selection methods (every one is part of the runs' fingerprint;
             left at the preset's, they change nothing); a method's own settings (e.g.
             ours-authors') apply over them.
@@ -68,6 +71,7 @@ class Study(StudySpec):
     force: bool = False
     summary_only: bool = False
     results_doc: ResultsDoc = None
+    budget_s: BudgetSeconds = None
     selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
 
     @classmethod
@@ -103,7 +107,7 @@ class Study(StudySpec):
             print(f"study: engine {engine} left out: {why}", file=sys.stderr)
         workers = self.workers if self.workers is not None else default_workers(plan.config)
         print(study_size_line(plan, workers, previous), flush=True)
-        outcomes = study_runs.run_study(plan, workers=workers, force=self.force, table=previous)
+        outcomes = study_runs.run_study(plan, workers=workers, force=self.force, table=previous, budget_s=self.budget_s)
         return {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
 
 

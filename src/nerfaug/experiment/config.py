@@ -217,9 +217,15 @@ STUDY_PRESETS: Presets[ExperimentConfig] = Presets(
         # does not show them, and they cost seconds per run.
         "study": ExperimentConfig(view_uncertainty=False),
         "tiny": PROTOCOL_PRESETS.choose("tiny", view_uncertainty=False),
+        # The GPU study (docs/study-plan.md, 2026-11-27): the paper engine at the paper's scale
+        # (400 px, 10k steps, 200 test views); the page shows no uncertainty images.
+        "gpu": ExperimentConfig(
+            engine="paper", resolution=400, steps=10_000, n_test=200, render_samples=32, view_uncertainty=False
+        ),
     },
 )
 """The protocols a study runs every engine under (`nerfaug study --preset`): "study" is the
 paper's protocol at 100x100 (6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50
-test views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are
+test views); "gpu" the same at the paper's scale for its engine (400 px, 10k steps, 200 test
+views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are
 rendered first, which takes minutes)."""

@@ -12,6 +12,7 @@ import multiprocessing
 import os
 import platform
 import sys
+import time
 import traceback
 from dataclasses import asdict, dataclass, field
 from importlib import metadata
@@ -60,6 +61,8 @@ class SweepOutcome:
     results: list[dict]
     failed: dict[str, str] = field(default_factory=dict)
     skipped: int = 0
+    unstarted: int = 0
+    """Runs left for a later sweep: not started within `budget_s`."""
 
 
 def default_workers(config: ExperimentConfig) -> int:
@@ -347,6 +350,7 @@ def run_sweep(
     command: list[str] | None = None,
     recorded: dict[RunKey, str] | None = None,
     checked: dict[str, dict] | None = None,
+    budget_s: float | None = None,
 ) -> SweepOutcome:
     """Run every missing run of the sweep and return all results.
 
@@ -364,8 +368,10 @@ def run_sweep(
         ValueError, DatasetError: a setting or a dataset is wrong (checked before any work).
         IncompatibleResults, FolderRefused: `root` holds other results or files nerfaug did not write.
     """
+    _began = time.monotonic()
     root = Path(root)
     _need(isinstance(workers, int) and workers >= 1, "workers", workers, "must be an integer >= 1")
+    _need(budget_s is None or budget_s > 0, "budget_s", budget_s, "must be > 0 seconds")
     record = sweep_record(config, command, check_config(config) if checked is None else checked)
     keys = plan_runs(config)
     for key in [] if force else keys:  # refuse before anything is written, removed or rendered
@@ -402,9 +408,15 @@ def run_sweep(
     units = plan_units(todo, config, batch_size(config, len(todo)) if config.batched() and todo else 1)
     if config.batched() and todo:
         console.print(f"{len(todo)} run(s) in {len(units)} trial batch(es) of up to {max(map(len, units))}")
-    execute = {"local": _execute_local, "ray": _execute_ray}[backend]
-    new_results, failed = execute(units, datasets, config, root, workers, address, progress)
-    return SweepOutcome(results + new_results, failed, skipped)
+    deadline = None if budget_s is None else _began + budget_s
+    if backend == "ray":
+        new_results, failed = _execute_ray(units, datasets, config, root, workers, address, progress)
+        unstarted = 0
+    else:
+        new_results, failed, unstarted = _execute_local(units, datasets, config, root, workers, progress, deadline)
+    if unstarted:
+        console.print(f"{unstarted} run(s) not started within --budget-s {budget_s:g}: run the same command to go on")
+    return SweepOutcome(results + new_results, failed, skipped, unstarted)
 
 
 class _Display:
@@ -463,40 +475,70 @@ class _Display:
         return f"runs: {self.done} done, {len(self.running)} running, {self.failed} failed"
 
 
-def _execute_local(units, datasets, config, root, workers, address, progress):
+class _Budget:
+    """Whether another unit of work fits before a deadline: by the longest unit so far."""
+
+    def __init__(self, deadline: float | None):
+        self.deadline, self.longest, self.started = deadline, 0.0, {}
+
+    def allows(self) -> bool:
+        return self.deadline is None or time.monotonic() + self.longest <= self.deadline
+
+    def start(self, unit_id) -> None:
+        self.started[unit_id] = time.monotonic()
+
+    def end(self, unit_id) -> None:
+        self.longest = max(self.longest, time.monotonic() - self.started.pop(unit_id))
+
+
+def _execute_local(units, datasets, config, root, workers, progress, deadline=None):
+    """Run `units` here (one at a time) or in a pool of `workers` processes, starting each only
+    while the deadline allows. Returns (results, failed, runs not started)."""
     results, failed = [], {}
+    budget = _Budget(deadline)
+    queue = list(units)
     total = sum(len(unit) for unit in units)
     with _Display(total, root, config.steps, progress) as display:
         if workers <= 1:
-            for unit in units:
+            while queue and (budget.allows() or not budget.longest):
+                unit = queue.pop(0)
                 for key in unit:
                     display.started(key)
                 protocol.on_progress = display.poll  # the display is live here: poll it from the runs' writes
+                budget.start(0)
                 try:
                     outcomes = _run_unit(unit, datasets, config, root)
                 finally:
                     protocol.on_progress = None
+                    budget.end(0)
                 _collect(outcomes, results, failed, root, display)
-            return results, failed
+            return results, failed, sum(len(unit) for unit in queue)
         # Spawned workers: each run sets its own thread count; fork would inherit torch's pools.
+        # Units are handed out as workers free up, so that a deadline can stop the handing out.
         context = multiprocessing.get_context("spawn")
         with futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
             pending = {}
-            for unit in units:
-                pending[pool.submit(_run_unit, unit, datasets, config, root)] = unit
-                for key in unit:
-                    display.queue(key)
-            while pending:
+            while queue or pending:
+                while queue and len(pending) < workers and (budget.allows() or not budget.longest):
+                    unit = queue.pop(0)
+                    future = pool.submit(_run_unit, unit, datasets, config, root)
+                    pending[future] = unit
+                    budget.start(future)
+                    for key in unit:
+                        display.queue(key)
+                if not pending:
+                    break
                 done, _ = futures.wait(pending, timeout=0.5, return_when=futures.FIRST_COMPLETED)
                 display.poll()
                 for future in done:
                     unit = pending.pop(future)
+                    budget.end(future)
                     try:
                         outcomes = future.result()
                     except Exception as error:  # the worker itself died (e.g. killed for memory)
                         outcomes = [(key, None, _failure_text(error)) for key in unit]
                     _collect(outcomes, results, failed, root, display)
-    return results, failed
+    return results, failed, sum(len(unit) for unit in queue)
 
 
 def _collect(outcomes: list[tuple], results: list, failed: dict, root: Path, display: _Display) -> None:

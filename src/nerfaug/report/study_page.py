@@ -68,6 +68,15 @@ def _header(study: Study) -> list[Block]:
     commands = plan.get("commands") or [plan.get("command", [])]
     command = "; ".join(f"`{' '.join(c)}`" for c in commands if c) or "n/a"
     versions = sorted({r["code_version"] for r in study.table["runs"]})
+    engine_versions = [
+        f"{engine} {', '.join(found)}"
+        for engine in study.engines
+        if (
+            found := sorted(
+                {r.get("engine_version") or "reference" for r in study.table["runs"] if r["engine"] == engine}
+            )
+        )
+    ]
     items = [
         f"command{'s (one per sitting)' if len(commands) > 1 else ''}: {command}",
         f"study last started: {plan.get('written', 'n/a')}",
@@ -77,6 +86,8 @@ def _header(study: Study) -> list[Block]:
         ),
         f"code versions of the runs: {', '.join(versions) or 'none'}",
         f"engines run: {', '.join(study.engines) or 'none'}",
+        "engine versions (runs trained alone: reference; in trial batches: batched-N; a cell never mixes "
+        f"two): {'; '.join(engine_versions) or 'none'}",
         f"scenes: {', '.join(plan.get('scenes', []))}; methods: {', '.join(plan.get('methods', []))}",
         f"trials per (scene, engine, method): {plan.get('trials', '?')} "
         f"(trial k uses seed {config.get('seed', 0)} + k)",

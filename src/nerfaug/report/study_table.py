@@ -59,7 +59,9 @@ ROW_FIELDS = (
     "code_version",
     "fingerprint",
 )
-OPTIONAL_ROW_FIELDS = ("layout", "uniform_fill")
+OPTIONAL_ROW_FIELDS = ("layout", "uniform_fill", "engine_version")
+# The reference engine (a run trained alone) has no recorded version: every earlier row is one.
+REFERENCE_ENGINE_VERSION = ""
 
 
 @dataclass(frozen=True)
@@ -87,6 +89,7 @@ class RunRow:
     fingerprint: str
     layout: int = 0
     uniform_fill: int = 0
+    engine_version: str = REFERENCE_ENGINE_VERSION
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -141,6 +144,7 @@ def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
         fingerprint=str(result["fingerprint"]),
         layout=int(result.get("layout", 0)),
         uniform_fill=int(selection.raw.get("uniform_fill", 0)),
+        engine_version=str(result.get("engine_version", REFERENCE_ENGINE_VERSION)),
     )
     return row, rounded_poses(selection.train_poses)
 
@@ -208,11 +212,12 @@ def initial_poses_by_layout(scene: dict) -> dict[int, list]:
 
 
 def row_dict(row: RunRow) -> dict:
-    """A row as the table stores it: `layout` and `uniform_fill` only where they are not 0, so
-    tables of one layout, whose methods always chose by their scores, read as they always have."""
+    """A row as the table stores it: `layout`, `uniform_fill` and `engine_version` only where they
+    are not their defaults, so tables of one layout, whose methods always chose by their scores,
+    trained by the reference engine, read as they always have."""
     record = asdict(row)
     for optional in OPTIONAL_ROW_FIELDS:
-        if record[optional] == 0:
+        if record[optional] == RunRow.__dataclass_fields__[optional].default:
             del record[optional]
     return record
 
@@ -311,6 +316,7 @@ def _check_row(path: Path, index: int, run) -> RunRow:
         ("seed", int),
         ("layout", int),
         ("uniform_fill", int),
+        ("engine_version", str),
     ):
         if name not in run:  # an optional field
             continue

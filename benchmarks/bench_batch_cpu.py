@@ -1,0 +1,138 @@
+"""Trial batches on the CPU: the study protocol's runs alone (the reference engine) against the same
+runs in trial batches (the batched engine), in one sitting: throughput side by side, and the
+batched engine's equivalence by paired seeds.
+
+Each arm is one sweep of the study protocol (`nerfaug.experiment.config.STUDY_PRESETS["study"]`:
+100 px, 6 initial views, 6 added at step 200, 2000 steps, 50 test views) over the given datasets
+and seeds, with every core busy: the reference arm one run per core, the batched arm one batch per
+core. Run k of both arms shares its seed, its initial views and (with "uniform") its added views,
+so d = PSNR(batched) - PSNR(alone) isolates the engine. Acceptance: a TOST of the mean of d
+inside +-`--bound` dB at alpha 0.05, and no seed more than `--max-seed` dB apart.
+
+    python benchmarks/bench_batch_cpu.py --data data/lego100 data/chair100 --trials 10 \\
+        --out /tmp/batch-bench --json docs/benchmarks/batch-cpu.json
+
+Printed and written: per arm wall seconds, CPU seconds and runs per core-hour; per run both
+PSNRs; the equivalence test over all runs and per dataset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import resource
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from nerfaug.experiment.config import STUDY_PRESETS
+from nerfaug.experiment.sweep import run_sweep
+from nerfaug.statistics import paired_equivalence
+
+
+def arm(config, root: Path, workers: int) -> dict:
+    """Run one arm's sweep; its wall and CPU seconds (this process and its workers) and results."""
+    cpu_before = _cpu_seconds()
+    start = time.perf_counter()
+    outcome = run_sweep(config, root, workers=workers, progress=True, command=sys.argv)
+    wall = time.perf_counter() - start
+    cpu = _cpu_seconds() - cpu_before
+    if outcome.failed:
+        print(f"failed runs: {outcome.failed}", file=sys.stderr)
+    runs = {(r["scene"], r["trial"]): r for r in outcome.results}
+    return {"wall_s": wall, "cpu_s": cpu, "runs": len(runs), "results": runs, "skipped": outcome.skipped}
+
+
+def _cpu_seconds() -> float:
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", nargs="+", required=True, help="prepared dataset folders (Blender format)")
+    parser.add_argument("--trials", type=int, default=10)
+    parser.add_argument("--batch", type=int, default=10, help="runs per trial batch")
+    parser.add_argument("--engine", default="nerfacto-cpu")
+    parser.add_argument("--method", default="uniform")
+    parser.add_argument("--steps", type=int, default=None, help="override the protocol's 2000 steps (smoke runs)")
+    parser.add_argument("--bound", type=float, default=0.2, help="equivalence margin in dB")
+    parser.add_argument("--max-seed", type=float, default=1.0, help="largest |d| allowed for any seed, dB")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--out", type=Path, required=True, help="a folder for both arms' runs")
+    parser.add_argument("--json", type=Path, help="where to write the figures")
+    args = parser.parse_args(argv)
+
+    base = STUDY_PRESETS.choose(
+        "study", scenes=tuple(args.data), methods=(args.method,), trials=args.trials, engine=args.engine
+    )
+    if args.steps is not None:
+        base = base.replace(steps=args.steps)
+    started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    arms = {
+        "alone": arm(base.replace(batch=1), args.out / "alone", args.workers),
+        "batched": arm(base.replace(batch=args.batch), args.out / "batched", args.workers),
+    }
+    pairs = sorted(set(arms["alone"]["results"]) & set(arms["batched"]["results"]))
+    psnr = {name: [a["results"][p]["metrics"]["psnr"] for p in pairs] for name, a in arms.items()}
+    overall = paired_equivalence(psnr["batched"], psnr["alone"], args.bound)
+    per_scene = {}
+    for scene in sorted({scene for scene, _ in pairs}):
+        index = [i for i, p in enumerate(pairs) if p[0] == scene]
+        if len(index) >= 2:
+            per_scene[scene] = paired_equivalence(
+                [psnr["batched"][i] for i in index], [psnr["alone"][i] for i in index], args.bound
+            )
+    figures = {
+        "date": started,
+        "host": platform.node(),
+        "cpu": platform.processor() or platform.machine(),
+        "cores": os.cpu_count(),
+        "load_average_at_start": os.getloadavg(),
+        "torch": torch.__version__,
+        "settings": vars(args) | {"out": str(args.out), "json": str(args.json), "data": args.data},
+        "arms": {
+            name: {
+                "wall_s": a["wall_s"],
+                "cpu_s": a["cpu_s"],
+                "runs": a["runs"],
+                "runs_per_core_hour": a["runs"] / (a["wall_s"] * args.workers / 3600.0),
+                "runs_per_cpu_hour": a["runs"] / (a["cpu_s"] / 3600.0),
+            }
+            for name, a in arms.items()
+        },
+        "runs": [
+            {"scene": s, "trial": t, "psnr_alone": a, "psnr_batched": b, "difference": b - a}
+            for (s, t), a, b in zip(pairs, psnr["alone"], psnr["batched"])
+        ],
+        "equivalence": overall,
+        "equivalence_per_scene": per_scene,
+        "accepted": overall["equivalent"] and overall["max_abs_difference"] <= args.max_seed,
+    }
+    ratio = figures["arms"]["batched"]["runs_per_core_hour"] / figures["arms"]["alone"]["runs_per_core_hour"]
+    figures["throughput_ratio"] = ratio
+    for name, a in figures["arms"].items():
+        print(
+            f"{name}: {a['runs']} runs, {a['wall_s']:.0f} s wall, {a['cpu_s']:.0f} CPU s, "
+            f"{a['runs_per_core_hour']:.1f} runs per core-hour"
+        )
+    print(f"batched / alone: {ratio:.2f}x runs per core-hour")
+    print(
+        f"PSNR batched - alone over {overall['n_pairs']} seeds: mean {overall['mean']:+.3f} dB, 90% CI "
+        f"[{overall['low']:+.3f}, {overall['high']:+.3f}], TOST p = {overall['p_value']:.4f} (bound "
+        f"+-{args.bound} dB), largest |d| {overall['max_abs_difference']:.3f} dB: "
+        f"{'accepted' if figures['accepted'] else 'NOT accepted'}"
+    )
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(figures, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
