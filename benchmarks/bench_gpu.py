@@ -293,6 +293,7 @@ def experiment_config(args, folder: Path, meta: dict, methods, trials: int):
         save_renders=args.save_renders,
         device=args.device,
         compile=args.compile,
+        batch=getattr(args, "batch", 1),
     )
 
 
@@ -351,7 +352,8 @@ def trial(args) -> dict:
     configure_process(threads=args.threads)
     HashEncoding.default_kernel = args.hash_kernel  # the trial runs in this process (one worker)
     folder, meta = unpack(args.data, args.unpack_to)
-    config = experiment_config(args, folder, meta, (args.method,), 1)
+    # With --batch K: K seeds of the method, trained as one trial batch.
+    config = experiment_config(args, folder, meta, (args.method,), args.batch)
     warm = warm_up(folder, args.engine, device, args.warmup_steps, args.compile) if args.warmup_steps else 0.0
     _fresh(args.out)
     if device.type == "cuda":
@@ -361,8 +363,9 @@ def trial(args) -> dict:
     wall = time.perf_counter() - start
     if outcome.failed:
         raise SystemExit(f"the trial failed: {outcome.failed}")
-    result = outcome.results[0]
-    timing = result["timing"]
+    results = sorted(outcome.results, key=lambda r: r["trial"])
+    result = results[0]
+    timing = result["timing"]  # a batch's runs record their share of its training time
     train_seconds = timing["train_before"] + timing["train_after"]
     figures = {
         "mode": "trial",
@@ -379,6 +382,10 @@ def trial(args) -> dict:
         "pool": config.pool,
         "test_views": config.n_test,
         "steps": config.steps,
+        "batch": args.batch,
+        "engine_version": result.get("engine_version", "reference"),
+        "trial_share_s": wall / len(results),
+        "psnr_per_seed": [r["metrics"]["psnr"] for r in results],
         "s_per_step": train_seconds / config.steps,
         "train_s": train_seconds,
         "trial_s": timing["total"],
@@ -459,6 +466,12 @@ def _print_trial(f: dict) -> None:
         f"{f['test_views']} test views on {f['device']} (torch {f['torch']})"
     )
     rows = [
+        (
+            "trial batch",
+            f"{f['batch']} seeds ({f['engine_version']}), {f['trial_share_s']:.1f} s of the device a trial"
+            if f["batch"] > 1
+            else "none (one run alone, the reference engine)",
+        ),
         ("s/step (training, both phases)", _fmt(f["s_per_step"], ".4f")),
         ("trial time (setup+train+select+eval)", f"{f['trial_s']:.1f} s"),
         ("  of which", ", ".join(f"{k} {v:.1f}" for k, v in f["timing"].items() if k != "total")),
@@ -686,6 +699,12 @@ def parser() -> argparse.ArgumentParser:
             action="store_true",
             help=f"seconds-long smoke run: {' '.join(f'--{k.replace(chr(95), chr(45))} {v}' for k, v in QUICK.items())}"
             + ("" if name == "trial" else " --methods ours uniform --trials 1"),
+        )
+        s.add_argument(
+            "--batch",
+            type=int,
+            default=1,
+            help="runs per trial batch (1: each alone, the reference engine); trial: this many seeds of the method",
         )
         if name == "trial":
             s.add_argument("--method", default="ours")

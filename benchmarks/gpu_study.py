@@ -50,18 +50,25 @@ TABLE = ROOT / "docs" / "results" / "gpu-study-table.json"
 PAGE = ROOT / "docs" / "results-gpu.md"
 MANIFEST = "gpu-study-pack.json"
 
-PLAN = {
-    # Written before the first run (docs/study-plan.md); a change is a dated amendment there.
-    "engines": ("paper",),
-    "scenes": ("mic", "lego", "maryRose", "dtu_scan24", "moldGoldCape"),
-    "held_back": ("moldGoldCape",),
-    "methods": ("uniform", "ours", "ours-batch-sharp", "fisherrf", "entropy-sampling", "furthest"),
-    "trials": 10,
-    "layouts": 3,
-    "resolution": 400,
-    "steps": 10_000,
-    "preset": "gpu",
-}
+
+def _plan() -> dict:
+    from nerfaug.experiment.study import GPU_STUDY_ENGINES, GPU_STUDY_HELD_BACK, GPU_STUDY_SCENES
+
+    return {
+        # Written before the first run (docs/study-plan.md); a change is a dated amendment there.
+        "engines": GPU_STUDY_ENGINES,
+        "scenes": GPU_STUDY_SCENES,
+        "held_back": GPU_STUDY_HELD_BACK,
+        "methods": ("uniform", "ours", "ours-batch-sharp", "fisherrf", "entropy-sampling", "furthest"),
+        "trials": 10,
+        "layouts": 3,
+        "resolution": 400,
+        "steps": 10_000,
+        "preset": "gpu",
+    }
+
+
+PLAN = _plan()
 
 
 def folder_digest(folder: Path) -> str:
@@ -136,11 +143,21 @@ def run(args) -> dict:
     if args.table.is_file():
         table_path.write_bytes(args.table.read_bytes())
     previous = read_table(table_path) if table_path.is_file() else None
+    methods = PLAN["methods"] if args.methods is None else tuple(args.methods)
+    # The held-back scene runs only once every other planned cell is complete (the plan's order).
+    waiting = [s for s in PLAN["scenes"] if s not in PLAN["held_back"] and not _complete(previous, s, args, methods)]
+    if waiting:
+        held = [s for s in scenes if s in PLAN["held_back"]]
+        if held:
+            print(f"held back until {', '.join(waiting)} are complete: {', '.join(held)}")
+        scenes = [s for s in scenes if s not in held]
+        if not scenes:
+            raise SystemExit("only held-back scenes were carried; carry the packs of the scenes still running")
     spec = StudySpec(
         out=args.work / "study",
         engines=(args.engine,),
         scenes=tuple(str(datasets[s]) for s in scenes),
-        methods=PLAN["methods"] if args.methods is None else tuple(args.methods),
+        methods=methods,
         trials=args.trials,
         resolution=args.resolution,
         layouts=args.layouts,
@@ -181,6 +198,16 @@ def run(args) -> dict:
         print(f"archive: {args.archive}")
     print(json.dumps(summary, default=str))
     return summary
+
+
+def _complete(table: dict | None, scene: str, args, methods) -> bool:
+    """Whether `table` holds every run of the plan's cell (engine, scene) for `methods`."""
+    done = {
+        (r["method"], r["trial"])
+        for r in (table or {}).get("runs", [])
+        if r["scene"] == scene and r["engine"] == args.engine
+    }
+    return all((m, t) in done for m in methods for t in range(args.trials))
 
 
 def archive(work: Path, out: Path) -> Path:

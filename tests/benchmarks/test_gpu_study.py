@@ -58,6 +58,7 @@ def test_calls_run_the_next_batches_within_their_budget_and_the_merge_makes_the_
     runs = archived_results(tmp_path / "a1.tgz")
     assert sorted((r["method"], r["trial"]) for r in runs) == [("ours", 0), ("uniform", 0)]  # a whole trial
     assert {r["engine_version"] for r in runs} == {"batched-1"} and {r["batch_size"] for r in runs} == {2}
+    assert all(isinstance(r["health"]["empty"], bool) for r in runs)  # each run says whether it learned
     # What came back is committed; the next call (a bare machine) runs only what the table lacks.
     bench.main(["merge", str(tmp_path / "a1.tgz"), "--work", str(tmp_path / "m1"), "--table", str(table),
                 "--page", str(tmp_path / "page.md")])  # fmt: skip

@@ -266,3 +266,14 @@ def test_the_batched_engine_is_equivalent_to_runs_alone_by_paired_seeds(sphere_v
     blank = -10.0 * math.log10(float((held_out.images - 1.0).square().mean()))
     assert min(alone) > blank + 3.0
     assert max(alone) - min(alone) > 0.05  # the seeds differ: pairing by seed is what is tested
+
+
+def test_a_runs_memory_estimate_grows_with_the_engine_and_shrinks_with_fused_kernels():
+    from nerfaug.nerf.batch import estimated_run_bytes
+
+    paper, small = NerfConfig.preset("paper"), NerfConfig.preset("nerfacto-cpu")
+    assert estimated_run_bytes(paper, fused=True) > 20 * estimated_run_bytes(small, fused=True)
+    assert estimated_run_bytes(paper, fused=False) > estimated_run_bytes(paper, fused=True)
+    # At least the parameters with their gradients and Adam's two moments.
+    params = sum(p.numel() for p in seeded_model(small, torch.Generator().manual_seed(0)).parameters())
+    assert estimated_run_bytes(small, fused=True) > 16 * params

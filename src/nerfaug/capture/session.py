@@ -81,6 +81,7 @@ from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_forma
 from nerfaug.data.frame import estimate_hemisphere, pole_tilt_degrees
 from nerfaug.data.views import Views
 from nerfaug.evaluation import EvaluationResult
+from nerfaug.health import EmptyModelWarning, Health, model_health
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.trainer import Trainer
@@ -432,13 +433,24 @@ class CaptureSession(SessionFolder):
         Raises:
             RequestError: a value of the request out of range (naming it).
             TooFewCandidates (a ValueError): the constraints leave fewer candidates than asked.
+
+        Warns:
+            EmptyModelWarning: the NeRF renders its training views as background only (`health`):
+                its proposal says nothing about which views would help.
         """
         folder = self.run_dir / PROPOSALS_DIR
         number, shown = len(self.state.proposals), bool(self.trainer.progress)  # as the session was opened
-        request = request or ProposalRequest()
+        request = (request or ProposalRequest()).checked()
+        health = self.health()
+        if health.empty:
+            warnings.warn(f"{self.run_dir}: {health.line()}", EmptyModelWarning, stacklevel=2)
         proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown, map)
         self.state.proposals.append(record)
         return proposal
+
+    def health(self) -> Health:
+        """Whether the NeRF learned its training views (`nerfaug.health`)."""
+        return model_health(self.trainer.model, self.trainer.train_views, tuple(self.state.background))
 
     def session_model(self) -> SessionModel:
         """What the steps that use the NeRF need of this session (`SessionModel`)."""

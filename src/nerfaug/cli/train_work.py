@@ -24,6 +24,7 @@ from nerfaug.cli.option_names import as_options, checked, option
 from nerfaug.data import load_dataset
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
+from nerfaug.health import EmptyModelWarning
 from nerfaug.selection.selectors import DirectDraw, UniformFill
 
 
@@ -52,6 +53,9 @@ def add(run: Path, images: Path, poses: Path, steps: int, device: str, checkpoin
     last = train_session(session, steps, checkpoint_every)
     if steps:
         print(f"step {session.step}, training PSNR {last['psnr']:.2f} dB")
+        health = session.health()
+        if health.empty:
+            print(f"warning: {health.line()}", flush=True)
 
 
 def device_name(device: str) -> str:
@@ -84,9 +88,10 @@ def _lock(run: Path, command: str) -> None:
 
 @contextlib.contextmanager
 def warning_lines():
-    """Show the capture's warnings (`DuplicateViews`, `TiltedPole`, `UnverifiedCheckpoint`, and a
-    sampler's `UniformFill` and `DirectDraw`) as one line each, `warning: ...` on stderr."""
-    kinds = (DuplicateViews, TiltedPole, UnverifiedCheckpoint, UniformFill, DirectDraw)
+    """Show the capture's warnings (`DuplicateViews`, `TiltedPole`, `UnverifiedCheckpoint`,
+    `EmptyModelWarning`, and a sampler's `UniformFill` and `DirectDraw`) as one line each,
+    `warning: ...` on stderr."""
+    kinds = (DuplicateViews, TiltedPole, UnverifiedCheckpoint, EmptyModelWarning, UniformFill, DirectDraw)
     with warnings.catch_warnings():
         for kind in kinds:
             warnings.simplefilter("always", kind)
@@ -225,3 +230,6 @@ def _finish(session, steps: int, every_s: float) -> None:
     last = train_session(session, steps, every_s)
     psnr = f", training PSNR {last['psnr']:.2f} dB" if "psnr" in last else ""
     print(f"{session.run_dir}: step {session.step}{psnr}")
+    health = session.health()
+    if health.empty:  # said now, not first when a proposal is refused
+        print(f"warning: {health.line()}", flush=True)

@@ -39,6 +39,7 @@ from nerfaug.experiment.store import (
     start_run_folder,
     write_result,
 )
+from nerfaug.health import model_health
 from nerfaug.hemisphere import angles_from_pose
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.nerf.batch_trainer import BatchTrainer
@@ -371,6 +372,9 @@ def finish_run(
         start = time.perf_counter()
         save_view_uncertainty(folder, trained, data.test, config.selection, seed)
         timing["view_uncertainty"] = time.perf_counter() - start
+    # Whether the NeRF learned its views at all: a run that rendered background only is kept in its
+    # cell (it is what the method got) and counted on the study's page.
+    health = model_health(trained.model, trained.train_views)
     timing["total"] = sum(timing.values())
 
     write_selection(
@@ -416,6 +420,7 @@ def finish_run(
         "host": platform.node(),
         "torch": torch.__version__,
         "device": describe_device(trained.device),
+        "health": health.to_dict(),
     }
     if batch is not None:
         result["engine_version"], result["batch_size"] = batch["engine_version"], batch["size"]

@@ -200,6 +200,11 @@ REAL_STUDY_SCENES = ("mic", "maryRose", "dtu_scan24", "cow", "moldGoldCape")
 replication; `nerfaug.report.study_hypotheses` judges its hypotheses on the same names)."""
 REAL_STUDY_HELD_BACK = ("moldGoldCape",)
 """The real-scene study's replication scene: judged per cell, kept out of the means across scenes."""
+GPU_STUDY_ENGINES = ("paper",)
+GPU_STUDY_SCENES = ("mic", "lego", "maryRose", "dtu_scan24", "moldGoldCape")
+"""The GPU study's planned scenes (docs/study-plan.md, 2026-11-27), on the paper engine at 400 px:
+mic, the procedural lego stand-in and two real captures, the last held back for replication."""
+GPU_STUDY_HELD_BACK = ("moldGoldCape",)
 
 
 def run_study(
@@ -259,13 +264,18 @@ def with_design(record: dict, out: Path) -> dict:
     ran = list(record.get("scenes", []))
     # The procedural or the real-scene study: its planned scenes (those not run yet are named); a
     # study of other scenes (a user's own) plans just the scenes it ran.
-    if set(ran) <= set(PROCEDURAL_SCENES):
+    gpu_study = set(record.get("engines", [])) <= set(GPU_STUDY_ENGINES) and set(ran) <= set(GPU_STUDY_SCENES)
+    if gpu_study:
+        planned, engines = GPU_STUDY_SCENES, list(GPU_STUDY_ENGINES)
+    elif set(ran) <= set(PROCEDURAL_SCENES):
         planned = PROCEDURAL_SCENES
     else:
         planned = REAL_STUDY_SCENES if set(ran) <= set(REAL_STUDY_SCENES) else ()
     design = {"engines": engines, "scenes": list(dict.fromkeys([*planned, *ran]))}
     if planned == REAL_STUDY_SCENES:
         design["held_back"] = list(REAL_STUDY_HELD_BACK)
+    elif planned == GPU_STUDY_SCENES:
+        design["held_back"] = list(GPU_STUDY_HELD_BACK)
     # A design recorded by an earlier sitting stands; one recorded before held-back scenes were
     # part of it gains them (the plan named its held-back scene before any run).
     record = {**record, "design": {**design, **(record.get("design") or {})}}
@@ -414,6 +424,9 @@ def _engines(engines, device_type: str) -> tuple[list[str], dict[str, str]]:
 
 __all__ = [
     "DEFAULT_TRIALS",
+    "GPU_STUDY_ENGINES",
+    "GPU_STUDY_HELD_BACK",
+    "GPU_STUDY_SCENES",
     "PROCEDURAL_SCENES",
     "REAL_STUDY_SCENES",
     "StudySpec",

@@ -368,7 +368,7 @@ def run_sweep(
         ValueError, DatasetError: a setting or a dataset is wrong (checked before any work).
         IncompatibleResults, FolderRefused: `root` holds other results or files nerfaug did not write.
     """
-    _began = time.monotonic()
+    began = time.monotonic()
     root = Path(root)
     _need(isinstance(workers, int) and workers >= 1, "workers", workers, "must be an integer >= 1")
     _need(budget_s is None or budget_s > 0, "budget_s", budget_s, "must be > 0 seconds")
@@ -408,7 +408,7 @@ def run_sweep(
     units = plan_units(todo, config, batch_size(config, len(todo)) if config.batched() and todo else 1)
     if config.batched() and todo:
         console.print(f"{len(todo)} run(s) in {len(units)} trial batch(es) of up to {max(map(len, units))}")
-    deadline = None if budget_s is None else _began + budget_s
+    deadline = None if budget_s is None else began + budget_s
     if backend == "ray":
         new_results, failed = _execute_ray(units, datasets, config, root, workers, address, progress)
         unstarted = 0

@@ -444,11 +444,10 @@ def estimated_run_bytes(config: NerfConfig, fused: bool) -> int:
 
 
 def auto_batch_size(config: NerfConfig, device, runs: int) -> tuple[int, str]:
-    """How many runs of engine `config` a trial batch on `device` holds: on a GPU, what 80% of its
+    """How many runs of engine `config` a trial batch on the GPU `device` holds: what 80% of its
     free memory holds, less `SELECTION_RESERVE_BYTES` (scaled down for a small engine), at twice
-    `estimated_run_bytes` a run (the allocator's slack); on a CPU 4 (there its caches, not its
-    memory, limit what a batch gains: BENCHMARKS.md, "Trial batches"). At most `runs` and
-    `MAX_AUTO_BATCH`.
+    `estimated_run_bytes` a run (the allocator's slack); at most `runs` and `MAX_AUTO_BATCH`. (On a
+    CPU a batch gains little whatever its size: BENCHMARKS.md, "Trial batches"; its size is asked for.)
 
     Returns:
         the size, and a line saying how it was chosen.
@@ -457,9 +456,6 @@ def auto_batch_size(config: NerfConfig, device, runs: int) -> tuple[int, str]:
     from nerfaug.nerf.encoding import triton_available
 
     device = resolve_device(device)
-    if device.type != "cuda":
-        size = max(1, min(runs, 4))
-        return size, f"trial batches of {size} runs on the CPU"
     per_run = 2 * estimated_run_bytes(config, fused=triton_available())
     reserve = min(SELECTION_RESERVE_BYTES, 10 * per_run)
     free, _ = torch.cuda.mem_get_info(device)

@@ -62,6 +62,22 @@ def background(study: Study, engine: str) -> str:
 # ----------------------------------------------------------------------------- sections
 
 
+def _empty_runs(study: Study) -> str:
+    """Which cells hold runs whose NeRF rendered background only (runs recorded before the check
+    count as not empty)."""
+    cells: dict[tuple[str, str], int] = {}
+    for run in study.table["runs"]:
+        if run.get("empty"):
+            cells[(run["engine"], run["scene"])] = cells.get((run["engine"], run["scene"]), 0) + 1
+    if not cells:
+        return "runs whose NeRF rendered its training views as background only: none flagged"
+    listed = ", ".join(f"{engine}/{scene} {n}" for (engine, scene), n in sorted(cells.items()))
+    return (
+        f"runs whose NeRF rendered its training views as background only: {sum(cells.values())} "
+        f"({listed}); they stay in their cells"
+    )
+
+
 def _header(study: Study) -> list[Block]:
     plan, config = study.plan, study.plan.get("config", {})
     host = plan.get("machine", {})
@@ -88,6 +104,7 @@ def _header(study: Study) -> list[Block]:
         f"engines run: {', '.join(study.engines) or 'none'}",
         "engine versions (runs trained alone: reference; in trial batches: batched-N; a cell never mixes "
         f"two): {'; '.join(engine_versions) or 'none'}",
+        _empty_runs(study),
         f"scenes: {', '.join(plan.get('scenes', []))}; methods: {', '.join(plan.get('methods', []))}",
         f"trials per (scene, engine, method): {plan.get('trials', '?')} "
         f"(trial k uses seed {config.get('seed', 0)} + k)",

@@ -59,7 +59,7 @@ ROW_FIELDS = (
     "code_version",
     "fingerprint",
 )
-OPTIONAL_ROW_FIELDS = ("layout", "uniform_fill", "engine_version")
+OPTIONAL_ROW_FIELDS = ("layout", "uniform_fill", "engine_version", "empty")
 # The reference engine (a run trained alone) has no recorded version: every earlier row is one.
 REFERENCE_ENGINE_VERSION = ""
 
@@ -90,6 +90,9 @@ class RunRow:
     layout: int = 0
     uniform_fill: int = 0
     engine_version: str = REFERENCE_ENGINE_VERSION
+    empty: bool = False
+    """Its NeRF rendered its training views as background only (`nerfaug.health`); runs made
+    before the check read False."""
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -145,6 +148,7 @@ def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
         layout=int(result.get("layout", 0)),
         uniform_fill=int(selection.raw.get("uniform_fill", 0)),
         engine_version=str(result.get("engine_version", REFERENCE_ENGINE_VERSION)),
+        empty=bool(result.get("health", {}).get("empty", False)),
     )
     return row, rounded_poses(selection.train_poses)
 
@@ -317,10 +321,11 @@ def _check_row(path: Path, index: int, run) -> RunRow:
         ("layout", int),
         ("uniform_fill", int),
         ("engine_version", str),
+        ("empty", bool),
     ):
         if name not in run:  # an optional field
             continue
-        if not isinstance(run[name], kinds) or isinstance(run[name], bool):
+        if not isinstance(run[name], kinds) or (isinstance(run[name], bool) and kinds is not bool):
             raise _refuse(path, f"{where}.{name}", f"{run[name]!r} is not a {kinds.__name__}")
     for name in ("psnr", "ssim", "lpips"):
         value = run[name]
