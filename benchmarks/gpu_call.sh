@@ -32,12 +32,7 @@ export PYTHONUNBUFFERED=1
 pack() { tar czf "$OUT/gpu.tgz" -C "$RES" .; }
 left() { echo $((BUDGET_S - SECONDS)); }
 
-if [ -d .whl ]; then
-    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
-        && export PYTHONPATH=/tmp/site:src
-fi
-nvidia-smi -L | tee "$RES/device.txt"
-python3 -c "import torch, triton; print(torch.__version__, triton.__version__)" | tee -a "$RES/device.txt"
+. "$(dirname "$0")/gpu_env.sh" "$RES/device.txt"
 
 trial() {  # scene, seconds
     echo "== paper-scale trial on $1, $2 s allowed, $(left) s left"

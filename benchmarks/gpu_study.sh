@@ -18,12 +18,7 @@ mkdir -p "$OUT"
 export PYTHONUNBUFFERED=1
 left() { echo $((BUDGET_S - SECONDS)); }
 
-if [ -d .whl ]; then
-    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
-        && export PYTHONPATH=/tmp/site:src
-fi
-nvidia-smi -L | tee "$OUT/device.txt"
-python3 -c "import torch, triton; print(torch.__version__, triton.__version__)" | tee -a "$OUT/device.txt"
+. "$(dirname "$0")/gpu_env.sh" "$OUT/device.txt"
 
 if [ "$PART" != study ]; then
     # The same code at toy size: two trials of two methods in one trial batch on the GPU (the

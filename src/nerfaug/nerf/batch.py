@@ -27,9 +27,10 @@ from nerfaug.nerf.proposal import (
     ProposalSchedule,
     distortion_per_ray,
     interlevel_loss_per_ray,
+    place_samples,
     proposal_anneal,
 )
-from nerfaug.nerf.sampling import RunGenerators, ray_box_span, sample_pdf, stratified_edges, unit_cube
+from nerfaug.nerf.sampling import RunGenerators, ray_box_span, unit_cube
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 
 # The stacked parameters' rows (dim 0) hold the runs in order, in equal contiguous blocks, so
@@ -318,18 +319,23 @@ class BatchModel(nn.Module):
         config = self.config
         o, d = origins.reshape(-1, 3), directions.reshape(-1, 3)
         t_min, t_max = ray_box_span(o, d, config.box_half_size, config.near, config.far)
-        jitter = self.training
-        edges = stratified_edges(t_min, t_max, self.samples[0], jitter, generator)
-        proposal_edges, proposal_weights = [], []
-        targets = list(self.samples[1:]) + [self.num_samples]
-        with torch.set_grad_enabled(torch.is_grad_enabled() and self.training and self.update_networks):
-            for network, n_next in zip(self.networks, targets):
-                mids = 0.5 * (edges[:, 1:] + edges[:, :-1])
-                sigma = network(self._unit_points(o, d, mids, runs)).reshape(mids.shape)
-                weights = render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
-                proposal_edges.append(edges)
-                proposal_weights.append(weights)
-                edges = sample_pdf(edges, weights.detach() ** self.anneal, n_next, jitter, generator)
+
+        def weights_of(level: int, edges: Tensor) -> Tensor:
+            mids = 0.5 * (edges[:, 1:] + edges[:, :-1])
+            sigma = self.networks[level](self._unit_points(o, d, mids, runs)).reshape(mids.shape)
+            return render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
+
+        edges, extras = place_samples(
+            weights_of,
+            t_min,
+            t_max,
+            self.samples,
+            self.num_samples,
+            self.anneal,
+            self.training,
+            generator,
+            with_graph=torch.is_grad_enabled() and self.training and self.update_networks,
+        )
         t_starts, t_ends = edges[:, :-1], edges[:, 1:]
         weights, rgbs = self._shade(o, d, t_starts, t_ends, runs)
         if background is None and config.background_mode == "last_sample":
@@ -340,7 +346,6 @@ class BatchModel(nn.Module):
             background = rgbs[:, -1]
         background = (self.background if background is None else background).to(weights)
         rgb, accumulation, depth = composite(weights, rgbs, t_starts, t_ends, background)
-        extras = {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
         return RenderOutput(rgb, accumulation, depth, weights, t_starts, t_ends, extras)
 
     def _unit_points(self, o: Tensor, d: Tensor, t: Tensor, runs: int) -> Tensor:

@@ -119,6 +119,38 @@ def proposal_update_interval(step: int, update_every: int, warmup_steps: int) ->
     return min(max(update_every * fraction, 1.0), float(update_every))
 
 
+def place_samples(
+    weights_of, t_min, t_max, samples, num_samples: int, anneal, jitter: bool, generator, with_graph: bool
+) -> tuple[Tensor, dict]:
+    """The proposal sampler's cascade: stratified intervals for the first network, each
+    network's weights (raised to `anneal`) placing the next level's intervals by inverse CDF, the
+    last network's the `num_samples` final ones.
+
+    Args:
+        weights_of: `weights_of(level, edges)` -> that level's network's volume-rendering weights
+            (n_rays, n) on intervals `edges` (n_rays, n + 1).
+        t_min, t_max: Tensors with shape (n_rays,), where each ray is in the scene.
+        samples: intervals per proposal level.
+        anneal: the exponent of the proposal weights (a scalar Tensor or float).
+        jitter, generator: stratified random positions, and their source.
+        with_graph: whether the networks' evaluations keep a graph (steps that update them).
+
+    Returns:
+        The final edges (n_rays, num_samples + 1), and each level's histogram for the
+        interlevel loss ("proposal_edges", "proposal_weights").
+    """
+    edges = stratified_edges(t_min, t_max, samples[0], jitter, generator)
+    proposal_edges, proposal_weights = [], []
+    targets = list(samples[1:]) + [num_samples]
+    with torch.set_grad_enabled(with_graph):
+        for level, n_next in enumerate(targets):
+            weights = weights_of(level, edges)
+            proposal_edges.append(edges)
+            proposal_weights.append(weights)
+            edges = sample_pdf(edges, weights.detach() ** anneal, n_next, jitter, generator)
+    return edges, {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
+
+
 class ProposalSchedule:
     """Which training steps update the proposal networks (nerfstudio's ProposalNetworkSampler
     rule): every step below 10, then a step once more than `proposal_update_interval` steps have
@@ -204,19 +236,19 @@ class ProposalSampler(Sampler):
     def sample(self, origins, directions, t_min, t_max, generator=None) -> tuple[Tensor, dict]:
         """See `Sampler.sample`; `extras` holds each network's histogram ("proposal_edges",
         "proposal_weights") for the interlevel loss."""
-        jitter = self.training
-        edges = stratified_edges(t_min, t_max, self.samples[0], jitter, generator)
-        proposal_edges, proposal_weights = [], []
-        targets = list(self.samples[1:]) + [self.num_samples]
         # Samples are placed without gradient, so outside training (e.g. a Fisher information
         # pass in eval mode) and on steps that do not update them the networks need no graph.
-        with torch.set_grad_enabled(torch.is_grad_enabled() and self.training and self.update_networks):
-            for network, n_next in zip(self.networks, targets):
-                weights = self._weights(network, origins, directions, edges)
-                proposal_edges.append(edges)
-                proposal_weights.append(weights)
-                edges = sample_pdf(edges, weights.detach() ** self.anneal, n_next, jitter, generator)
-        return edges, {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
+        return place_samples(
+            lambda level, edges: self._weights(self.networks[level], origins, directions, edges),
+            t_min,
+            t_max,
+            self.samples,
+            self.num_samples,
+            self.anneal,
+            self.training,
+            generator,
+            with_graph=torch.is_grad_enabled() and self.training and self.update_networks,
+        )
 
     def _weights(self, network: DensityField, origins: Tensor, directions: Tensor, edges: Tensor) -> Tensor:
         """Volume-rendering weights of one network on intervals `edges` (n_rays, n + 1)."""
