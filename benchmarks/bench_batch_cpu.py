@@ -48,6 +48,34 @@ def arm(config, root: Path, workers: int) -> dict:
     return {"wall_s": wall, "cpu_s": cpu, "runs": len(runs), "results": runs, "skipped": outcome.skipped}
 
 
+def nudged_models():
+    """A context in which every run alone starts with one parameter of its field moved by one
+    unit in the last place (float32): the reference engine with a rounding-sized difference, the
+    null against which an engine that rounds otherwise is judged. In this process only (one worker)."""
+    import contextlib
+
+    from nerfaug.nerf import trainer as trainer_module
+
+    original = trainer_module.seeded_model
+
+    def nudged(*args, **kwargs):
+        model = original(*args, **kwargs)
+        with torch.no_grad():
+            weight = model.field.density_mlp[0].weight
+            weight[0, 0] = torch.nextafter(weight[0, 0], torch.tensor(float("inf")))
+        return model
+
+    @contextlib.contextmanager
+    def patched():
+        trainer_module.seeded_model = nudged
+        try:
+            yield
+        finally:
+            trainer_module.seeded_model = original
+
+    return patched()
+
+
 def _cpu_seconds() -> float:
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
@@ -66,6 +94,12 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", type=Path, required=True, help="a folder for both arms' runs")
     parser.add_argument("--json", type=Path, help="where to write the figures")
+    parser.add_argument(
+        "--nudged-against",
+        type=Path,
+        help="instead: run the reference engine with one weight moved by one ulp, in this process, and "
+        "compare with the runs alone of this earlier --json (the rounding null)",
+    )
     args = parser.parse_args(argv)
 
     base = STUDY_PRESETS.choose(
@@ -74,6 +108,8 @@ def main(argv=None) -> int:
     if args.steps is not None:
         base = base.replace(steps=args.steps)
     started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    if args.nudged_against is not None:
+        return nudged_null(base, args, started)
     arms = {
         "alone": arm(base.replace(batch=1), args.out / "alone", args.workers),
         "batched": arm(base.replace(batch=args.batch), args.out / "batched", args.workers),
@@ -95,7 +131,7 @@ def main(argv=None) -> int:
         "cores": os.cpu_count(),
         "load_average_at_start": os.getloadavg(),
         "torch": torch.__version__,
-        "settings": vars(args) | {"out": str(args.out), "json": str(args.json), "data": args.data},
+        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
         "arms": {
             name: {
                 "wall_s": a["wall_s"],
@@ -127,6 +163,37 @@ def main(argv=None) -> int:
         f"[{overall['low']:+.3f}, {overall['high']:+.3f}], TOST p = {overall['p_value']:.4f} (bound "
         f"+-{args.bound} dB), largest |d| {overall['max_abs_difference']:.3f} dB: "
         f"{'accepted' if figures['accepted'] else 'NOT accepted'}"
+    )
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(figures, indent=2) + "\n")
+    return 0
+
+
+def nudged_null(base, args, started: str) -> int:
+    """The rounding null: runs alone with a one-ulp nudge against the same runs alone without."""
+    reference = json.loads(args.nudged_against.read_text())
+    before = {(r["scene"], r["trial"]): r["psnr_alone"] for r in reference["runs"]}
+    with nudged_models():
+        nudged = arm(base.replace(batch=1), args.out / "nudged", workers=1)
+    pairs = sorted(set(before) & set(nudged["results"]))
+    after = [nudged["results"][p]["metrics"]["psnr"] for p in pairs]
+    result = paired_equivalence(after, [before[p] for p in pairs], args.bound)
+    figures = {
+        "date": started,
+        "host": platform.node(),
+        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+        "nudge": "the field's first density-network weight [0, 0] moved by one float32 ulp at initialisation",
+        "runs": [
+            {"scene": s, "trial": t, "psnr_alone": before[(s, t)], "psnr_nudged": a, "difference": a - before[(s, t)]}
+            for (s, t), a in zip(pairs, after)
+        ],
+        "equivalence": result,
+    }
+    print(
+        f"PSNR nudged - alone over {result['n_pairs']} seeds: mean {result['mean']:+.3f} dB, 90% CI "
+        f"[{result['low']:+.3f}, {result['high']:+.3f}], TOST p = {result['p_value']:.4f}, largest |d| "
+        f"{result['max_abs_difference']:.3f} dB"
     )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

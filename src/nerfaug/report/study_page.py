@@ -69,13 +69,14 @@ def _empty_runs(study: Study) -> str:
     for run in study.table["runs"]:
         if run.get("empty"):
             cells[(run["engine"], run["scene"])] = cells.get((run["engine"], run["scene"]), 0) + 1
-    if not cells:
-        return "runs whose NeRF rendered its training views as background only: none flagged"
-    listed = ", ".join(f"{engine}/{scene} {n}" for (engine, scene), n in sorted(cells.items()))
-    return (
-        f"runs whose NeRF rendered its training views as background only: {sum(cells.values())} "
-        f"({listed}); they stay in their cells"
+    what = (
+        "runs whose NeRF rendered its training views as background only (the health check; runs "
+        "recorded before it are not checked)"
     )
+    if not cells:
+        return f"{what}: none flagged"
+    listed = ", ".join(f"{engine}/{scene} {n}" for (engine, scene), n in sorted(cells.items()))
+    return f"{what}: {sum(cells.values())} ({listed}); they stay in their cells"
 
 
 def _header(study: Study) -> list[Block]:
