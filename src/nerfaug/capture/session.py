@@ -440,12 +440,12 @@ class CaptureSession(SessionFolder):
         """
         folder = self.run_dir / PROPOSALS_DIR
         number, shown = len(self.state.proposals), bool(self.trainer.progress)  # as the session was opened
-        request = (request or ProposalRequest()).checked()
-        health = self.health()
-        if health.empty:
-            warnings.warn(f"{self.run_dir}: {health.line()}", EmptyModelWarning, stacklevel=2)
+        request = request or ProposalRequest()
         proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown, map)
         self.state.proposals.append(record)
+        health = self.health()  # once the request was possible: a refused one says only why
+        if health.empty:
+            warnings.warn(f"{self.run_dir}: {health.line()}", EmptyModelWarning, stacklevel=2)
         return proposal
 
     def health(self) -> Health:
