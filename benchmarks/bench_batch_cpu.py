@@ -30,9 +30,9 @@ from pathlib import Path
 
 import torch
 
+from nerfaug.equivalence import paired_equivalence
 from nerfaug.experiment.config import STUDY_PRESETS
 from nerfaug.experiment.sweep import run_sweep
-from nerfaug.statistics import paired_equivalence
 
 
 def arm(config, root: Path, workers: int) -> dict:

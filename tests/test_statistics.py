@@ -13,6 +13,7 @@ from nerfaug.coverage import (
     unseen_half_share,
     view_coverage,
 )
+from nerfaug.equivalence import paired_equivalence
 from nerfaug.hemisphere import half_hemisphere_poses, pose_from_angles
 from nerfaug.statistics import (
     bootstrap_median_difference,
@@ -21,7 +22,6 @@ from nerfaug.statistics import (
     min_attainable_p,
     min_attainable_paired_p,
     paired_comparison,
-    paired_equivalence,
     seed_level_comparison,
     sign_flip_p,
     summarise,

@@ -238,7 +238,7 @@ def test_the_batched_engine_is_equivalent_to_runs_alone_by_paired_seeds(sphere_v
     """The acceptance rule of a new engine version, at test size: over paired seeds, the mean
     difference of held-out PSNR inside +-0.2 dB by a TOST at alpha 0.05, and no seed more than
     1 dB apart (the full check, at the study's size, is BENCHMARKS.md's "Trial batches")."""
-    from nerfaug.statistics import paired_equivalence
+    from nerfaug.equivalence import paired_equivalence
 
     train = sphere_views([0.0, 1.2, 2.4, 3.6, 4.8], [0.9, 1.1, 0.8, 1.2, 1.0], size=16)
     held_out = sphere_views([0.6, 1.8, 3.0, 4.2], [1.0, 0.9, 1.1, 0.8], size=16)

@@ -264,7 +264,8 @@ def with_design(record: dict, out: Path) -> dict:
     ran = list(record.get("scenes", []))
     # The procedural or the real-scene study: its planned scenes (those not run yet are named); a
     # study of other scenes (a user's own) plans just the scenes it ran.
-    gpu_study = set(record.get("engines", [])) <= set(GPU_STUDY_ENGINES) and set(ran) <= set(GPU_STUDY_SCENES)
+    ran_engines = set(record.get("engines", []))
+    gpu_study = bool(ran_engines) and ran_engines <= set(GPU_STUDY_ENGINES) and set(ran) <= set(GPU_STUDY_SCENES)
     if gpu_study:
         planned, engines = GPU_STUDY_SCENES, list(GPU_STUDY_ENGINES)
     elif set(ran) <= set(PROCEDURAL_SCENES):

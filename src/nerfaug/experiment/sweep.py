@@ -24,6 +24,7 @@ from rich.console import Console
 from nerfaug.data import find_split, has_split, require_split
 from nerfaug.device import device_kind
 from nerfaug.experiment import protocol
+from nerfaug.experiment.budget import Budget
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, run_trial_batch, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
@@ -475,27 +476,11 @@ class _Display:
         return f"runs: {self.done} done, {len(self.running)} running, {self.failed} failed"
 
 
-class _Budget:
-    """Whether another unit of work fits before a deadline: by the longest unit so far."""
-
-    def __init__(self, deadline: float | None):
-        self.deadline, self.longest, self.started = deadline, 0.0, {}
-
-    def allows(self) -> bool:
-        return self.deadline is None or time.monotonic() + self.longest <= self.deadline
-
-    def start(self, unit_id) -> None:
-        self.started[unit_id] = time.monotonic()
-
-    def end(self, unit_id) -> None:
-        self.longest = max(self.longest, time.monotonic() - self.started.pop(unit_id))
-
-
 def _execute_local(units, datasets, config, root, workers, progress, deadline=None):
     """Run `units` here (one at a time) or in a pool of `workers` processes, starting each only
     while the deadline allows. Returns (results, failed, runs not started)."""
     results, failed = [], {}
-    budget = _Budget(deadline)
+    budget = Budget(deadline)
     queue = list(units)
     total = sum(len(unit) for unit in units)
     with _Display(total, root, config.steps, progress) as display:
