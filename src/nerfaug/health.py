@@ -1,6 +1,7 @@
 """Whether a trained NeRF learned its scene: a NeRF whose renders of its own training views are
 background only (all-transparent), or no closer to them than a blank image, has nothing to say
-about which views to capture next, and must not send a robot anywhere.
+about which views to capture next: a proposal from it is said to be so (a warning), never silently
+sent to a robot.
 
 The check renders the training views small (`HEALTH_WIDTH` pixels across, at most
 `HEALTH_VIEWS` of them, spread over the set) and compares with the images shrunk alike: the mean

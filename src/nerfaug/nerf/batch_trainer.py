@@ -20,7 +20,7 @@ from torch import Tensor
 from nerfaug.data.views import Views
 from nerfaug.device import resolve_device
 from nerfaug.nerf.batch import BatchModel
-from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig  # noqa: F401 (re-exported)
+from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.registry import DEFAULT_FIELD, build_field
 from nerfaug.nerf.sampling import RunGenerators
