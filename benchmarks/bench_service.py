@@ -49,6 +49,7 @@ def propose_body(args, seed: int) -> dict:
         "seed": seed,
         "selection": {"entropy_resolution": args.entropy_resolution},
         "constraints": constraints,
+        "allow_empty": True,  # a timing: the proposal runs whatever the NeRF learned in --steps
     }
 
 

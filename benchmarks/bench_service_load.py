@@ -113,6 +113,7 @@ def client_loop(index: int, args, url: str, session: str, record: Record, deadli
                     "n": 2,
                     "n_candidates": args.candidates,
                     "selection": {"entropy_resolution": args.entropy_resolution},
+                    "allow_empty": True,  # timed, whatever the NeRF learned meanwhile
                 }
                 record.timed("proposal", client.post, f"/sessions/{session}/proposals", json=body)
             if turn % args.capture_every == index % args.capture_every:

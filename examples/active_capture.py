@@ -79,6 +79,7 @@ def main(
     seed: int = 0,
     resolution: int = 100,
     pool: int = 300,
+    allow_empty: bool = False,
 ) -> None:
     """Run `rounds` of train -> propose -> capture -> add, then export for nerfstudio.
 
@@ -98,6 +99,7 @@ def main(
         preset: NeRF engine preset.
         seed: seeds the model, its training and every proposal.
         resolution, pool: image size and candidate pool of the dataset when it is rendered here.
+        allow_empty: propose even from a NeRF that learned nothing yet (a run of a few steps).
     """
     data = dataset(data, scene, resolution, pool)
     session = open_or_create(run, data, preset, seed, split)
@@ -118,7 +120,9 @@ def main(
 
     for _ in range(rounds):
         session.train(steps_per_round)
-        request = ProposalRequest(n=views_per_round, method="ours", candidates=reachable, n_candidates=n_candidates)
+        request = ProposalRequest(
+            n=views_per_round, method="ours", candidates=reachable, n_candidates=n_candidates, allow_empty=allow_empty
+        )
         proposal = session.propose(request)
         print(f"proposal {proposal.number}: map {proposal.map_path}")
         proposal.write(run / f"poses_{proposal.number:03d}.json")  # what a real robot would get

@@ -27,12 +27,14 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import httpx
 import imageio.v3 as iio
 import numpy as np
 import tyro
+
+from nerfaug.cli_hints import none_means
 
 HOST = "127.0.0.1"
 
@@ -112,17 +114,18 @@ def evaluate(client: httpx.Client, session: str, held_out: str, max_views: int) 
 class Options:
     """Drive a capture session through rounds of propose -> capture -> add -> train -> evaluate."""
 
-    url: str | None = None
-    """a running `nerfaug serve`; default: start one on ROOT and stop it at the end."""
+    url: Annotated[str | None, none_means("start one on ROOT, stopped at the end", "URL")] = None
+    """a running `nerfaug serve`."""
     root: Path = Path("results/robot-service")
     """the service's root folder (the session and a copy of the held-out views go there)."""
-    token: str | None = None
+    token: Annotated[str | None, none_means("none", "STR")] = None
     """the service's token, when it has one."""
     session: str = "robot"
     """the session's id (an existing session of that id is resumed)."""
-    data: Path | None = None
-    """a Blender dataset of SCENE (initial split: the first captures; test: the held-out views); default:
-    data/SCENE-RESOLUTION, rendered there when absent (as `nerfaug scene render SCENE --out data/SCENE-RESOLUTION`)."""
+    data: Annotated[
+        Path | None, none_means("data/SCENE-RESOLUTION, rendered there by `nerfaug scene render` when absent", "PATH")
+    ] = None
+    """a Blender dataset of SCENE (initial split: the first captures; test: the held-out views)."""
     scene: str = "lego"
     """the built-in scene the robot's camera sees (lego, chair, materials)."""
     resolution: int = 100
@@ -153,6 +156,8 @@ class Options:
     """score on the first this many held-out views."""
     device: Literal["auto", "cpu", "cuda"] = "cpu"
     """where a service started here trains."""
+    allow_empty: bool = False
+    """propose even from a NeRF that learned nothing yet (a run of a few steps)."""
     timeout: float = 3600.0
     """seconds one training job may take before the loop gives up."""
     summary: Path = Path("results/robot-capture-loop.json")
@@ -267,6 +272,7 @@ def capture_loop(client: httpx.Client, o: Options, held_out: str) -> list[dict]:
             "n_candidates": o.n_candidates,
             "seed": o.seed + number,
             "constraints": constraints,
+            "allow_empty": o.allow_empty,
         }
         proposal = answer(client.post(f"/sessions/{o.session}/proposals", json=body))
         poses = np.array([frame["transform_matrix"] for frame in proposal["frames"]], dtype=np.float32)

@@ -182,22 +182,48 @@ def test_every_help_speaks_the_users_words_and_each_option_name_means_one_thing(
     assert "elevation" in helps["propose"] and "azimuth, polar" not in helps["propose"]
 
 
-@pytest.mark.parametrize("command", ["train", "add", "serve", "uncertainty"])
+# Every command, as its words on the command line (`nerfaug scene render`: two).
+EVERY_COMMAND = [
+    "run",
+    "study",
+    "report",
+    "methods",
+    "propose",
+    "export",
+    "eval",
+    "render-proposals",
+    "uncertainty",
+    "train",
+    "add",
+    "serve",
+    "scene render",
+    "scene prepare",
+]
+
+
+def test_the_light_help_test_names_every_command():
+    from nerfaug.cli import COMMANDS
+
+    assert {command.split()[0] for command in EVERY_COMMAND} == set(COMMANDS)
+
+
+@pytest.mark.parametrize("command", EVERY_COMMAND)
 def test_a_commands_help_loads_no_torch(command):
-    """`nerfaug train --help` (and the other light commands') parse their options before anything
-    heavy is imported: torch alone takes seconds to import (BENCHMARKS.md, "`--help` start-up")."""
+    """`nerfaug COMMAND --help` parses its options before anything heavy is imported: torch alone
+    takes seconds to import (BENCHMARKS.md, "`--help` start-up"), numpy, FastAPI and matplotlib
+    a good part of one; each command's options are light, its work is imported when it runs."""
     import subprocess
     import sys
 
     probe = (
         "import sys\nfrom nerfaug.cli import main\n"
-        f"try:\n    main([{command!r}, '--help'])\nexcept SystemExit:\n    pass\n"
+        f"try:\n    main([*{command.split()!r}, '--help'])\nexcept SystemExit:\n    pass\n"
         "print(sorted(m for m in ('torch', 'numpy', 'fastapi', 'matplotlib') if m in sys.modules))"
     )
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert f"usage: nerfaug {command}" in done.stdout
-    assert done.stdout.strip().splitlines()[-1] == "[]"
+    assert done.stdout.strip().splitlines()[-1] == "[]", command
 
 
 def test_trains_old_preset_option_names_its_new_spelling(capsys):
@@ -206,3 +232,38 @@ def test_trains_old_preset_option_names_its_new_spelling(capsys):
     assert refused.value.code == 2
     error = capsys.readouterr().err.strip()
     assert error.startswith("nerfaug: --preset: `nerfaug train` takes the NeRF engine preset as --engine")
+
+
+@pytest.mark.parametrize("argv", [[], ["scene"], ["scene", "render"], ["scene", "prepare"]])
+def test_the_overview_and_the_scene_commands_help_load_no_command_and_no_torch(argv):
+    """`nerfaug --help` lists the commands without importing them (it took seconds, loading every
+    command's options, torch among them); `nerfaug scene render --help` reads its options alone."""
+    import subprocess
+    import sys
+
+    probe = (
+        "import sys\nfrom nerfaug.cli import main\n"
+        f"try:\n    main([*{argv!r}, '--help'])\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in sys.modules if m == 'torch' or m.startswith(('nerfaug.cli.run', 'nerfaug.cli.s'))))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    loaded = done.stdout.strip().splitlines()[-1]
+    assert loaded == ("['nerfaug.cli.scene']" if argv else "[]"), loaded
+
+
+def test_a_mistyped_command_is_answered_with_the_closest_one(capsys):
+    with pytest.raises(SystemExit) as refused:
+        main(["trian", "--help"])
+    assert refused.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("nerfaug: unknown command 'trian'; did you mean 'train'? choose one of: scene, run,")
+
+
+def test_an_engine_preset_is_offered_without_none_and_a_typo_gets_the_closest_name(capsys):
+    with pytest.raises(SystemExit) as refused:
+        main(["train", "data", "--out", "run", "--engine", "papr"])
+    assert refused.value.code == 2
+    error = " ".join(capsys.readouterr().err.replace("│", " ").split())
+    assert "'None'" not in error and "None," not in error
+    assert "unknown name 'papr'; did you mean 'paper'? choose one of: paper, cpu, nerfacto-cpu, test" in error

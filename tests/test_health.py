@@ -61,9 +61,12 @@ def test_the_verdict_by_its_thresholds():
     assert Health(**{**base, "psnr": 12.3}).to_dict()["empty"] is True
 
 
-def test_a_proposal_from_an_empty_session_warns(tmp_path):
+def test_a_proposal_from_an_empty_session_is_refused_unless_allowed(tmp_path):
+    from dataclasses import replace
+
     from nerfaug.capture import CaptureSession, ProposalRequest, SessionSettings
     from nerfaug.data import write_blender_split
+    from nerfaug.health import EmptyModel
     from nerfaug.selection import SelectionConfig
 
     views = ball_views()
@@ -72,9 +75,23 @@ def test_a_proposal_from_an_empty_session_warns(tmp_path):
     with torch.no_grad():
         session.trainer.model.field.density_mlp[-1].bias[0] = -30.0
     request = ProposalRequest(n=2, n_candidates=20, selection=SelectionConfig(entropy_resolution=4))
-    with pytest.warns(EmptyModelWarning, match="background only"):
+    with pytest.raises(EmptyModel, match="no views proposed: .*background only.*--allow-empty"):
         session.propose(request, map=False)
+    assert session.state.proposals == [] and not (session.run_dir / "proposals").exists()
+    with pytest.warns(EmptyModelWarning, match="background only"):
+        session.propose(replace(request, allow_empty=True), map=False)
+    assert session.state.proposals[-1].model_dump()["empty_model"] is True
     session.train(300)
     with warnings.catch_warnings():
         warnings.simplefilter("error", EmptyModelWarning)
         session.propose(request, map=False)
+    assert "empty_model" not in session.state.proposals[-1].model_dump()
+
+
+def test_the_service_answers_an_empty_model_with_409():
+    from nerfaug.health import EmptyModel
+    from nerfaug.service.errors import status_of
+
+    status, line = status_of(EmptyModel("run: no views proposed: the NeRF renders ..."))
+    assert status == 409 and line.startswith("run: no views proposed")
+    assert EmptyModel("x").exit_code == 1

@@ -102,3 +102,16 @@ def test_a_map_leaves_blank_where_no_candidate_lies_and_nowhere_else():
     assert 0.6 < masked[inside].mean() < 0.95
     opposite = (gx < -0.3) & inside  # the far side of the disk from the wedge (azimuth ~300 deg)
     assert masked[opposite].all()
+
+
+def test_the_rings_are_labelled_as_elevation_and_the_bar_says_what_the_scores_are():
+    from nerfaug.maps import hemisphere_map_figure
+    from nerfaug.selection import METHODS
+
+    poses, azimuth, _ = candidates()
+    label = METHODS["ours"].score_label()
+    figure = hemisphere_map_figure(poses, torch.cos(azimuth), half_hemisphere_poses(6), poses[:2], label=label)
+    texts = {t.get_text() for t in figure.axes[0].texts}
+    assert {"30° elev.", "60° elev.", "90° az."} <= texts
+    assert figure.axes[1].get_ylabel() == label  # the colour bar
+    assert "bits" in label and "rad²" in label and "no unit" in label

@@ -80,3 +80,28 @@ def test_a_sweep_without_a_terminal_prints_a_line_per_finished_run(tmp_path, cap
     assert "(data/uniform/trial 0 done)" in runs[0].group(0) and "(data/uniform/trial 1 done)" in runs[1].group(0)
     steps = [m for m in lines if m is not None and m["what"].strip() == "data/uniform/trial 0"]
     assert len(steps) >= 2, "a run's steps are reported while it trains"
+
+
+def test_the_live_bars_eta_is_the_mean_rate_so_far_and_does_not_swing_on_a_burst():
+    """Runs ending together (parallel workers) must not make the ETA drop to the last seconds'
+    rate: 5 of 10 units in 101 s leave 101 s, though 4 of them ended in the last second."""
+    import io
+
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from nerfaug.progress import RemainingAtMeanRate, progress_bar
+
+    clock = [0.0]
+    column = RemainingAtMeanRate()
+    bar = Progress(column, get_time=lambda: clock[0], console=Console(file=io.StringIO()))
+    task = bar.add_task("runs", total=10)
+    assert column.render(bar.tasks[0]).plain == "-:--:--"
+    clock[0] = 100.0
+    bar.update(task, completed=1)
+    assert column.render(bar.tasks[0]).plain == "0:15:00"
+    clock[0] = 101.0
+    bar.update(task, completed=5)
+    assert column.render(bar.tasks[0]).plain == "0:01:41"
+    live = progress_bar(console=Console(file=io.StringIO(), force_terminal=True))
+    assert any(isinstance(c, RemainingAtMeanRate) for c in live.columns)

@@ -94,7 +94,11 @@ def write_run(root, record, scene, method, trial, psnr, lpips_available=True, ge
             "lpips_status": "available: test" if lpips_available else LPIPS_MISSING,
         },
     )
-    write_history(folder, [{"step": step, "loss": 1.0 / step, "psnr": psnr * step / 60} for step in range(1, 61)])
+    losses = lambda step: {"rgb": 0.9 / step, "distortion": 0.01 / step, "interlevel": 0.001 / step}  # noqa: E731
+    write_history(
+        folder,
+        [{"step": step, "loss": 1.0 / step, "psnr": psnr * step / 60, "losses": losses(step)} for step in range(1, 61)],
+    )
     write_config(folder, record["config"], {})
     write_result(
         folder,
@@ -352,3 +356,54 @@ def test_selection_round_trips_through_the_contract(tmp_path):
     assert np.allclose(record.raw["candidate_azimuth"], azimuth.numpy())
     (tmp_path / FILES.selection).write_text('{"scores": [1, 2]}')  # lacks the poses: not drawable
     assert read_selection(tmp_path) is None
+
+
+def test_the_view_figure_shows_the_tables_ause_units_on_its_bars_and_fisherrf_at_the_views_size(tmp_path):
+    from nerfaug.report import collect_results
+    from nerfaug.report.view_uncertainty import ause_table, view_uncertainty_figure
+
+    root = make_results(tmp_path, corrupt=False)
+    for trial in (1, 2):  # uniform's later trials rank the error exactly: its median differs from trial 0's
+        folder = RunKey("lego", "uniform", trial).folder(root)
+        write_view_uncertainty(folder, {**view_arrays("uniform"), "entropy": 3 * VIEW_ERROR})
+    results = collect_results(root)
+    rows = {row[0]: row for row in ause_table(results, "lego").rows}
+    figure = view_uncertainty_figure(results, "lego")
+    panels, bars = figure.axes[:12], [ax.get_ylabel() for ax in figure.axes[12:]]  # 3 rows of 4, then the bars
+    uniform = panels[4:8]
+    assert rows["uniform"][2].startswith("0.000 (")  # the median of 0, 0 and the constant image's AUSE
+    assert uniform[2].get_title() == "ray entropy\nAUSE 0.000 (median of 3 runs)"
+    assert uniform[3].get_title().endswith(f"AUSE {rows['uniform'][3].split()[0]} (median of 3 runs)")
+    fisher, error = uniform[3].images[0], uniform[1].images[0]
+    assert fisher.get_array().shape == error.get_array().shape == (8, 8)  # computed at 4x4, drawn at 8x8
+    assert (
+        len(bars) == 8
+        and all(bars)
+        and any("bits" in b for b in bars)
+        and any("no unit" in b and "log scale" in b for b in bars)
+    )
+
+
+def test_the_training_curves_say_they_are_the_training_batchs_psnr_and_mark_the_added_views(report):
+    from nerfaug.report import collect_results
+    from nerfaug.report.figures import training_curves_figure
+
+    root, _, _, _ = report
+    figure = training_curves_figure(collect_results(root))
+    ax = figure.axes[0]
+    assert ax.get_ylabel() == "training-batch PSNR (dB)"
+    assert any(t.get_text().strip() == "views added" for t in ax.texts)
+    assert len(ax.lines) == len(METHODS) + 1  # a curve per method and the add step
+    assert "not held-out views" in figure._suptitle.get_text()
+
+
+def test_the_training_curves_draw_each_named_loss(report):
+    """A collapse is read loss by loss: a second row draws rgb, distortion and interlevel apart."""
+    from nerfaug.report import collect_results
+    from nerfaug.report.figures import training_curves_figure
+
+    root, _, _, _ = report
+    figure = training_curves_figure(collect_results(root))
+    below = figure.axes[len(figure.axes) // 2]
+    assert [line.get_label() for line in below.lines[:3]] == ["rgb", "distortion", "interlevel"]
+    assert below.get_yscale() == "log" and "loss" in below.get_ylabel()

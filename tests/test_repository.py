@@ -1,6 +1,7 @@
 """The repository after the README's commands: what they write into its root is ignored by git,
 and the package metadata uses the current form of its fields."""
 
+import re
 import shutil
 import subprocess
 import tomllib
@@ -40,3 +41,13 @@ def test_the_readme_still_writes_those_paths():
 def test_license_is_an_spdx_string():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["license"] == "MIT"
+
+
+def test_the_readmes_http_round_trains_on_its_captures_before_it_evaluates():
+    """Scores taken right after the captures are added, before any step on them, make the new
+    views look useless: the curl round trains between adding and evaluating."""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = next(b for b in re.findall(r"```bash\n(.*?)```", readme, flags=re.S) if "/captures" in b)
+    calls = re.findall(r"/sessions/\w+/(captures|train|evaluate)", block)
+    after_captures = calls[calls.index("captures") + 1 :]
+    assert "evaluate" in after_captures and after_captures.index("train") < after_captures.index("evaluate")

@@ -215,6 +215,21 @@ def test_dataset_refuses_to_replace_a_foreign_folder(tmp_path):
     assert (tmp_path / "mine.txt").read_text() == "precious"
 
 
+@blender
+def test_a_rendered_dataset_holding_a_users_file_is_not_replaced(tmp_path):
+    """A dataset rendered with other arguments is replaced, unless a user put a file of their own
+    into it: then nothing is rendered or removed, and the refusal names the file."""
+    out = tmp_path / "lego"
+    (out / "train").mkdir(parents=True)
+    (out / "scene.json").write_text(json.dumps({"resolution": 4}))
+    (out / "transforms_train.json").write_text(json.dumps({"frames": []}))
+    (out / "train" / "r_0.png").write_bytes(b"png")
+    (out / "train" / "notes.md").write_text("mine")
+    with pytest.raises(FileExistsError, match=r"lego: holds train/notes\.md, which nerfaug did not write"):
+        render_scene_dataset("lego", out, resolution=8, pool=1, test=1, initial=1, progress=False)
+    assert (out / "train" / "notes.md").read_text() == "mine" and (out / "scene.json").is_file()
+
+
 # ---- the cow: a built-in scene built from files shipped with the package -------------------------
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -309,3 +324,16 @@ def test_cow_renders_its_spots():
         luminance = image[alpha > 0.99].mean(-1)
         dark, median = torch.quantile(luminance, torch.tensor([0.05, 0.5])).tolist()
         assert dark < 0.5 and median > 0.55, (dark, median)
+
+
+def test_a_mistyped_scene_is_answered_with_the_closest_built_in_one(tmp_path, monkeypatch):
+    from nerfaug.experiment.protocol import scene_folder
+    from nerfaug.scenes.render import scene_spec
+
+    with pytest.raises(ValueError, match="unknown scene 'lgo': did you mean 'lego'\\? expected one of lego, chair"):
+        scene_spec("lgo")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match="unknown scene 'chiar': did you mean 'chair'\\? not a dataset folder"):
+        scene_folder("chiar")
+    with pytest.raises(ValueError, match="unknown scene 'teapot': not a dataset folder"):  # nothing close
+        scene_folder("teapot")

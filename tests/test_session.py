@@ -166,7 +166,7 @@ def test_propose_add_train_propose_round_trip(dataset, tmp_path):
     assert session.hemisphere.centre == pytest.approx(CENTRE, abs=1e-4)
     assert session.hemisphere.radius == pytest.approx(RADIUS, rel=1e-4)
     session.train(3)
-    first = session.propose(ProposalRequest(n=3, method="ours", n_candidates=40, selection=FAST))
+    first = session.propose(ProposalRequest(allow_empty=True, n=3, method="ours", n_candidates=40, selection=FAST))
     assert first.poses.shape == (3, 4, 4) and first.scores.shape == (len(first.candidates),)
     assert first.map_path is not None and first.map_path.stat().st_size > 0
     assert (first.polar <= math.pi / 2 + 1e-5).all()
@@ -174,7 +174,7 @@ def test_propose_add_train_propose_round_trip(dataset, tmp_path):
     names = session.add_views(render_sphere(first.poses).images, first)
     assert names == first.names
     session.train(2)
-    second = session.propose(ProposalRequest(n=2, method="ours", **PROPOSE), map=False)
+    second = session.propose(ProposalRequest(allow_empty=True, n=2, method="ours", **PROPOSE), map=False)
     assert second.number == 1 and second.names == ["capture_001_00", "capture_001_01"]
     assert session.step == 5 and len(session.trainer.train_views) == 11
 
@@ -204,7 +204,7 @@ def test_views_added_after_the_last_save_are_not_lost(dataset, tmp_path):
 
 def test_poses_json_round_trip_and_convention(dataset, tmp_path):
     session = new_session(dataset, tmp_path / "run")
-    proposal = session.propose(ProposalRequest(n=4, method="uniform", n_candidates=40), map=True)
+    proposal = session.propose(ProposalRequest(allow_empty=True, n=4, method="uniform", n_candidates=40), map=True)
     path = proposal.write(tmp_path / "out" / "poses.json")
     assert path.with_suffix(".png").stat().st_size > 0
     data = json.loads(path.read_text())
@@ -234,7 +234,7 @@ def test_user_given_candidates_are_the_only_choices(dataset, tmp_path):
     reachable = half_hemisphere_poses(5, azimuth_start=-math.pi / 2, radius=RADIUS, centre=CENTRE)
     already = load_dataset(dataset).cameras.camera_to_world[:2]  # poses it has: never proposed again
     proposal = session.propose(
-        ProposalRequest(n=2, method="distance", candidates=torch.cat([already, reachable])), map=False
+        ProposalRequest(allow_empty=True, n=2, method="distance", candidates=torch.cat([already, reachable])), map=False
     )
     assert proposal.scores.shape == (5,)
     for pose in proposal.poses:
@@ -245,14 +245,18 @@ def test_resume_after_save_gives_the_same_next_proposal(dataset, tmp_path):
     session = new_session(dataset, tmp_path / "run")
     session.train(3)
     session.save()
-    original = session.propose(ProposalRequest(n=3, **PROPOSE), map=False)
+    original = session.propose(ProposalRequest(allow_empty=True, n=3, **PROPOSE), map=False)
     torch.manual_seed(12345)  # the global RNG must not matter
-    resumed = CaptureSession.open(tmp_path / "run").propose(ProposalRequest(n=3, **PROPOSE), map=False)
+    resumed = CaptureSession.open(tmp_path / "run").propose(
+        ProposalRequest(allow_empty=True, n=3, **PROPOSE), map=False
+    )
     assert resumed.number == original.number == 0
     assert torch.equal(resumed.indices, original.indices)
     assert torch.equal(resumed.candidates.camera_to_world, original.candidates.camera_to_world)
     assert torch.allclose(resumed.scores, original.scores)
-    later = session.propose(ProposalRequest(n=3, **PROPOSE), map=False)  # the next proposal draws new candidates
+    later = session.propose(
+        ProposalRequest(allow_empty=True, n=3, **PROPOSE), map=False
+    )  # the next proposal draws new candidates
     assert not torch.equal(later.candidates.camera_to_world, original.candidates.camera_to_world)
 
 
@@ -371,6 +375,7 @@ def test_cli_train_propose_add_export(dataset, tmp_path, capsys):
         [
             "propose",
             str(run),
+            "--allow-empty",  # three steps of training: the NeRF is empty, which this round does not test
             "--n",
             "2",
             "--method",
@@ -423,7 +428,7 @@ def test_blender_render_of_a_proposed_pose_shows_the_object_centred(tmp_path):
     root = tmp_path / "data"
     write_blender_split(root, "train", render_sphere(half_hemisphere_poses(6), 48, centre=(0, 0, 0), radius=1.0))
     session = new_session(root, tmp_path / "run")
-    proposal = session.propose(ProposalRequest(n=2, method="uniform", n_candidates=40), map=False)
+    proposal = session.propose(ProposalRequest(allow_empty=True, n=2, method="uniform", n_candidates=40), map=False)
     views = BlenderOracle("chair", 48, 48, samples=4, progress=False).capture(proposal.poses, proposal.names)
     ys, xs = torch.meshgrid(torch.arange(48.0), torch.arange(48.0), indexing="ij")
     for alpha in views.alphas:
@@ -437,9 +442,9 @@ def test_blender_render_of_a_proposed_pose_shows_the_object_centred(tmp_path):
     from nerfaug.cli import main
 
     session.save()
-    second = session.propose(ProposalRequest(n=1, method="uniform", n_candidates=40), map=False).write(
-        tmp_path / "poses.json"
-    )
+    second = session.propose(
+        ProposalRequest(allow_empty=True, n=1, method="uniform", n_candidates=40), map=False
+    ).write(tmp_path / "poses.json")
     main(
         [
             "render-proposals",

@@ -46,3 +46,9 @@ class DatasetError(ValueError):
             message += f" (got {text[:200] + '...' if len(text) > 200 else text})"
         # One line whatever the file held: a newline in a value or path is shown escaped.
         super().__init__(message.replace("\r", "\\r").replace("\n", "\\n"))
+
+
+class PathRefused(DatasetError):
+    """A path given or listed under a folder leads out of it (a symbolic link, `..`, an absolute
+    path) or cannot be followed (a link loop): refused before anything there is opened
+    (`nerfaug.containment.inside`). Bad input, as a `DatasetError` is."""

@@ -1,7 +1,7 @@
 """Whether a trained NeRF learned its scene: a NeRF whose renders of its own training views are
 background only (all-transparent), or no closer to them than a blank image, has nothing to say
-about which views to capture next: a proposal from it is said to be so (a warning), never silently
-sent to a robot.
+about which views to capture next: a proposal from it is refused (`EmptyModel`) unless asked for
+all the same, and then said to be so (a warning), never silently sent to a robot.
 
 The check renders the training views small (`HEALTH_WIDTH` pixels across, at most
 `HEALTH_VIEWS` of them, spread over the set) and compares with the images shrunk alike: the mean
@@ -16,6 +16,8 @@ from dataclasses import asdict, dataclass
 
 import torch
 
+from nerfaug.errors import NerfaugError
+
 HEALTH_WIDTH = 32
 HEALTH_VIEWS = 12
 # A pixel is the object's where some channel differs from the background by more than this.
@@ -27,7 +29,15 @@ MIN_GAIN_OVER_BLANK_DB = 0.5
 
 
 class EmptyModelWarning(UserWarning):
-    """A proposal made from a NeRF that renders its training views as background only."""
+    """A proposal made (as asked: `allow_empty`) from a NeRF that renders its training views as
+    background only."""
+
+
+class EmptyModel(NerfaugError):
+    """A proposal refused: the NeRF renders its training views as background only (`Health`).
+    Not bad input (the request is fine; the model is not): exit code 1, HTTP 409."""
+
+    exit_code = 1
 
 
 @dataclass(frozen=True)

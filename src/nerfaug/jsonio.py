@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 
@@ -43,6 +44,11 @@ def read_json(path: str | Path) -> dict:
     return data
 
 
+# The name of the file `atomic_write_bytes` writes before it replaces NAME: `.NAME.XXXXXXXX.tmp`
+# beside it (mkstemp's eight random characters). A killed process leaves it; nothing else has it.
+TEMP_NAME = re.compile(r"\..+\.[a-z0-9_]{8}\.tmp")
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write `data` to `path` so that readers see the old file or the whole new one, never a part."""
     path = Path(path)
@@ -58,6 +64,19 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
         raise
 
 
+def remove_temp_files(folder: str | Path) -> list[Path]:
+    """Remove what a killed `atomic_write_bytes` left directly in `folder`: plain files named as
+    its temporary files (`TEMP_NAME`), nothing else. Call it only where no other process writes
+    into `folder` at the time (a session's folder, under its lock). Returns the removed paths."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    found = [p for p in folder.iterdir() if TEMP_NAME.fullmatch(p.name) and p.is_file() and not p.is_symlink()]
+    for path in found:
+        path.unlink(missing_ok=True)
+    return sorted(found)
+
+
 def atomic_write_text(path: str | Path, text: str) -> None:
     """`atomic_write_bytes` of `text` encoded as UTF-8."""
     atomic_write_bytes(path, text.encode("utf-8"))
@@ -68,4 +87,11 @@ def atomic_write_json(path: str | Path, data) -> None:
     atomic_write_text(path, json.dumps(data, indent=2) + "\n")
 
 
-__all__ = ["atomic_write_bytes", "atomic_write_json", "atomic_write_text", "read_json"]
+__all__ = [
+    "TEMP_NAME",
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_text",
+    "read_json",
+    "remove_temp_files",
+]

@@ -6,7 +6,8 @@ equal-area one (radius = sin(polar / 2) / sin(pi / 4)), so candidates drawn unif
 look evenly spread; "equidistant" makes the radius proportional to the polar angle instead.
 Scores at the scattered candidates are interpolated linearly (Delaunay triangles) onto a grid,
 with the nearest candidate's value outside their convex hull; bright means uncertain (high
-score). Training views are drawn as triangles, chosen views as stars. Figures are written
+score). Rings mark 30 and 60 degrees of elevation (labelled "elev."), spokes the azimuth.
+Training views are drawn as triangles, chosen views as stars. Figures are written
 atomically at the project's one dpi (`nerfaug.plotting.save_figure`).
 """
 
@@ -125,7 +126,7 @@ def _draw(
             ax.text(
                 r * math.cos(math.radians(112)),
                 r * math.sin(math.radians(112)),
-                f"{90 - polar_deg}°",
+                f"{90 - polar_deg}° elev.",
                 color="0.8",
                 fontsize=6,
                 ha="center",
@@ -134,7 +135,8 @@ def _draw(
     for az_deg in range(0, 360, 90):
         a = math.radians(az_deg)
         ax.plot([0, math.cos(a)], [0, math.sin(a)], color="0.6", lw=0.4)
-        ax.text(1.09 * math.cos(a), 1.09 * math.sin(a), f"{az_deg}°", ha="center", va="center", fontsize=7)
+        name = f"{az_deg}° az." if az_deg == 90 else f"{az_deg}°"  # the rim's labels: azimuth, named once
+        ax.text(1.09 * math.cos(a), 1.09 * math.sin(a), name, ha="center", va="center", fontsize=7)
 
     train = hemisphere_xy(train_c2w, projection, centre)
     ax.scatter(
@@ -185,6 +187,30 @@ def _draw(
     return image
 
 
+def hemisphere_map_figure(
+    candidate_c2w,
+    scores,
+    train_c2w,
+    chosen_c2w=None,
+    title: str | None = None,
+    label: str = "score",
+    projection: str = "equal-area",
+    centre=(0.0, 0.0, 0.0),
+    train_label: str = "training views",
+) -> Figure:
+    """The scores over the hemisphere seen from above, as a matplotlib Figure (arguments as
+    `plot_hemisphere_map`'s)."""
+    # A bare Figure renders with Agg and touches no pyplot state (no global backend, no leaks).
+    fig = Figure(figsize=(5.6, 4.6))
+    ax = fig.subplots()
+    image = _draw(ax, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre, train_label=train_label)
+    fig.colorbar(image, ax=ax, fraction=0.046, pad=0.02).set_label(label, fontsize=8)
+    ax.legend(loc="lower left", bbox_to_anchor=(-0.05, -0.08), fontsize=7, frameon=False)
+    if title:
+        ax.set_title(title)
+    return fig
+
+
 def plot_hemisphere_map(
     candidate_c2w,
     scores,
@@ -192,7 +218,7 @@ def plot_hemisphere_map(
     chosen_c2w=None,
     path: str | Path | None = None,
     title: str | None = None,
-    label: str = "uncertainty",
+    label: str = "score",
     projection: str = "equal-area",
     centre=(0.0, 0.0, 0.0),
     train_label: str = "training views",
@@ -206,7 +232,8 @@ def plot_hemisphere_map(
         chosen_c2w: Tensor or array with shape (n_chosen, 4, 4), drawn as stars; None for none.
         path: PNG file to write (folders are created); required.
         title: title above the map.
-        label: the colourbar's label.
+        label: the colourbar's label: what the scores are, with their unit (a method's
+            `MethodSpec.score_label`).
         projection: "equal-area" (default) or "equidistant".
         centre: the hemisphere's centre, world space.
         train_label: the legend's name for the triangles (an experiment's "initial views").
@@ -216,15 +243,10 @@ def plot_hemisphere_map(
     """
     if path is None:
         raise ValueError("plot_hemisphere_map needs the path of the PNG to write")
-    # A bare Figure renders with Agg and touches no pyplot state (no global backend, no leaks).
-    fig = Figure(figsize=(5.2, 4.6))
-    ax = fig.subplots()
-    image = _draw(ax, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre, train_label=train_label)
-    fig.colorbar(image, ax=ax, fraction=0.046, pad=0.02, label=label)
-    ax.legend(loc="lower left", bbox_to_anchor=(-0.05, -0.08), fontsize=7, frameon=False)
-    if title:
-        ax.set_title(title)
-    return save_figure(fig, path)
+    figure = hemisphere_map_figure(
+        candidate_c2w, scores, train_c2w, chosen_c2w, title, label, projection, centre, train_label
+    )
+    return save_figure(figure, path)
 
 
 def plot_method_maps(
@@ -273,7 +295,13 @@ def plot_method_maps(
         ax.set_ylim(-limit, limit)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
-    fig.colorbar(image, ax=list(axes[0]), fraction=0.02, pad=0.01, label="score (min-max per panel)")
+    fig.colorbar(
+        image,
+        ax=list(axes[0]),
+        fraction=0.02,
+        pad=0.01,
+        label="each method's own score,\nmin-max scaled per panel (no unit)",
+    )
     if title:
         fig.suptitle(title)
     return save_figure(fig, path)

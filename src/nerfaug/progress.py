@@ -28,7 +28,6 @@ from rich.progress import (
     ProgressColumn,
     TextColumn,
     TimeElapsedColumn,
-    TimeRemainingColumn,
 )
 from rich.text import Text
 
@@ -76,6 +75,18 @@ class _Task:
     completed: float = 0.0
     started: float = field(default_factory=time.monotonic)
     printed: float = 0.0  # the `completed` of the last line printed
+
+
+class RemainingAtMeanRate(ProgressColumn):
+    """The time left at the mean rate since the task started (the rest goes as fast as what is
+    done), as `LineProgress` says it. Rich's own column divides by the rate of the last 30 s,
+    which swings when the units end in bursts (a sweep's runs, ending together on parallel workers)."""
+
+    def render(self, task) -> Text:
+        if task.total is None or not task.completed or not task.elapsed:
+            return Text("-:--:--", style="progress.remaining")
+        left = task.elapsed * max(task.total - task.completed, 0) / task.completed
+        return Text(duration(left), style="progress.remaining")
 
 
 class LineProgress:
@@ -177,7 +188,7 @@ def progress_bar(
         MofNCompleteColumn(),
         _FieldsColumn(fields),
         TimeElapsedColumn(),
-        TimeRemainingColumn(),
+        RemainingAtMeanRate(),
         console=console,
         disable=not enabled,
         transient=transient,

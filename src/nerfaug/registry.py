@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import difflib
 from collections.abc import Iterable, Mapping
 from typing import Literal, TypeVar
 
@@ -17,13 +18,29 @@ C = TypeVar("C")
 
 
 def unknown(kind: str, name: object, known: Iterable[str]) -> ValueError:
-    """The error for a name that is none of `known`: it names the value and lists the known ones.
+    """The error for a name that is none of `known`: it names the value, the known names closest to
+    it (a typo's likely meaning, by `difflib`) and lists the known ones.
 
     Example:
         >>> unknown("sampler", "grid", ["occupancy", "proposal"])
         ValueError("unknown sampler 'grid'; choose one of: occupancy, proposal")
+        >>> unknown("method", "ourss", ["ours", "uniform", "ours-batch"])
+        ValueError("unknown method 'ourss'; did you mean 'ours'? choose one of: ours, uniform, ours-batch")
     """
-    return ValueError(f"unknown {kind} {name!r}; choose one of: {', '.join(known)}")
+    known = [str(k) for k in known]
+    return ValueError(f"unknown {kind} {name!r}; {did_you_mean(name, known)}choose one of: {', '.join(known)}")
+
+
+def did_you_mean(name: object, known: Iterable[str]) -> str:
+    """ "did you mean 'x'? " naming the known names closest to a mistyped `name` (by `difflib`, at
+    most two), or "" when none is close.
+
+    Example:
+        >>> did_you_mean("lgo", ["lego", "chair"])
+        "did you mean 'lego'? "
+    """
+    close = difflib.get_close_matches(str(name), [str(k) for k in known], n=2, cutoff=0.75)
+    return f"did you mean {' or '.join(repr(c) for c in close)}? " if close else ""
 
 
 def check_name(kind: str, name: object, known: Iterable[str]) -> None:

@@ -133,7 +133,7 @@ def test_constraints_round_trip_through_a_dict():
     data = json.loads(json.dumps(constraints.to_dict()))
     assert ViewConstraints.from_dict(data) == constraints.checked()
     assert ViewConstraints.from_dict({}).empty
-    with pytest.raises(RequestError, match=r"^height \[0, 1\]: Unexpected keyword argument"):
+    with pytest.raises(RequestError, match=r"^height \[0, 1\]: unknown field"):
         ViewConstraints.from_dict({"height": [0, 1]})
 
 
@@ -166,7 +166,7 @@ def test_a_session_proposes_within_the_constraints(session_dir):
     session = CaptureSession.open(session_dir)
     constraints = ViewConstraints(elevation=(30, 70), azimuth=(-90, 45), keep_out=((1, 0, 0.5, 25),))
     proposal = session.propose(
-        ProposalRequest(n=3, n_candidates=80, selection=FAST, constraints=constraints), map=False
+        ProposalRequest(allow_empty=True, n=3, n_candidates=80, selection=FAST, constraints=constraints), map=False
     )
     assert len(proposal) == 3
     assert constraints.mask(proposal.poses, session.hemisphere).all()
@@ -181,7 +181,7 @@ def test_constraints_apply_to_a_list_of_reachable_poses(session_dir):
     session = CaptureSession.open(session_dir)
     reachable = poses_at([20.0, 40.0, 60.0, 80.0, 35.0], [0.0, 90.0, 180.0, 270.0, 45.0], radius=4.03)
     constraints = ViewConstraints(elevation=(30, 65))
-    request = ProposalRequest(n=2, candidates=reachable, selection=FAST, constraints=constraints)
+    request = ProposalRequest(allow_empty=True, n=2, candidates=reachable, selection=FAST, constraints=constraints)
     proposal = session.propose(request, map=False)
     chosen = {tuple(p[:3, 3].round(decimals=3).tolist()) for p in proposal.poses}
     allowed = {tuple(p[:3, 3].round(decimals=3).tolist()) for p in reachable[[1, 2, 4]]}
@@ -195,7 +195,19 @@ def test_constraints_apply_to_a_list_of_reachable_poses(session_dir):
 
 def test_nerfaug_propose_takes_the_constraints(session_dir, tmp_path, capsys):
     out = tmp_path / "poses.json"
-    args = ["propose", str(session_dir), "--out", str(out), "--n", "2", "--n-candidates", "60", "--device", "cpu"]
+    args = [
+        "propose",
+        str(session_dir),
+        "--allow-empty",
+        "--out",
+        str(out),
+        "--n",
+        "2",
+        "--n-candidates",
+        "60",
+        "--device",
+        "cpu",
+    ]
     main([*args, "--elevation", "40", "90", "--azimuth", "90", "270", "--selection.entropy-resolution", "4"])
     frames = json.loads(out.read_text())["frames"]
     assert len(frames) == 2

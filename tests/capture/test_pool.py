@@ -21,7 +21,7 @@ from nerfaug.capture.lock import SessionBusy, acquire
 from nerfaug.capture.pool import JOBS_DIR, JobRunning, SessionPool, TrainingFull
 from nerfaug.capture.requests import RequestError
 from nerfaug.data import Views, write_blender_split
-from nerfaug.errors import FolderRefused
+from nerfaug.errors import FolderRefused, PathRefused
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 
 SIZE = 8
@@ -140,7 +140,7 @@ def test_what_the_pool_refuses(root, tmp_path):
     with pytest.raises(FolderRefused, match="data already exists"):
         pool.refuse_existing("data")
     for outside in ("/etc", "../", "data/../.."):
-        with pytest.raises(ValueError, match="service root"):
+        with pytest.raises(ValueError, match="relative to the service root|leads outside"):
             pool.dataset_path(outside)
     with pytest.raises(FileNotFoundError, match="'missing'"):
         pool.dataset_path("missing")
@@ -202,3 +202,38 @@ def test_a_waiting_request_goes_before_the_workers_next_chunk():
         order.append("chunk")
     request.join(10)
     assert order == ["request", "chunk"] and turns.waiting == 0
+
+
+def test_a_session_folder_linked_outside_the_root_is_neither_listed_nor_served_nor_written(root, tmp_path):
+    """A session id that is a link inside the root to a folder outside it: not listed, and every
+    request naming it (state, a request, training, a new session there) refused in one line before
+    anything there is read or written. A link to a folder inside the root is a session as any."""
+    outside = tmp_path / "outside"
+    CaptureSession.create(root / "data", outside / "s", SessionSettings(preset="test"))
+    before = sorted((p.relative_to(outside).as_posix(), p.stat().st_mtime_ns) for p in outside.rglob("*"))
+    (root / "linked").symlink_to(outside / "s", target_is_directory=True)
+    (root / "dangling").symlink_to(outside / "new", target_is_directory=True)
+    pool = SessionPool(root)
+    try:
+        assert pool.ids() == []
+        refusals = [
+            lambda: pool.state("linked"),
+            lambda: pool.require("linked"),
+            lambda: pool.run("linked", lambda session: session.save()),
+            lambda: pool.train("linked", 1),
+            lambda: pool.refuse_existing("dangling"),
+            lambda: new_session(pool, "dangling"),
+        ]
+        for call in refusals:
+            with pytest.raises(PathRefused) as info:
+                call()
+            message = str(info.value)
+            assert "leads outside" in message and str(root) in message and "\n" not in message
+            assert str(outside) not in message
+        assert not (outside / "new").exists()
+        assert sorted((p.relative_to(outside).as_posix(), p.stat().st_mtime_ns) for p in outside.rglob("*")) == before
+        new_session(pool, "real")
+        (root / "alias").symlink_to(root / "real", target_is_directory=True)
+        assert pool.ids() == ["alias", "real"] and pool.state("alias").step == 0
+    finally:
+        pool.shutdown()

@@ -1,5 +1,6 @@
 """A session's proposals kept apart (`min_separation`, degrees): every two views of one proposal at
-least that far apart about the hemisphere's centre, recorded with the proposal; off by default."""
+least that far apart about the hemisphere's centre, recorded with the proposal; 15 degrees by default,
+0 switches it off."""
 
 import json
 import math
@@ -38,27 +39,47 @@ def closest_pair_degrees(poses: torch.Tensor, centre) -> float:
 
 def test_a_separated_proposal_keeps_its_views_apart_and_records_it(session_dir):
     session = CaptureSession.open(session_dir)
-    proposal = session.propose(ProposalRequest(n=5, n_candidates=120, selection=FAST, min_separation=35.0), map=False)
+    proposal = session.propose(
+        ProposalRequest(allow_empty=True, n=5, n_candidates=120, selection=FAST, min_separation=35.0), map=False
+    )
     assert closest_pair_degrees(proposal.poses, session.hemisphere.centre) >= 35.0 - 1e-4
     assert session.proposals[-1].model_extra["min_separation"] == 35.0
     written = json.loads((session_dir / session.proposals[-1].file).read_text())
     assert written["nerfaug"]["min_separation"] == 35.0
 
 
-def test_the_default_proposes_what_the_method_chooses(session_dir):
-    """Off by default: the same views as with the separation 0, and nothing recorded about it."""
-    request = ProposalRequest(n=5, n_candidates=120, selection=FAST, seed=7)
-    plain = CaptureSession.open(session_dir).propose(request, map=False)
+def test_proposals_are_spread_by_default_and_zero_switches_it_off(session_dir):
+    """By default no two views of a proposal lie within 15 degrees, and the choice is recorded;
+    with the separation 0 the method's own draw comes back (here with views closer than that)."""
+    request = ProposalRequest(allow_empty=True, n=6, n_candidates=120, selection=FAST, seed=0)
     session = CaptureSession.open(session_dir)
-    zero = session.propose(replace(request, min_separation=0.0), map=False)
-    assert torch.equal(plain.indices, zero.indices) and torch.equal(plain.poses, zero.poses)
-    assert "min_separation" not in session.proposals[-1].model_extra
-    assert "min_separation" not in zero.transforms()["nerfaug"]
+    spread = session.propose(request, map=False)
+    centre = session.hemisphere.centre
+    assert closest_pair_degrees(spread.poses, centre) >= 15.0 - 1e-4
+    assert session.proposals[-1].model_extra["min_separation"] == 15.0
+    assert spread.transforms()["nerfaug"]["min_separation"] == 15.0
+    off = CaptureSession.open(session_dir).propose(replace(request, min_separation=0.0), map=False)
+    assert closest_pair_degrees(off.poses, centre) < 15.0  # what the default prevents
+    assert off.transforms()["nerfaug"]["min_separation"] == 0.0
+    again = CaptureSession.open(session_dir).propose(replace(request, min_separation=0.0), map=False)
+    assert torch.equal(off.indices, again.indices)
 
 
 def test_nerfaug_propose_takes_a_minimum_separation(session_dir, tmp_path, capsys):
     out = tmp_path / "poses.json"
-    args = ["propose", str(session_dir), "--out", str(out), "--n", "4", "--n-candidates", "100", "--device", "cpu"]
+    args = [
+        "propose",
+        str(session_dir),
+        "--allow-empty",
+        "--out",
+        str(out),
+        "--n",
+        "4",
+        "--n-candidates",
+        "100",
+        "--device",
+        "cpu",
+    ]
     main([*args, "--min-separation", "40", "--selection.entropy-resolution", "4"])
     written = json.loads(out.read_text())
     poses = torch.tensor([frame["transform_matrix"] for frame in written["frames"]])
@@ -87,7 +108,9 @@ def test_a_proposal_from_a_model_that_gives_no_information_says_how_many_views_a
     monkeypatch.setitem(registry.ESTIMATORS, "fisher", lambda request: Estimate(torch.zeros(len(request.candidates))))
     session = CaptureSession.open(session_dir)
     with pytest.warns(UniformFill):
-        proposal = session.propose(ProposalRequest(n=4, n_candidates=60, method="fisherrf-sampling", seed=3), map=False)
+        proposal = session.propose(
+            ProposalRequest(allow_empty=True, n=4, n_candidates=60, method="fisherrf-sampling", seed=3), map=False
+        )
     assert len(proposal) == 4 and proposal.uniform_fill == 4
     assert session.proposals[-1].model_extra["uniform_fill"] == 4
     written = json.loads((session_dir / session.proposals[-1].file).read_text())
@@ -95,6 +118,6 @@ def test_a_proposal_from_a_model_that_gives_no_information_says_how_many_views_a
     assert (
         "uniform_fill"
         not in CaptureSession.open(session_dir)
-        .propose(ProposalRequest(n=4, n_candidates=60, selection=FAST, seed=3), map=False)
+        .propose(ProposalRequest(allow_empty=True, n=4, n_candidates=60, selection=FAST, seed=3), map=False)
         .transforms()["nerfaug"]
     )

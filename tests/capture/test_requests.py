@@ -42,7 +42,7 @@ def refusal(make) -> RequestError:
     ("fields", "says"),
     [
         ({"seed": -1}, "seed -1: must be >= 0"),
-        ({"seed": 2**63}, f"seed {2**63}: must be <= {2**63 - 1}"),
+        ({"seed": 2**53}, f"seed {2**53}: must be <= {2**53 - 1}"),  # JSON clients round larger ints
         ({"downscale": 0}, "downscale 0: must be >= 1"),
         ({"radius": 1e-300}, "radius 1e-300: must be >= 1e-06"),
         ({"radius": 1e7}, "radius 10000000.0: must be <= 1e+06"),
@@ -76,7 +76,7 @@ def test_session_settings_defaults_and_conversions():
         ({"constraints": {"elevation": [60, 10]}}, "constraints.elevation [60, 10]: low must be <= high"),
         ({"candidates": "reach.json"}, "candidates 'reach.json': Input should be a valid list"),
         ({"candidates": [EYE] * (MAX_REACHABLE_POSES + 1)}, "candidates ["),
-        ({"unknown": 1}, "unknown 1: Unexpected keyword argument"),
+        ({"unknown": 1}, "unknown 1: unknown field"),
     ],
 )
 def test_proposal_requests_out_of_range_name_the_field_and_value(fields, says):
@@ -219,3 +219,14 @@ def test_a_thread_count_below_one_is_refused_by_the_library():
     assert check_threads(2) == 2
     with pytest.raises(RequestError, match=r"^threads 0: must be >= 1$"):
         check_threads(0)
+
+
+def test_proposal_seeds_stay_within_what_a_json_client_reads_exactly():
+    from nerfaug.capture.proposal import proposal_seed
+    from nerfaug.capture.requests import SEED_MAX
+
+    assert SEED_MAX == 2**53 - 1
+    seeds = [proposal_seed(seed, number) for seed in (0, 1, SEED_MAX) for number in range(200)]
+    assert max(seeds) <= SEED_MAX and max(seeds) > 2**50  # the whole range is used
+    assert all(float(s) == s for s in seeds)  # a float64 (a JavaScript number) holds each exactly
+    assert len(set(seeds)) == len(seeds)

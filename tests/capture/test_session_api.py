@@ -5,6 +5,9 @@ whether the model is loaded or only the folder is read."""
 
 import itertools
 import json
+import signal
+import subprocess
+import sys
 
 import imageio.v3 as iio
 import numpy as np
@@ -141,3 +144,62 @@ def test_a_session_names_what_asks_for_another_session(session, tmp_path):
     elsewhere = tiny_dataset(tmp_path / "elsewhere")
     found = state.differences(other, {"seed"}, split="initial", data=elsewhere)
     assert found == [("data", str(elsewhere), state.source.data_dir), ("seed", "4", "3"), ("split", "initial", "train")]
+
+
+KILLED_ADD = """
+import os, signal, sys
+
+replace = os.replace
+
+
+def killed_before_the_image_lands(source, target, *args, **kwargs):
+    if str(target).endswith(".png"):
+        os.kill(os.getpid(), signal.SIGKILL)
+    return replace(source, target, *args, **kwargs)
+
+
+os.replace = killed_before_the_image_lands
+from nerfaug.cli import main
+
+main(["add", sys.argv[1], "--images", sys.argv[2], "--poses", sys.argv[3], "--steps", "0", "--device", "cpu"])
+"""
+
+
+def test_an_add_killed_mid_write_leaves_a_temporary_image_the_next_add_removes(session, tmp_path):
+    """`nerfaug add` SIGKILLed while its image is a temporary file beside its final name: the
+    next addition removes that file (named as nerfaug's atomic writes name theirs), and only such
+    files: a user's files that look alike stay."""
+    (tmp_path / "shots").mkdir()
+    (tmp_path / "shots" / "new_a.png").write_bytes(png(7))
+    pose = sample_uniform_poses(1, torch.Generator().manual_seed(9))[0].tolist()
+    poses = tmp_path / "poses.json"
+    poses.write_text(json.dumps({"frames": [{"file_path": "new_a", "transform_matrix": pose}]}))
+    killed = subprocess.run(
+        [sys.executable, "-c", KILLED_ADD, str(session.run_dir), str(tmp_path / "shots"), str(poses)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    images = session.run_dir / "dataset" / "train"
+    left = [p.name for p in images.iterdir() if p.name.endswith(".tmp")]
+    assert len(left) == 1 and left[0].startswith(".new_a.png."), sorted(p.name for p in images.iterdir())
+    for name in ("notes.tmp", ".notes.tmp", ".new_a.png.tmp"):  # not nerfaug's temporary files
+        (images / name).write_text("mine")
+    reopened = CaptureSession.open(session.run_dir)
+    assert reopened.add_views(tmp_path / "shots", poses) == ["new_a"]
+    assert sorted(p.name for p in images.iterdir() if p.name.endswith(".tmp")) == [
+        ".new_a.png.tmp",
+        ".notes.tmp",
+        "notes.tmp",
+    ]
+
+
+def test_an_image_linked_out_of_the_captures_folder_is_refused_before_it_is_read(session, tmp_path):
+    (tmp_path / "shots").mkdir()
+    (tmp_path / "elsewhere.png").write_bytes(png(8))
+    (tmp_path / "shots" / "new_b.png").symlink_to(tmp_path / "elsewhere.png")
+    pose = sample_uniform_poses(1, torch.Generator().manual_seed(10))
+    with pytest.raises(DatasetError, match=r"shots/new_b\.png: image leads outside .*shots, the folder it must"):
+        session.add_views(tmp_path / "shots", pose)
+    assert len(session.frames()) == 4

@@ -29,11 +29,17 @@ def test_train_calls_back_every_ten_steps_and_at_the_last(session_dir):
 def test_a_session_opened_with_progress_shows_training_and_scoring(session_dir, capsys):
     session = CaptureSession.open(session_dir, progress=True)
     session.train(20)
-    session.propose(ProposalRequest(n=2, n_candidates=40, selection=SelectionConfig(entropy_resolution=4)), map=False)
+    session.propose(
+        ProposalRequest(allow_empty=True, n=2, n_candidates=40, selection=SelectionConfig(entropy_resolution=4)),
+        map=False,
+    )
     err = capsys.readouterr().err  # not a terminal here: plain lines
     assert "training: 20/20" in err
     assert "scoring candidates (ours): 40/40" in err
     quiet = CaptureSession.open(session_dir)
     quiet.train(10)
-    quiet.propose(ProposalRequest(n=2, n_candidates=40, selection=SelectionConfig(entropy_resolution=4)), map=False)
+    quiet.propose(
+        ProposalRequest(allow_empty=True, n=2, n_candidates=40, selection=SelectionConfig(entropy_resolution=4)),
+        map=False,
+    )
     assert capsys.readouterr().err == ""

@@ -122,15 +122,16 @@ def fake_view(depth: float, fisher_high: float, seed: int = 0):
 
 
 def test_a_batch_shares_its_colour_scales_and_background_and_faint_fisher_are_left_out():
-    from nerfaug.capture.uncertainty_images import FISHER_DECADES, colour_scales
+    from nerfaug.capture.uncertainty_images import colour_scales
+    from nerfaug.plotting import LOG_DECADES
 
     views = [fake_view(3.0, 10.0, 0), fake_view(5.0, 1000.0, 1)]
     scales = colour_scales(views)
     assert scales.depth == (3.0, 5.0)  # the background's noisy depths (up to 100) are not in the range
     assert scales.entropy == pytest.approx(0.5)
-    assert scales.fisher == pytest.approx((1000.0 / 10**FISHER_DECADES, 1000.0))  # not down to 1e-17
+    assert scales.fisher == pytest.approx((1000.0 / 10**LOG_DECADES, 1000.0))  # not down to 1e-17
     own = colour_scales(views[:1])
-    assert own.depth == (3.0, 3.0) and own.fisher == pytest.approx((10.0 / 10**FISHER_DECADES, 10.0))
+    assert own.depth == (3.0, 3.0) and own.fisher == pytest.approx((10.0 / 10**LOG_DECADES, 10.0))
 
 
 def test_the_figures_draw_depth_only_where_rays_are_opaque_on_the_scales_given():
@@ -147,6 +148,24 @@ def test_the_figures_draw_depth_only_where_rays_are_opaque_on_the_scales_given()
     assert limits[0] == pytest.approx(limits[1]) == (3.0, 5.0, 0.1, 1000.0, 0.0, 0.5)  # a colour: one value
     alone = figure(views[0], "v").axes[3].images[0].norm
     assert (alone.vmin, alone.vmax) == pytest.approx((1e-3, 10.0))
+
+
+def test_each_colour_bar_names_its_unit_and_fisherrf_is_drawn_at_the_renders_size():
+    from dataclasses import replace
+
+    from nerfaug.capture.uncertainty_images import figure
+
+    view = fake_view(3.0, 10.0)
+    coarse = replace(view, fisher=np.array([[10.0, 1e-19], [0.1, 0.0]], np.float32))  # 2x2 beside a 4x4 render
+    fig = figure(coarse, "v")
+    images = [ax.images[0] for ax in fig.axes[:4]]
+    assert images[3].get_array().shape == images[0].get_array().shape[:2] == (4, 4)
+    bars = [ax.get_ylabel() for ax in fig.axes[4:]]
+    assert bars[0] == "depth (world units)" and bars[1] == "ray entropy (bits)"
+    assert "FisherRF" in bars[2] and "no unit" in bars[2] and "log scale, top 4 decades" in bars[2]
+    assert "computed at 2x2 px" in fig.axes[3].get_title()
+    norm = images[3].norm
+    assert (norm.vmin, norm.vmax) == pytest.approx((1e-3, 10.0))  # clipped: not down to 1e-19
 
 
 def test_the_command_shares_the_scale_unless_told_and_writes_the_opacity(run, tmp_path, capsys):

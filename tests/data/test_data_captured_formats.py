@@ -3,6 +3,7 @@ from fixtures written by hand in each layout (not by the formats' own writers), 
 preparation of a downloaded dataset (`nerfaug scene prepare`)."""
 
 import json
+import os
 
 import imageio.v3 as iio
 import numpy as np
@@ -10,8 +11,10 @@ import pytest
 import torch
 
 from nerfaug.data import FORMATS, DatasetError, find_split, load_dataset
-from nerfaug.data.prepare import PREPARED, prepare_dataset
+from nerfaug.data.prepare import MARKER_KIND, PREPARED, prepare_dataset
+from nerfaug.errors import FolderRefused
 from nerfaug.hemisphere import half_hemisphere_poses
+from nerfaug.owned import mark
 
 
 def gl_poses(n=5, radius=3.0):
@@ -173,3 +176,115 @@ def test_prepare_shrinks_by_any_factor_merges_masks_and_records_the_source(tmp_p
     with pytest.raises(ValueError, match="holds files nerfaug did not write"):
         prepare_dataset(source, tmp_path / "mine", width=8)
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+
+
+# --- masks and image folders never lead outside the dataset folder -----------------------------
+
+
+@pytest.mark.parametrize("fmt", ["llff", "idr"])
+def test_a_mask_linked_outside_is_refused_before_it_is_opened_whatever_it_leads_to(tmp_path, fmt, monkeypatch):
+    """A mask linking out of the folder is refused as a linked image is, with one message
+    whether the file outside is an image, another file or missing: no probing of outside files."""
+    (tmp_path / "outside").mkdir()
+    iio.imwrite(tmp_path / "outside" / "image.png", np.full((12, 16), 255, np.uint8))
+    (tmp_path / "outside" / "notes.txt").write_text("private")
+    opened = []
+    real_imread = iio.imread
+    monkeypatch.setattr(iio, "imread", lambda path, *a, **k: opened.append(str(path)) or real_imread(path, *a, **k))
+    messages = []
+    for target in ("image.png", "notes.txt", "missing.png"):
+        folder = tmp_path / f"{fmt}-{target}"
+        if fmt == "llff":
+            root, mask = llff_fixture(folder), folder / "masks" / "IMG_02_mask.png"
+        else:
+            root, mask = idr_fixture(folder)[0], folder / "mask" / "002.png"
+        mask.unlink()
+        mask.symlink_to(tmp_path / "outside" / target)
+        opened.clear()
+        with pytest.raises(DatasetError) as info:
+            load_dataset(root)
+        assert not any("outside" in path for path in opened)
+        messages.append(str(info.value).replace(str(folder), "ROOT"))
+    assert messages[0] == messages[1] == messages[2], messages
+    assert "mask path leads outside ROOT" in messages[0] and "\n" not in messages[0]
+    assert "image.png" not in messages[0] and "notes.txt" not in messages[0]
+
+
+def test_a_mask_folder_linked_outside_is_refused_before_it_is_listed(tmp_path):
+    root = llff_fixture(tmp_path / "scene")
+    (tmp_path / "elsewhere").mkdir()
+    for mask in (root / "masks").iterdir():
+        mask.rename(tmp_path / "elsewhere" / mask.name)
+    (root / "masks").rmdir()
+    (root / "masks").symlink_to(tmp_path / "elsewhere", target_is_directory=True)
+    with pytest.raises(DatasetError, match=r"masks/ folder leads outside .*scene, the folder it must stay in"):
+        load_dataset(root)
+
+
+def test_masks_linked_inside_the_folder_are_read(tmp_path):
+    root = llff_fixture(tmp_path / "scene")
+    kept = root / "kept"
+    (root / "masks").rename(kept)
+    (root / "masks").symlink_to(kept, target_is_directory=True)
+    assert load_dataset(root).alphas is not None
+
+
+def test_an_image_link_swapped_after_the_check_is_not_followed(tmp_path):
+    """Lazy views read each image later: they open the path resolved when it was checked, so a
+    link swapped to a file outside the folder in between is not followed."""
+    root = llff_fixture(tmp_path / "scene", masks=False)
+    (tmp_path / "outside").mkdir()
+    iio.imwrite(tmp_path / "outside" / "secret.png", np.zeros((12, 16, 3), np.uint8))
+    kept = root / "kept"
+    kept.mkdir()
+    image = root / "images" / "IMG_03.png"
+    image.rename(kept / image.name)
+    image.symlink_to(kept / image.name)
+    expected = torch.from_numpy(iio.imread(kept / image.name)).float() / 255
+    views = load_dataset(root, lazy=True)
+    image.unlink()
+    image.symlink_to(tmp_path / "outside" / "secret.png")  # swapped after the check
+    assert torch.allclose(views.image(3), expected)
+
+
+# --- what `prepare` removes, and where it writes ------------------------------------------------
+
+
+def test_an_interrupted_preparation_holding_a_users_file_is_never_removed(tmp_path):
+    """A folder marked as nerfaug's but without prepared.json is an interrupted preparation: it is
+    started again only when it holds nothing but what a preparation writes; a user's file in it
+    stops the command, naming the folder and the file, and nothing there is removed."""
+    source = llff_fixture(tmp_path / "download")
+    out = tmp_path / "prepared"
+    mark(out, MARKER_KIND)
+    (out / "images").mkdir()
+    (out / "images" / "frame_0.png").write_bytes(b"half written")
+    (out / "thesis.tex").write_text("keep me")
+    with pytest.raises(FolderRefused, match=rf"{out}: holds thesis\.tex, which nerfaug did not write") as info:
+        prepare_dataset(source, out, width=8)
+    assert "\n" not in str(info.value)
+    assert (out / "thesis.tex").read_text() == "keep me" and (out / "images" / "frame_0.png").is_file()
+
+
+def test_an_interrupted_preparation_is_removed_and_done_again_keeping_what_its_hard_links_share(tmp_path):
+    source = llff_fixture(tmp_path / "download")
+    out = tmp_path / "prepared"
+    mark(out, MARKER_KIND)
+    (out / "images").mkdir()
+    (tmp_path / "users.png").write_bytes(b"the user's bytes")
+    os.link(tmp_path / "users.png", out / "images" / "frame_0.png")  # a hard link: the same file
+    (out / ".transforms.json.abcd_123.tmp").write_text("{")  # what a killed atomic write leaves
+    prepare_dataset(source, out, width=8)
+    assert (out / PREPARED).is_file() and len(load_dataset(out)) == 5
+    assert (tmp_path / "users.png").read_bytes() == b"the user's bytes"
+    assert not (out / ".transforms.json.abcd_123.tmp").exists()
+
+
+@pytest.mark.parametrize("where", ["inside", "same", "holds"])
+def test_prepare_refuses_an_out_folder_inside_the_source_it_only_reads(tmp_path, where):
+    source = llff_fixture(tmp_path / "download")
+    out = {"inside": source / "prepared", "same": source, "holds": tmp_path}[where]
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    with pytest.raises(ValueError, match=rf"--out {out}: lies inside or holds the source {source}, which is only read"):
+        prepare_dataset(source, out, width=8)
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before

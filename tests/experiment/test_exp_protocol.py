@@ -7,8 +7,8 @@ import torch
 from nerfaug.cameras import Cameras
 from nerfaug.data import Views
 from nerfaug.experiment.config import PROTOCOL_PRESETS, STUDY_PRESETS, ExperimentConfig
-from nerfaug.experiment.scene_views import initial_in_half, layout_halves
 from nerfaug.hemisphere import angles_from_pose, in_azimuth_window, sample_uniform_poses
+from nerfaug.layouts import initial_in_half, layout_halves
 
 
 def test_paper_field_learning_rate_for_chair_and_materials():

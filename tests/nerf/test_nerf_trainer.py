@@ -172,3 +172,22 @@ def test_compiled_networks_train_like_the_pure_path(sphere_views):
         assert pure.model.field._compiled_call_impl is None
         losses = [[t.train_step()["loss"] for _ in range(4)] for t in (pure, compiled)]
         assert losses[0] == losses[1], preset
+
+
+def test_each_loss_is_kept_by_name_and_they_sum_to_the_loss(views):
+    """A collapse is debugged loss by loss: every history entry names the photometric error and the
+    proposal sampler's distortion and interlevel losses, whose sum (in that order) is the loss."""
+    proposal = dict(encoding="hash", sampler="proposal", hash_levels=4, hash_log2_table_size=10, num_samples=8)
+    proposal |= dict(proposal_samples=(16, 12), proposal_max_resolutions=(32, 64), proposal_log2_table_size=10)
+    proposal |= dict(proposal_hash_levels=3, hidden_dim=16, color_hidden_dim=16, color_layers=1)
+    trainer = Trainer(views, NerfConfig.preset("test", **proposal), seed=0, progress=False)
+    trainer.train(6)
+    for entry in trainer.history:
+        losses = entry["losses"]
+        assert list(losses) == ["rgb", "distortion", "interlevel"] and all(v >= 0 for v in losses.values())
+        assert entry["loss"] == pytest.approx(losses["rgb"] + (losses["distortion"] + losses["interlevel"]), rel=1e-6)
+        assert entry["psnr"] == psnr_from_mse(losses["rgb"])
+    assert all(value > 0 for value in trainer.history[-1]["losses"].values())
+    occupancy = Trainer(views, NerfConfig.preset("test"), seed=0, progress=False)
+    entry = occupancy.train_step()
+    assert list(entry["losses"]) == ["rgb"] and entry["loss"] == pytest.approx(entry["losses"]["rgb"], rel=1e-6)

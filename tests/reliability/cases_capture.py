@@ -14,7 +14,19 @@ def _session(tmp, bases) -> Path:
 
 
 def _propose(run: Path, tmp: Path, *extra) -> list:
-    return ["propose", run, "--out", tmp / "poses.json", "--n-candidates", "12", "--device", "cpu", *extra]
+    # The cases' sessions train a few steps (an empty NeRF): each case is about another input.
+    return [
+        "propose",
+        run,
+        "--out",
+        tmp / "poses.json",
+        "--n-candidates",
+        "12",
+        "--device",
+        "cpu",
+        "--allow-empty",
+        *extra,
+    ]
 
 
 def _propose_case(tmp, bases, *extra, says=()) -> Case:
@@ -135,6 +147,14 @@ def train_session_with_out(tmp, bases):
 def train_session_negative_steps(tmp, bases):
     run = _session(tmp, bases)
     return Case(["train", run, "--steps", "-2", "--device", "cpu"], [run], says=("--steps", "-2"))
+
+
+@case
+def propose_from_an_empty_nerf(tmp, bases):
+    """A NeRF that learned nothing (three steps) says nothing about which views would help."""
+    run = _session(tmp, bases)
+    argv = [a for a in _propose(run, tmp) if a != "--allow-empty"]
+    return Case(argv, [run], code=1, says=("no views proposed", "background only", "--allow-empty"))
 
 
 @case
@@ -624,6 +644,14 @@ def train_checkpoint_every_zero(tmp, bases):
 def train_zero_threads(tmp, bases):
     run = _session(tmp, bases)
     return Case(["train", run, "--threads", "0", "--device", "cpu"], [run], says=("--threads", "0"))
+
+
+@case
+def uncertainty_threads_beyond_any_machine(tmp, bases):
+    """A thread count beyond the C int torch takes: one line naming the option, not an overflow."""
+    run = _session(tmp, bases)
+    argv = ["uncertainty", run, "--poses", tmp / "poses.json", "--out", tmp / "maps", "--threads", "1099511627776"]
+    return Case(argv, [run, tmp], says=("--threads", "1099511627776"))
 
 
 @case

@@ -239,6 +239,26 @@ def image_symlink_leaving_the_folder(tmp, bases):
 
 
 @case
+def scene_prepare_over_an_interrupted_folder_holding_a_users_file(tmp, bases):
+    """A folder nerfaug marked for a preparation that never finished (no prepared.json), into
+    which the user put a file: the file is never removed; the command names it."""
+    data = copy_dataset(tmp, bases)
+    out = tmp / "prepared"
+    out.mkdir()
+    (out / ".nerfaug").write_text(json.dumps({"kind": "prepared-dataset", "created": "2026-01-01T00:00:00+00:00"}))
+    (out / "thesis.tex").write_text("keep me")
+    return Case(["scene", "prepare", data, "--out", out, "--width", "4"], [data, out], says=(str(out), "thesis.tex"))
+
+
+@case
+def scene_prepare_out_inside_the_source(tmp, bases):
+    """The source of `scene prepare` is only read: an --out inside it is refused before anything is written."""
+    data = copy_dataset(tmp, bases)
+    argv = ["scene", "prepare", data, "--out", data / "prepared", "--width", "4"]
+    return Case(argv, [data], says=("--out", str(data / "prepared"), "only read"))
+
+
+@case
 def split_name_leaving_the_folder(tmp, bases):
     data = copy_dataset(tmp, bases)
     return Case(train_on(data, tmp, "--split", "../x").argv, [data], says=("../x",))
@@ -298,3 +318,77 @@ def scene_render_over_a_users_folder(tmp, bases):
     (tmp / "lego").mkdir()
     (tmp / "lego" / "thesis.tex").write_text("keep me")
     return _scene_render(tmp, says=(str(tmp / "lego"),))
+
+
+# Cameras no lens makes, in each captured-set format (the camera schema, `nerfaug.camera_schema`).
+
+
+def _llff(tmp, hwf=(8.0, 8.0, 9.0)) -> Path:
+    """An LLFF folder of 3 8x8 photos, each pose's (height, width, focal) `hwf`."""
+    import numpy as np
+
+    from nerfaug.hemisphere import half_hemisphere_poses
+
+    data = tmp / "llff"
+    write_images(data / "images", ["a", "b", "c"])
+    rows = []
+    for pose in half_hemisphere_poses(3, radius=3.0).double().numpy():
+        matrix = np.stack([-pose[:3, 1], pose[:3, 0], pose[:3, 2], pose[:3, 3], hwf], axis=1)
+        rows.append(np.concatenate([matrix.reshape(-1), [1.0, 5.0]]))
+    np.save(data / "poses_bounds.npy", np.stack(rows))
+    return data
+
+
+def _idr(tmp, scale_mat) -> Path:
+    """An IDR folder of 3 8x8 photos whose cameras lie 3 units from the origin, with `scale_mat`."""
+    import numpy as np
+
+    from nerfaug.hemisphere import half_hemisphere_poses
+
+    data = tmp / "dtu"
+    write_images(data / "image", ["000000", "000001", "000002"])
+    arrays = {}
+    for i, pose in enumerate(half_hemisphere_poses(3, radius=3.0).double().numpy()):
+        w2c = (pose[:3, :3] @ np.diag([1.0, -1.0, -1.0])).T
+        world = np.eye(4)
+        world[:3, :4] = np.array([[9.0, 0, 4], [0, 9.0, 4], [0, 0, 1]]) @ np.c_[w2c, -w2c @ pose[:3, 3]]
+        arrays[f"world_mat_{i}"], arrays[f"scale_mat_{i}"] = world, np.asarray(scale_mat, dtype=float)
+    np.savez(data / "cameras_sphere.npz", **arrays)
+    return data
+
+
+def _prepare(data: Path, tmp: Path, *says) -> Case:
+    return Case(["scene", "prepare", data, "--out", tmp / "prepared", "--width", "4"], [data], says=says)
+
+
+@case
+def idr_scale_mat_singular(tmp, bases):
+    return _prepare(_idr(tmp, [[0.0] * 4] * 4), tmp, "cameras_sphere.npz", "scale_mat_0", "singular")
+
+
+@case
+def idr_scale_putting_the_cameras_3e30_away(tmp, bases):
+    data = _idr(tmp, [[1e-30, 0, 0, 0], [0, 1e-30, 0, 0], [0, 0, 1e-30, 0], [0, 0, 0, 1]])
+    return Case(train_on(data, tmp).argv, [data], says=("cameras_sphere.npz", "scale_mat_0", "3e+30"))
+
+
+@case
+def llff_focal_1e_minus_30(tmp, bases):
+    return _prepare(_llff(tmp, (8.0, 8.0, 1e-30)), tmp, "poses_bounds.npy", "row 0", "1e-30")
+
+
+@case
+def llff_image_size_1e308(tmp, bases):
+    return _prepare(_llff(tmp, (1e308, 8.0, 9.0)), tmp, "poses_bounds.npy", "row 0", "1e+308")
+
+
+@case
+def nerfstudio_lens_k1_minus_999(tmp, bases):
+    data = _nerfstudio(tmp, bases, camera_model="OPENCV", k1=-999)
+    return _prepare(data, tmp, "transforms.json", "k1=-999")
+
+
+@case
+def nerfstudio_lens_p1_500(tmp, bases):
+    data = _nerfstudio(tmp, bases, camera_model="OPENCV", p1=500)
+    return Case(train_on(data, tmp).argv, [data], says=("transforms.json", "p1=500"))

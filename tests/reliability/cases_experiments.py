@@ -42,6 +42,11 @@ def run_negative_trials(tmp, bases):
 
 
 @case
+def run_workers_beyond_any_machine(tmp, bases):
+    return _run(tmp, bases, "--workers", "1099511627776", says=("--workers", "1099511627776"), inputs=[tmp])
+
+
+@case
 def run_steps_below_add_at_step(tmp, bases):
     """The issue's example: views were added at step 20 and never trained on."""
     return _run(tmp, bases, "--steps", "10", says=("--steps", "10"), inputs=[tmp])

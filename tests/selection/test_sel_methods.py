@@ -84,6 +84,8 @@ def test_unknown_method_lists_the_valid_names(scene):
     model, train, candidates = scene
     with pytest.raises(ValueError, match="unknown selection method 'bayes'.*ours.*furthest"):
         select_views("bayes", model, train, candidates, 2, torch.Generator().manual_seed(0))
+    with pytest.raises(ValueError, match="unknown selection method 'fisher'; did you mean 'fisherrf'"):
+        select_views("fisher", model, train, candidates, 2, torch.Generator().manual_seed(0))
 
 
 @pytest.mark.parametrize("method", sorted(EXPECTED))
@@ -436,3 +438,16 @@ def test_a_sampler_with_enough_positive_scores_records_no_fill(scene):
             "fisherrf-sampling", model, train, candidates, 4, torch.Generator().manual_seed(1), FAST
         )
     assert selection.uniform_fill == 0 and "uniform_fill" not in selection.to_dict()
+
+
+def test_each_method_says_what_its_scores_are_and_in_which_unit():
+    from nerfaug.selection import METHODS, Selection
+
+    assert METHODS["ours"].score_label().splitlines()[0] == "uncertainty U = H′ + D′ (no unit; ′: min-max scaled)"
+    raw = METHODS["ours-paper-sum"].score_label()
+    assert raw.startswith("uncertainty U = H + D (bits + rad²)") and "min-max" not in raw
+    assert METHODS["distance"].score_label(SelectionConfig(distance_weight=3.0)).startswith("uncertainty U = D′")
+    assert METHODS["fisherrf"].score_label() == "FisherRF information gain (no unit)"
+    assert METHODS["uniform"].score_label().startswith("no score")
+    sharpened = Selection(torch.zeros(1), torch.ones(3), {"exponent": torch.full((3,), 2.5)}, "ours")
+    assert sharpened.score_label().endswith("raised to the power 2.5 (the sampler's 1/T)")

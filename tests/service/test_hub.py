@@ -32,3 +32,21 @@ def test_requests_that_could_not_run_are_refused_before_they_are_queued(tmp_path
         assert hub.work.pending() == 0
     finally:
         hub.shutdown()
+
+
+def test_a_session_linked_out_of_the_root_is_neither_listed_nor_served_nor_made(tmp_path):
+    (tmp_path / "outside" / "s").mkdir(parents=True)
+    (tmp_path / "outside" / "s" / SESSION_FILE).write_text("{}")
+    (tmp_path / "root").mkdir()
+    (tmp_path / "root" / "s").symlink_to(tmp_path / "outside" / "s", target_is_directory=True)
+    (tmp_path / "root" / "t").symlink_to(tmp_path / "outside" / "t", target_is_directory=True)
+    hub = SessionHub(tmp_path / "root")
+    try:
+        assert hub.ids() == []
+        for call in (lambda: hub.state("s"), lambda: hub.submit("s", print), lambda: hub.submit_train("s", 1)):
+            status, message, _ = refusal(call)
+            assert status == 422 and "session 's' leads outside" in message and "outside/s" not in message
+        assert refusal(lambda: hub.submit_create("t", print))[0] == 422
+        assert hub.work.pending() == 0 and sorted(p.name for p in (tmp_path / "outside").iterdir()) == ["s"]
+    finally:
+        hub.shutdown()

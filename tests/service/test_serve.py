@@ -153,6 +153,9 @@ def test_the_whole_capture_loop(server, root):
 
     constraints = {"elevation": [20, 70], "azimuth": [0, 180], "keep_out": [[0, 1, 0.3, 20]]}
     body = {"n": 2, "n_candidates": 60, "selection": FAST, "constraints": constraints, "min_separation": 25}
+    body["allow_empty"] = True  # ten steps: an empty NeRF, refused otherwise (409, below)
+    refused = server.client.post("/sessions/loop/proposals", json={**body, "allow_empty": False})
+    assert refused.status_code == 409 and "background only" in refused.json()["detail"], refused.text
     proposal = server.client.post("/sessions/loop/proposals", json=body)
     assert proposal.status_code == 200, proposal.text
     frames = proposal.json()["frames"]
@@ -175,7 +178,7 @@ def test_the_whole_capture_loop(server, root):
 
     # A robot's reachable set as the pool: the proposal comes from it.
     reachable = poses_at([30.0, 40.0, 50.0], [10.0, 100.0, 200.0])
-    body = {"n": 1, "candidates": reachable, "selection": FAST, "method": "uniform"}
+    body = {"n": 1, "candidates": reachable, "selection": FAST, "method": "uniform", "allow_empty": True}
     answer = server.client.post("/sessions/loop/proposals", json=body)
     assert answer.status_code == 200, answer.text
     chosen = answer.json()["frames"][0]["transform_matrix"]
@@ -334,7 +337,7 @@ BAD_REQUESTS = {
     "dataset outside the root": (
         _json("POST", "/sessions/from-dataset", {"id": "x1", "dataset": "../../etc"}),
         422,
-        "lies outside the service root",
+        "leads outside",
     ),
     "absolute dataset": (
         _json("POST", "/sessions/from-dataset", {"id": "x2", "dataset": "/etc"}),
@@ -434,7 +437,7 @@ BAD_REQUESTS = {
     "evaluate outside the root": (
         _json("POST", "/sessions/bad/evaluate", {"dataset": "../.."}),
         422,
-        "lies outside the service root",
+        "leads outside",
     ),
     "evaluate a missing split": (
         _json("POST", "/sessions/bad/evaluate", {"dataset": "data", "split": "val"}),

@@ -22,6 +22,7 @@ from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import DatasetSplit, NewFrame, unique_stem
 from nerfaug.data.frames import check_pose
 from nerfaug.data.views import Views
+from nerfaug.jsonio import remove_temp_files
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,14 @@ def prepare_addition(
 
 def write_addition(addition: Addition, dataset: DatasetSplit, camera: Cameras) -> dict[str, str]:
     """Write the images, then the listing (atomically). Returns each new frame's `file_path` ->
-    sha256 digest of its image (for the session's integrity record)."""
+    sha256 digest of its image (for the session's integrity record).
+
+    First the temporary files an earlier addition killed mid-write left there (named as
+    `nerfaug.jsonio`'s, nothing else) are removed: the caller holds the session's lock, so no
+    other writer has one under way."""
+    root = Path(dataset.root)
+    for folder in (root / dataset.format.image_folder(dataset.split), root):
+        remove_temp_files(folder)
     listed = dataset.append(addition.frames, camera)
     return {str(f["file_path"]): sha256_bytes(new.data) for f, new in zip(listed, addition.frames)}
 

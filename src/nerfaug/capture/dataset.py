@@ -1,22 +1,25 @@
 """What a session asks of the dataset it grows, beyond its format (`nerfaug.data.formats`): which
-split a new session trains on, its frames as the trainer sees them, the names new frames may take,
-and views that repeat a pose."""
+split a new session trains on (and which of its views, for a sparse start), its frames as the
+trainer sees them, the names new frames may take, and views that repeat a pose."""
 
 from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import torch
 
 from nerfaug.cameras import Cameras
+from nerfaug.capture.requests import START_LAYOUTS, RequestError, SparseStart
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import has_split
 from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import read_image
 from nerfaug.data.views import Views
+from nerfaug.layouts import initial_views
 
 # A new frame's image name (file stem): no separators, no leading dot.
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
@@ -90,3 +93,25 @@ def engine_views(dataset: DatasetSplit, start: int, downscale: int, background, 
     if all(a is not None for _, a in loaded):
         alphas = torch.stack([a for _, a in loaded])
     return Views(cameras, torch.stack([im for im, _ in loaded]), [str(f["file_path"]) for f in frames], alphas)
+
+
+def sparse_start(source: DatasetSplit, views: Views, hemisphere: Hemisphere, start: SparseStart):
+    """(`source` narrowed to a sparse start's initial views, their cameras, the candidate pool:
+    a transforms dict of the other views' world-frame poses and names, with the start's record
+    under "start")."""
+    world = views.cameras.camera_to_world
+    try:
+        chosen = initial_views(hemisphere.to_engine(world), start.initial, start.layout, START_LAYOUTS)
+    except ValueError as error:
+        raise RequestError("initial", start.initial, f"{error} (of {len(views)} views of {source.listing})") from None
+    if len(chosen) == len(views):
+        raise RequestError("initial", start.initial, f"must leave candidates: the dataset has {len(views)} views")
+    others = [i for i in range(len(views)) if i not in set(chosen)]
+    frames = [{"file_path": views.names[i], "transform_matrix": world[i].double().tolist()} for i in others]
+    record = {
+        "initial": start.initial,
+        "layout": start.layout,
+        "of": len(views),
+        "names": [views.names[i] for i in chosen],
+    }
+    return replace(source, only=tuple(chosen)), views.cameras[chosen], {"frames": frames, "start": record}

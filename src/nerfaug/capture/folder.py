@@ -9,7 +9,6 @@ from pathlib import Path
 
 import torch
 
-from nerfaug import owned
 from nerfaug.cameras import Cameras
 from nerfaug.capture import export, integrity
 from nerfaug.capture.dataset import engine_views
@@ -17,6 +16,7 @@ from nerfaug.capture.evaluate import load_held_out
 from nerfaug.capture.requests import Intrinsics, Split, validated
 from nerfaug.capture.runfolder import CHECKPOINT_FILE, DATASET_DIR, DATASET_SPLIT, SESSION_FILE
 from nerfaug.capture.state import AdditionRecord, ProposalRecord, SessionError, SessionState, SessionSummary
+from nerfaug.containment import inside
 from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, get_format
 from nerfaug.data.frame import Hemisphere
@@ -87,14 +87,12 @@ class SessionFolder:
         return camera_of(self.state.intrinsics, width, height)
 
     def dataset_split(self) -> DatasetSplit:
-        """The grown dataset's split in its format; SessionError if its listing lies outside the run folder."""
+        """The grown dataset's split in its format; `PathRefused` if its listing leads outside the run folder."""
         dataset = DatasetSplit(self.dataset_dir, FORMATS[self.state.dataset.format], DATASET_SPLIT)
-        path = dataset.listing
-        if not owned.overlaps(path, self.run_dir) or path.resolve() == self.run_dir.resolve():
-            raise SessionError(
-                f"{self.run_dir / SESSION_FILE}, field 'dataset.json': the dataset file must lie "
-                f"inside the run folder (got {str(path.resolve())!r})"
-            )
+        shown = dataset.listing.relative_to(self.run_dir).as_posix()
+        inside(
+            self.run_dir, dataset.listing, "the dataset's listing", listed_in=self.run_dir / SESSION_FILE, value=shown
+        )
         return dataset
 
     def frames(self) -> list:

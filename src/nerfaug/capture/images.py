@@ -14,6 +14,7 @@ import torch
 from torch import Tensor
 
 from nerfaug.capture.dataset import NAME
+from nerfaug.containment import inside
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import STORED_SUFFIXES, decode_image, encode_png
 from nerfaug.data.views import Views
@@ -109,8 +110,11 @@ def image_files(folder: Path) -> list[Path]:
     )
 
 
-def read_capture(path: Path, label: str | None = None) -> Capture:
-    return Capture(str(path), decode_image(path, label), source=path, name=path.stem)
+def read_capture(path: Path, label: str | None = None, folder: Path | None = None) -> Capture:
+    """The image file `path` as a capture named by its stem; given the `folder` it was found in,
+    read only where it lies inside it (`PathRefused` for a link out of it)."""
+    real = path if folder is None else inside(folder, path, "image")  # its pixels and bytes are read from here
+    return Capture(str(path), decode_image(real, label), source=real, name=path.stem)
 
 
 def as_array(image) -> np.ndarray:
@@ -155,7 +159,7 @@ def collect_images(images, names: Sequence[str] | None = None, background=(1.0, 
             if names is None:
                 if not files:
                     raise DatasetError(path, f"no image files ({', '.join(CAPTURE_SUFFIXES)}) in this folder")
-                return [read_capture(f) for f in files]
+                return [read_capture(f, folder=path) for f in files]
             by_stem: dict[str, list[Path]] = {}
             for f in files:
                 by_stem.setdefault(f.stem, []).append(f)
@@ -177,7 +181,7 @@ def collect_images(images, names: Sequence[str] | None = None, background=(1.0, 
                         field=f"frames[{i}]",
                         value=[f.name for f in found],
                     )
-                captures.append(read_capture(found[0]))
+                captures.append(read_capture(found[0], folder=path))
             return captures
         return [read_capture(path)]
     if isinstance(images, (np.ndarray, Tensor)):

@@ -6,6 +6,7 @@ session itself."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import torch
@@ -33,6 +34,7 @@ class SessionModel:
             resolution.
         background: RGB in [0, 1] behind transparent pixels, as trained.
         seed: the session's seed.
+        pool: a sparse start's candidate pool (a transforms JSON of world-frame poses), or None.
     """
 
     model: NerfModel
@@ -43,6 +45,7 @@ class SessionModel:
     template: Cameras
     background: tuple[float, float, float]
     seed: int
+    pool: Path | None = None
 
     def background_tensor(self) -> Tensor:
         """`background` as a Tensor with shape (3,) on the model's device."""

@@ -19,7 +19,8 @@ files), never waiting for a lock or a worker.
 
 Refusals: an unknown session or dataset `FileNotFoundError`; a session id that exists already
 `FolderRefused`; a second training job of a session `JobRunning`; one training job more than
-`max_training` `TrainingFull`; a dataset outside the root `ValueError`.
+`max_training` `TrainingFull`; a session folder, dataset or job record leading outside the root
+(a link) `PathRefused` (`nerfaug.containment.inside`: the folders are used resolved).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from nerfaug.capture.requests import CHECKPOINT_EVERY_S, SESSION_ID, check_check
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import SessionSummary
+from nerfaug.containment import inside, is_inside
 from nerfaug.data.formats import find_split
 from nerfaug.errors import FolderRefused, NerfaugError
 from nerfaug.jsonio import atomic_write_json, read_json
@@ -204,13 +206,16 @@ class SessionPool:
     # -- sessions --
 
     def folder(self, session_id: str) -> Path:
-        """The session's folder; `RequestError` for an id that is not a `SessionId`."""
-        return self.root / check_session_id(session_id)
+        """The session's folder, resolved: `RequestError` for an id that is not a `SessionId`,
+        `PathRefused` for one whose folder leads outside the root (a link)."""
+        return inside(self.root, self.root / check_session_id(session_id), f"session {session_id!r}")
 
     def ids(self) -> list[str]:
-        """Ids of the sessions under the root (folders holding a session.json)."""
+        """Ids of the sessions under the root (folders inside it holding a session.json)."""
         return sorted(
-            p.name for p in self.root.iterdir() if SESSION_ID.fullmatch(p.name) and (p / SESSION_FILE).is_file()
+            p.name
+            for p in self.root.iterdir()
+            if SESSION_ID.fullmatch(p.name) and is_inside(self.root, p) and (p / SESSION_FILE).is_file()
         )
 
     def require(self, session_id: str) -> None:
@@ -239,7 +244,7 @@ class SessionPool:
         if slot.session is None:
             self._lock_folder(slot)
             try:
-                slot.session = CaptureSession.open(self.root / slot.id, device=self.device)
+                slot.session = CaptureSession.open(self.folder(slot.id), device=self.device)
             except BaseException:
                 slot.folder_lock.release()
                 slot.folder_lock = None
@@ -249,7 +254,7 @@ class SessionPool:
 
     def _lock_folder(self, slot: _Slot) -> None:
         if slot.folder_lock is None:
-            slot.folder_lock = session_lock.acquire(self.root / slot.id, session_lock.SERVICE, wait=False)
+            slot.folder_lock = session_lock.acquire(self.folder(slot.id), session_lock.SERVICE, wait=False)
 
     def create(self, session_id: str, create: Callable[[Path], CaptureSession]) -> SessionStatus:
         """Create a session with `create(folder)` (a function returning the `CaptureSession`)."""
@@ -286,9 +291,7 @@ class SessionPool:
         the folder (`find_split`), so no file outside the root is read."""
         if not relative or Path(relative).is_absolute():
             raise ValueError(f"dataset {relative!r}: give a folder relative to the service root")
-        path = (self.root / relative).resolve()
-        if not path.is_relative_to(self.root.resolve()):
-            raise ValueError(f"dataset {relative!r}: lies outside the service root")
+        path = inside(self.root, self.root / relative, f"dataset {relative!r}")
         if not path.is_dir():
             raise FileNotFoundError(f"dataset {relative!r}: no such folder under the service root")
         if split is not None:
@@ -344,7 +347,7 @@ class SessionPool:
             return slot.job.model_copy()
 
     def _job_file(self, session_id: str) -> Path:
-        return self.root / JOBS_DIR / f"{session_id}.json"
+        return inside(self.root, self.root / JOBS_DIR / f"{session_id}.json", f"the job record of {session_id!r}")
 
     def _record(self, slot: _Slot) -> None:
         atomic_write_json(self._job_file(slot.id), {"kind": "train", **slot.job.model_dump()})
@@ -395,7 +398,7 @@ class SessionPool:
 
     def _resume(self, session_id: str, record: dict) -> bool:
         """Restart the job `record` (a job file's content) when it was left running; whether it was."""
-        if record.get("state") != "running" or not (self.root / session_id / SESSION_FILE).is_file():
+        if record.get("state") != "running" or not (self.folder(session_id) / SESSION_FILE).is_file():
             return False
         slot = self._slot(session_id)
         with slot.lock:

@@ -26,8 +26,9 @@ from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
 
 def proposal_seed(seed: int, number: int) -> int:
     """The seed of proposal `number` of a session seeded with `seed`: independent of the global
-    RNG and of everything done before, so a resumed session proposes what the original would."""
-    return int(np.random.SeedSequence([int(seed), int(number)]).generate_state(1, np.uint64)[0] >> np.uint64(1))
+    RNG and of everything done before, so a resumed session proposes what the original would; at
+    most `requests.SEED_MAX` (2^53 - 1), so a JSON client reads it back exactly."""
+    return int(np.random.SeedSequence([int(seed), int(number)]).generate_state(1, np.uint64)[0] >> np.uint64(11))
 
 
 @dataclass(kw_only=True)
@@ -52,7 +53,7 @@ class Proposal:
         camera_angle_x: horizontal field of view of the cameras, radians.
         hemisphere: the session's hemisphere.
         min_separation: the least angle, degrees about the hemisphere's centre, between two of
-            its views; 0 when not asked for.
+            its views; 0 when switched off.
         uniform_fill: how many of the views were drawn uniformly because fewer candidates than
             asked for had a positive score (the model gave them no information); 0 when none.
     """
@@ -109,8 +110,7 @@ class Proposal:
             "nerfaug": nerfaug.__version__,
             "map": None if self.map_path is None else str(self.map_path),
         }
-        if self.min_separation > 0:
-            info["min_separation"] = self.min_separation
+        info["min_separation"] = self.min_separation
         if self.uniform_fill:
             info["uniform_fill"] = self.uniform_fill
         if include_candidates:

@@ -27,7 +27,7 @@ import re
 import textwrap
 from dataclasses import dataclass, fields, make_dataclass
 from functools import cache
-from typing import Annotated, get_args, get_origin, get_type_hints
+from typing import Annotated, Literal, get_args, get_origin, get_type_hints
 
 import tyro
 from pydantic import (
@@ -42,8 +42,13 @@ from pydantic import (
     WithJsonSchema,
     model_validator,
 )
+from tyro.constructors import PrimitiveConstructorSpec
 
+from nerfaug import camera_schema
+from nerfaug.camera_schema import MAX_IMAGE_SIDE
+from nerfaug.errors import DatasetError
 from nerfaug.nerf.config import EnginePreset
+from nerfaug.registry import check_name
 
 
 class RequestError(ValueError):
@@ -71,6 +76,9 @@ class RequestError(ValueError):
 
 # Where a service's framework puts a field (FastAPI's "body", "query", ...): not part of its name.
 _TRANSPORT = ("body", "query", "path", "form")
+# What a field no schema has is refused with (pydantic's "Extra inputs are not permitted",
+# "Unexpected keyword argument").
+UNKNOWN_FIELD = "unknown field: not one of this request's"
 # Pydantic's words for a bound, shorter: "must be >= 1", as the commands have always said it.
 _BOUNDS = {"greater_than_equal": ">=", "greater_than": ">", "less_than_equal": "<=", "less_than": "<"}
 
@@ -88,6 +96,8 @@ def field_path(loc) -> str:
 def problem_text(error: dict) -> str:
     """A pydantic error's message, without its "Value error, " prefix and with bounds as ">= 1"."""
     kind, context = error.get("type", ""), error.get("ctx") or {}
+    if kind in ("extra_forbidden", "unexpected_keyword_argument"):  # a model's, a dataclass's
+        return UNKNOWN_FIELD
     if kind in _BOUNDS and context:
         bound = next(iter(context.values()))
         return f"must be {_BOUNDS[kind]} {bound:g}" if isinstance(bound, float) else f"must be {_BOUNDS[kind]} {bound}"
@@ -151,6 +161,8 @@ def given_form(schema: type) -> type:
     for f in fields(schema):
         kind, *meta = get_args(hints[f.name]) if get_origin(hints[f.name]) is Annotated else (hints[f.name],)
         shown = tyro.conf.arg(help=docs.get(f.name), help_behavior_hint=f"(default: {_shown(f.default)})")
+        if get_origin(kind) is Literal:  # its names, without the None no one can write
+            meta = [*meta, _one_of(tuple(get_args(kind)))]
         form.append((f.name, Annotated[kind | None, shown, *meta, tyro.conf.DisallowNone], None))
 
     def given_names(self) -> set[str]:
@@ -163,6 +175,23 @@ def given_form(schema: type) -> type:
 
     methods = {"given_names": given_names, "filled": filled}
     return make_dataclass(f"Given{schema.__name__}", form, frozen=True, namespace=methods)
+
+
+def _one_of(names: tuple[str, ...]) -> PrimitiveConstructorSpec:
+    """How tyro reads an option that is one of `names` or not given (None): its choices shown and
+    checked without "None", and a mistyped name answered with the closest ones (`registry.unknown`)."""
+
+    def parse(words: list[str]) -> str:
+        check_name("name", words[0], names)
+        return words[0]
+
+    return PrimitiveConstructorSpec(
+        nargs=1,
+        metavar="{" + ",".join(names) + "}",
+        instance_from_str=parse,
+        is_instance=lambda value: value is None or value in names,
+        str_from_instance=lambda value: [str(value)],
+    )
 
 
 def _field_docs(schema: type) -> dict[str, str]:
@@ -182,8 +211,9 @@ def _shown(value) -> str:
 
 # ---- numbers and names ------------------------------------------------------------------------
 
-# Seeds reach torch's generators, which take a signed 64-bit integer.
-SEED_MAX = 2**63 - 1
+# Seeds reach torch's generators (a signed 64-bit integer) and JSON clients, which read an integer
+# exactly only up to 2^53 (JavaScript's numbers): a larger seed would come back rounded.
+SEED_MAX = 2**53 - 1
 Seed = Annotated[int, Field(ge=0, le=SEED_MAX)]
 # A split's name: it becomes part of a file name (`transforms_{split}.json`), so no separators.
 SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
@@ -200,8 +230,10 @@ Steps = Annotated[int, Field(ge=0, le=MAX_STEPS)]
 # much), and at the end (`CaptureSession.train_for`).
 CHECKPOINT_EVERY_S = 60.0
 CheckpointEvery = Annotated[float, Field(gt=0, description="seconds of training between saves")]
-# CPU threads a command runs torch (or Blender's Cycles) on.
-Threads = Annotated[int, Field(ge=1)]
+# CPU threads a command runs torch (or Blender's Cycles) on: more than any machine has would
+# overflow the C int torch takes.
+MAX_THREADS = 1024
+Threads = Annotated[int, Field(ge=1, le=MAX_THREADS)]
 
 # Pixels across of an uncertainty image (`nerfaug.capture.uncertainty_images`): a render holds
 # width^2 rays and FisherRF's image three backward passes per pixel, so these bound the memory and
@@ -247,7 +279,7 @@ def check_checkpoint_every(seconds: float) -> float:
 
 
 def check_threads(threads: int) -> int:
-    """`threads` (CPU threads to run on) as an int; RequestError unless >= 1."""
+    """`threads` (CPU threads to run on) as an int; RequestError unless in 1..`MAX_THREADS`."""
     return validated(Threads, threads, "threads")
 
 
@@ -258,18 +290,36 @@ def check_image_widths(width: int | None, fisher_width: int) -> tuple[int | None
     return shown, validated(FisherWidth, fisher_width, "fisher_width")
 
 
+# ---- a sparse start -----------------------------------------------------------------------------
+
+# A sparse start's layouts: the half of the object the initial views come from, turned a third of
+# the way round from one layout to the next, as `nerfaug study --layouts 3` starts its trials.
+START_LAYOUTS = 3
+
+
+@dataclass(frozen=True, kw_only=True)
+class SparseStart(Schema):
+    """Start a session from a few of a dataset's views, the rest its candidate pool, as the
+    paper's experiments start: `initial` views on one half of the object."""
+
+    __pydantic_config__ = SCHEMA
+
+    initial: Annotated[int, Field(ge=1, le=10_000)]
+    """views to start from."""
+    layout: Annotated[int, Field(ge=0, lt=START_LAYOUTS)] = 0
+    """which half of the object they lie on: 0, 1 or 2, each turned a third of the way round."""
+
+
 # ---- poses ------------------------------------------------------------------------------------
 
 
 def _pose(value) -> list[list[float]]:
-    """A rigid, finite 4x4 camera-to-world matrix as nested lists of floats."""
-    from nerfaug.data.frames import check_pose  # torch: this module is read by `--help`, which loads none
-
+    """A rigid, finite 4x4 camera-to-world matrix (`nerfaug.camera_schema.check_pose`) as nested lists of floats."""
     value = value.tolist() if hasattr(value, "tolist") else value
     if any(isinstance(x, float) and not math.isfinite(x) for row in _rows(value) for x in row):
         raise ValueError("not finite (every entry of a pose must be a finite number)")
     try:
-        check_pose(value, "pose", "pose")
+        camera_schema.check_pose(value, "pose", "pose")
     except ValueError as error:
         raise ValueError(getattr(error, "problem", "must be 4 rows of 4 numbers")) from None
     return [[float(x) for x in row] for row in value]
@@ -316,9 +366,9 @@ class Intrinsics(BaseModel):
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, use_attribute_docstrings=True)
 
-    width: int = Field(ge=1)
+    width: int = Field(ge=1, le=MAX_IMAGE_SIDE)
     """image width, pixels"""
-    height: int = Field(ge=1)
+    height: int = Field(ge=1, le=MAX_IMAGE_SIDE)
     """image height, pixels"""
     fx: float = Field(gt=0)
     """focal length along x, pixels"""
@@ -328,7 +378,7 @@ class Intrinsics(BaseModel):
     """principal point x, pixels (default: width / 2)"""
     cy: float | None = None
     """principal point y, pixels (default: height / 2)"""
-    camera_angle_x: float | None = Field(None, gt=0, lt=math.pi)
+    camera_angle_x: float | None = Field(None, gt=camera_schema.MIN_FOV, lt=camera_schema.MAX_FOV)
     """horizontal field of view, radians (default: from width and fx)"""
 
     @model_validator(mode="after")
@@ -338,6 +388,10 @@ class Intrinsics(BaseModel):
         self.cy = self.height / 2 if self.cy is None else self.cy
         if self.camera_angle_x is None:
             self.camera_angle_x = 2 * math.atan(self.width / (2 * self.fx))
+        try:  # the camera schema every dataset reader holds cameras to
+            camera_schema.check_pinhole(self.fx, self.fy, self.cx, self.cy, self.width, self.height, "intrinsics", str)
+        except DatasetError as error:
+            raise ValueError(error.problem) from None
         return self
 
 

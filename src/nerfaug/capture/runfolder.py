@@ -14,6 +14,8 @@ SESSION_FILE = "session.json"
 CHECKPOINT_FILE = "checkpoint.pt"
 DATASET_DIR = "dataset"
 PROPOSALS_DIR = "proposals"
+# A sparse start's candidate pool: the dataset's views it did not start from (poses and names).
+POOL_FILE = "pool.json"
 # Marker kinds (`nerfaug.owned`): the run folder, its dataset copy, and a folder `export` wrote.
 RUN_KIND, DATASET_KIND, EXPORT_KIND = "capture-session", "capture-dataset", "capture-export"
 # The split the run's dataset copy holds the views in, whatever the source's split was.

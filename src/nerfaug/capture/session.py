@@ -37,7 +37,7 @@ from nerfaug import owned
 from nerfaug.cameras import Cameras
 from nerfaug.capture import add, choose, integrity
 from nerfaug.capture.choose import ProposalRequest
-from nerfaug.capture.dataset import default_split, duplicate_frames
+from nerfaug.capture.dataset import default_split, duplicate_frames, sparse_start
 from nerfaug.capture.evaluate import evaluate_model
 from nerfaug.capture.folder import SessionFolder, camera_of
 from nerfaug.capture.images import ImageFile, check_image_files, write_files
@@ -47,6 +47,7 @@ from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
     Intrinsics,
     SessionSettings,
+    SparseStart,
     Split,
     as_pose_list,
     check_checkpoint_every,
@@ -59,6 +60,7 @@ from nerfaug.capture.runfolder import (
     DATASET_DIR,
     DATASET_KIND,
     DATASET_SPLIT,
+    POOL_FILE,
     PROPOSALS_DIR,
     RUN_KIND,
     SESSION_FILE,
@@ -134,6 +136,7 @@ class CaptureSession(SessionFolder):
         progress: bool = False,
         warn: Callable[[str, type[Warning]], None] | None = None,
         source_name: str | None = None,
+        start: SparseStart | None = None,
     ) -> CaptureSession:
         """Start a session: copy `split` of the dataset into `run_dir/dataset`, build the NeRF,
         save. Nothing is trained yet (call `train`).
@@ -153,6 +156,10 @@ class CaptureSession(SessionFolder):
             warn: receives each warning (message, `DuplicateViews` or `TiltedPole`) instead of
                 Python's `warnings` (a service returns them with its answer).
             source_name: how warnings name the views' listing (default: its file).
+            start: a sparse start (`SparseStart`): only `start.initial` views of the split, on one
+                half of the object (the hemisphere is estimated from every view), are copied; the
+                others' poses and names become the candidate pool `propose` chooses from by
+                default (`run_dir/pool.json`), so `add` takes their images from the dataset.
 
         Raises:
             RequestError: a setting out of range (naming it).
@@ -194,13 +201,20 @@ class CaptureSession(SessionFolder):
                 "or --up X Y Z",
                 TiltedPole,
             )
+        pool = None
+        if start is not None:
+            source, cameras, pool = sparse_start(source, views, hemisphere, validated(SparseStart, start, "start"))
         origin = SourceInfo(data_dir=str(data_dir), split=split, format=source.format.name)
         state = _new_state(origin, cameras, plainest_format(source, cameras), settings, config, background, hemisphere)
+        if pool is not None:
+            state.start, state.pool = pool.pop("start"), POOL_FILE
         # Everything is checked: from here on the run folder is written, and marked as nerfaug's first;
         # a failure (an unreadable image, Ctrl-C) removes what was written, leaving no half-made session.
         existed = run_dir.exists()
         owned.mark(run_dir, RUN_KIND)
         try:
+            if pool is not None:
+                atomic_write_json(run_dir / POOL_FILE, pool)
             return cls._build(run_dir, source, state, config or NerfConfig.preset(settings.preset), device, progress)
         except BaseException:
             _remove_unfinished(run_dir, existed)
@@ -432,20 +446,22 @@ class CaptureSession(SessionFolder):
 
         Raises:
             RequestError: a value of the request out of range (naming it).
+            EmptyModel: the NeRF renders its training views as background only (`health`), and
+                the request does not say `allow_empty`: its proposal would say nothing about
+                which views would help.
             TooFewCandidates (a ValueError): the constraints leave fewer candidates than asked.
 
         Warns:
-            EmptyModelWarning: the NeRF renders its training views as background only (`health`):
-                its proposal says nothing about which views would help.
+            EmptyModelWarning: as `EmptyModel`, when the request says `allow_empty`.
         """
         folder = self.run_dir / PROPOSALS_DIR
         number, shown = len(self.state.proposals), bool(self.trainer.progress)  # as the session was opened
         request = request or ProposalRequest()
-        proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown, map)
+        health = functools.cache(self.health)  # measured once, by `choose.propose` when it gets that far
+        proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown, map, health)
+        if record.model_dump().get("empty_model"):
+            warnings.warn(f"{self.run_dir}: proposed from an empty NeRF: {health().line()}", EmptyModelWarning, 2)
         self.state.proposals.append(record)
-        health = self.health()  # once the request was possible: a refused one says only why
-        if health.empty:
-            warnings.warn(f"{self.run_dir}: {health.line()}", EmptyModelWarning, stacklevel=2)
         return proposal
 
     def health(self) -> Health:
@@ -463,6 +479,7 @@ class CaptureSession(SessionFolder):
             template=self.template(),
             background=tuple(self.state.background),
             seed=self.seed,
+            pool=None if self.state.pool is None else self.run_dir / self.state.pool,
         )
 
     def add_views(self, images, poses=None, names: Sequence[str] | None = None) -> list[str]:

@@ -16,10 +16,10 @@ from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.state import SessionState
 from nerfaug.data.blender import blender_fits
 from nerfaug.errors import DatasetError
-from nerfaug.scenes.render import render_poses
+from nerfaug.scenes.render import MAX_SAMPLES, render_poses
 
 # Cycles samples per pixel of a simulated capture.
-CyclesSamples = Annotated[int, Field(ge=1)]
+CyclesSamples = Annotated[int, Field(ge=1, le=MAX_SAMPLES)]
 
 
 def render_proposals(
@@ -30,7 +30,7 @@ def render_proposals(
 
     Args:
         scene: a built-in scene (lego, chair, materials, cow) or a .blend file.
-        samples, seed: Cycles samples per pixel (>= 1) and noise seed (>= 0).
+        samples, seed: Cycles samples per pixel (1..`MAX_SAMPLES`) and noise seed (>= 0).
         threads: CPU threads for Cycles (>= 1).
 
     Returns:

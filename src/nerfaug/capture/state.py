@@ -212,6 +212,10 @@ class SessionState(Stored):
     additions: list[AdditionRecord] = Field(default_factory=list)
     saved: str | None = None
     integrity: Integrity = Field(default_factory=Integrity)
+    start: dict | None = None
+    """a sparse start: {"initial", "layout", "of"} views the session started from, of the source's."""
+    pool: InsideRun | None = None
+    """a sparse start's candidate pool (`POOL_FILE`), where `propose` chooses by default."""
 
     @field_validator("format")
     @classmethod
@@ -227,6 +231,9 @@ class SessionState(Stored):
             del data["saved"]
         if self.integrity.checkpoint is None and not self.integrity.captures:
             del data["integrity"]
+        for key in ("start", "pool"):
+            if data[key] is None:
+                del data[key]
         return data
 
     def settings(self) -> SessionSettings:

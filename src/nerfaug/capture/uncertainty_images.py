@@ -21,7 +21,8 @@ from torch import Tensor
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.requests import check_image_widths
 from nerfaug.jsonio import atomic_write_bytes
-from nerfaug.plotting import figure_png, new_figure, save_figure
+from nerfaug.metrics import PIXEL_LABELS
+from nerfaug.plotting import colour_bar, draw_log_image, figure_png, log_range, new_figure, save_figure
 from nerfaug.progress import progress_bar
 from nerfaug.selection import SelectionConfig
 from nerfaug.selection.estimators import fisher_train_diagonal
@@ -31,12 +32,6 @@ ARRAYS = ("rgb", "depth", "opacity", "entropy", "fisher")
 # A ray less opaque than this shows mostly the background: its expected depth is an average over a
 # few faint samples anywhere along the ray (noise), so the depth panel draws it as background.
 BACKGROUND_OPACITY = 0.5
-# The FisherRF panel spans this many decades below the largest score. A score is a sum of squared
-# gradients: pixels whose rays cross empty space score 10^-15 or less of the brightest pixel, and
-# a log scale down to them (15-24 decades measured) leaves every pixel that matters in the top
-# fifth of the colour map. Four decades keep every pixel above 1/10^4 of the brightest distinct,
-# and draw the rest in the lowest colour, where they are worth nothing.
-FISHER_DECADES = 4
 BACKGROUND_GREY = (0.82, 0.82, 0.82, 1.0)
 
 
@@ -154,8 +149,8 @@ class ColourScales:
     Attributes:
         depth: (near, far) in world units over the foreground pixels; None when there are none.
         entropy: the entropy at the top of its scale, bits (the bottom is 0).
-        fisher: (low, high) of FisherRF's log scale, at most `FISHER_DECADES` decades; None when
-            no pixel scores above 0.
+        fisher: (low, high) of FisherRF's log scale, at most `nerfaug.plotting.LOG_DECADES`
+            decades (`log_range`); None when no pixel scores above 0.
     """
 
     depth: tuple[float, float] | None
@@ -170,18 +165,15 @@ def colour_scales(views: Sequence[ViewMaps]) -> ColourScales:
     foreground = np.concatenate([d[np.isfinite(d)] for d in foreground]) if views else np.zeros(0)
     depth = (float(foreground.min()), float(foreground.max())) if foreground.size else None
     entropy = max([float(np.nanmax(v.entropy)) for v in views if v.entropy.size] + [0.0])
-    positive = [v.fisher[v.fisher > 0] for v in views if v.fisher is not None]
-    positive = np.concatenate(positive) if positive else np.zeros(0)
-    fisher = None
-    if positive.size:
-        high = float(positive.max())
-        fisher = (max(float(positive.min()), high / 10.0**FISHER_DECADES), high)
+    fisher = [v.fisher.reshape(-1) for v in views if v.fisher is not None]
+    fisher = log_range(np.concatenate(fisher)) if fisher else None
     return ColourScales(depth, entropy if entropy > 0 else 1.0, fisher)
 
 
 def figure(maps: ViewMaps, title: str = "", scales: ColourScales | None = None):
     """The render, depth, entropy and (when computed) FisherRF panels of one view, side by side,
-    each measured panel with its colour bar.
+    each measured panel with its colour bar naming the quantity and its unit. FisherRF, computed
+    on fewer pixels, is drawn at the render's size (interpolated on its log scale).
 
     Args:
         maps: the view's images.
@@ -190,33 +182,28 @@ def figure(maps: ViewMaps, title: str = "", scales: ColourScales | None = None):
             None: this view's own.
     """
     from matplotlib import colormaps
-    from matplotlib.colors import LogNorm
 
     scales = scales if scales is not None else colour_scales([maps])
     panels = 4 if maps.fisher is not None else 3
-    fig = new_figure(3.3 * panels, 3.2)
+    fig = new_figure(3.4 * panels, 3.2)
+    fig.set_layout_engine("constrained")  # room for each panel's colour bar and its label
     axes = fig.subplots(1, panels)
     axes[0].imshow(maps.rgb, interpolation="nearest")
-    axes[0].set_title("render")
+    axes[0].set_title("render", fontsize=9)
     # Background pixels (mostly transparent rays) are left out of the depth's colours, in grey.
     depth = np.ma.masked_where(maps.opacity < BACKGROUND_OPACITY, maps.depth)
     near, far = scales.depth if scales.depth is not None else (None, None)
     colours = colormaps["viridis_r"].with_extremes(bad=BACKGROUND_GREY)
     image = axes[1].imshow(depth, cmap=colours, interpolation="nearest", vmin=near, vmax=far)
-    axes[1].set_title("depth (world units; grey: background)", fontsize=9)
-    fig.colorbar(image, ax=axes[1], fraction=0.046, pad=0.04)
+    axes[1].set_title("depth (grey: background)", fontsize=9)
+    colour_bar(fig, image, axes[1], PIXEL_LABELS["depth"])
     image = axes[2].imshow(maps.entropy, cmap="magma", interpolation="nearest", vmin=0, vmax=scales.entropy)
-    axes[2].set_title("ray entropy (bits)")
-    fig.colorbar(image, ax=axes[2], fraction=0.046, pad=0.04)
+    axes[2].set_title("ray entropy", fontsize=9)
+    colour_bar(fig, image, axes[2], PIXEL_LABELS["entropy"])
     if maps.fisher is not None:
-        norm = None if scales.fisher is None else LogNorm(*scales.fisher, clip=True)
-        shown = maps.fisher if norm is None else np.where(maps.fisher > 0, maps.fisher, np.nan)
-        # Pixels with no gain (rays that touch no parameter) are drawn in the scale's lowest colour.
-        colours = colormaps["inferno"].with_extremes(bad=colormaps["inferno"](0.0))
-        image = axes[3].imshow(shown, cmap=colours, norm=norm, interpolation="nearest")
-        decades = "" if norm is None else f" (log, {math.log10(scales.fisher[1] / scales.fisher[0]):.3g} decades)"
-        axes[3].set_title("FisherRF score per pixel" + decades, fontsize=9)
-        fig.colorbar(image, ax=axes[3], fraction=0.046, pad=0.04)
+        h, w = maps.fisher.shape
+        draw_log_image(fig, axes[3], maps.fisher, maps.rgb.shape[:2], scales.fisher, PIXEL_LABELS["fisher"])
+        axes[3].set_title(f"FisherRF (computed at {w}x{h} px)", fontsize=9)
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import tyro
 
 from nerfaug.errors import NerfaugError
+from nerfaug.registry import unknown
 
 # Each command's home, "module:function": a command's module is imported only when it runs, so
 # `nerfaug train --help` answers without loading torch (what the experiment commands' options need).
@@ -215,15 +216,17 @@ def _dispatch(argv: list[str]) -> None:
         if isinstance(target, type):  # a command's options as a dataclass: run them
             parsed()
         return
-    if not argv or argv[0] in ("-h", "--help"):
-        print(__doc__.strip())
-        print()
-    tyro.extras.subcommand_cli_from_dict(
-        {name: command(name) for name in COMMANDS},
-        args=argv,
-        prog="nerfaug",
-        description="Choose which views to add when a NeRF has too little data.",
-    )
+    if argv and argv[0] not in ("-h", "--help"):
+        raise SystemExit(f"{unknown('command', argv[0], COMMANDS)} (`nerfaug --help`)")
+    # The overview imports no command's module: each loads what its own options need (some, torch).
+    print(__doc__.strip())
+    print()
+    print(f"usage: nerfaug [-h] {{{','.join(COMMANDS)}}}")
+    print()
+    print("Choose which views to add when a NeRF has too little data. `nerfaug COMMAND --help`: its options.")
+    if not argv:
+        raise SystemExit("give a command (`nerfaug --help` lists them)")
+    raise SystemExit(0)
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 """The `nerfaug scene` commands: render a built-in scene or a .blend file as a dataset (`render`),
-and ready a downloaded dataset for the experiments (`prepare`)."""
+and ready a downloaded dataset for the experiments (`prepare`). Their work (which loads torch) is
+imported when one runs, so that `nerfaug scene ... --help` answers at once."""
 
 from __future__ import annotations
 
@@ -7,9 +8,6 @@ from pathlib import Path
 from typing import Annotated
 
 import tyro
-
-from nerfaug.data.prepare import prepare_dataset
-from nerfaug.scenes import render_scene_dataset
 
 Positional = tyro.conf.Positional
 
@@ -40,6 +38,8 @@ def scene_render(
         samples: Cycles samples per pixel.
         seed: seeds the pool's poses and Cycles' noise.
     """
+    from nerfaug.scenes import render_scene_dataset  # torch: here, so that --help loads none
+
     path = render_scene_dataset(
         scene, out, resolution=res, pool=pool, test=test, initial=initial, samples=samples, seed=seed, progress=True
     )
@@ -66,6 +66,8 @@ def scene_prepare(
         out: the folder to write (new or empty).
         width: image width in pixels (any size up to the source's; area-averaged).
     """
+    from nerfaug.data.prepare import prepare_dataset  # torch: here, so that --help loads none
+
     path = prepare_dataset(source, out, width)
     print(f"dataset prepared in {path}")
 

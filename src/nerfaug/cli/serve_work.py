@@ -28,19 +28,21 @@ def service_app(root: Path, device: str, token, checkpoint_every: float, threads
             f"nerfaug serve needs the service's packages ({error.name} is missing): pip install 'nerfaug[serve]'"
         ) from None
     configure_process(threads=threads)
-    _log_to_stderr()
+    _log_to_stderr(app)
     sessions = hub.SessionHub(root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every)
     return uvicorn, app.create_app(sessions, token=token, max_upload_mb=max_upload_mb)
 
 
-def _log_to_stderr() -> None:
-    """The service's own messages (a training job resumed after a restart, ...) as plain lines on stderr."""
-    logger = logging.getLogger(pool.__name__)
-    if not logger.handlers:
-        handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(message)s"))
-        logger.addHandler(handler)
-    logger.setLevel(logging.INFO)
+def _log_to_stderr(app_module) -> None:
+    """The service's own messages (a training job resumed after a restart, ...) and its request log
+    (`service.app.RequestLog`: one line per request) as plain lines on stderr."""
+    for name in (pool.__name__, app_module.__name__):
+        logger = logging.getLogger(name)
+        if not logger.handlers:
+            handler = logging.StreamHandler(sys.stderr)
+            handler.setFormatter(logging.Formatter("%(message)s"))
+            logger.addHandler(handler)
+        logger.setLevel(logging.INFO)
 
 
 def uncertainty(run: Path, poses: Path, out: Path, kind: str, device: str, threads: int, sizes: tuple, shared: bool):

@@ -19,6 +19,7 @@ import tyro
 from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
     SessionSettings,
+    SparseStart,
     Split,
     check_checkpoint_every,
     check_steps,
@@ -57,6 +58,8 @@ def train(
     device: Device = "auto",
     checkpoint_every: float = CHECKPOINT_EVERY_S,
     threads: int = THREADS,
+    initial: Annotated[int | None, replaced_by("every view of the split", "INT")] = None,
+    layout: int = 0,
 ) -> None:
     """Train a capture session until step --steps: start it on a dataset, resume it, or train it further.
 
@@ -77,11 +80,21 @@ def train(
         device: where the NeRF trains: auto (cuda when this machine has a GPU, else cpu), cpu, cuda.
         checkpoint_every: save the session after this many seconds of training (and at the end).
         threads: torch threads for training (one by default, as each run of a sweep).
+        initial: a sparse start: train on this many of the split's views, on one half of the
+            object (as the paper's experiments start); the others become the candidates
+            `nerfaug propose RUN` chooses from, named as in DATA, so that `nerfaug add RUN
+            --images DATA/<their folder> --poses poses.json` adds the chosen ones.
+        layout: with --initial, the half the views lie on: 0, 1 or 2, each turned a third of
+            the way round.
     """
     _check_training(steps, checkpoint_every)
+    start = None
+    if initial is not None:
+        with as_options():
+            start = SparseStart(initial=initial, layout=layout).checked()
     from nerfaug.cli import train_work  # torch: here, so that `nerfaug train --help` loads none
 
-    train_work.train(path, out, steps, settings, split, device, checkpoint_every, threads)
+    train_work.train(path, out, steps, settings, split, device, checkpoint_every, threads, start)
 
 
 def add(

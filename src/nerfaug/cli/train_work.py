@@ -28,14 +28,16 @@ from nerfaug.health import EmptyModelWarning
 from nerfaug.selection.selectors import DirectDraw, UniformFill
 
 
-def train(path: Path, out: Path | None, steps: int, given, split, device: str, checkpoint_every: float, threads: int):
+def train(
+    path: Path, out: Path | None, steps: int, given, split, device: str, checkpoint_every: float, threads: int, start
+):
     """`nerfaug train PATH` (`nerfaug.cli.train.train`) with its options, `given` the session
-    settings the command line gives (a `GivenSettings`)."""
+    settings the command line gives (a `GivenSettings`), `start` a sparse start (or None)."""
     configure(threads)
     run, data, compared = _which_session(path, out, given.given_names(), steps)
     settings = given.filled()
     if run is None:
-        _finish(_create(path, out, settings, split, device), steps, checkpoint_every)
+        _finish(_create(path, out, settings, split, device, start), steps, checkpoint_every)
     elif not _at_step(run, data, settings, split, compared, steps):
         _train_further(open_session(run, device, changing="train"), steps, checkpoint_every, resuming=data is not None)
 
@@ -208,21 +210,29 @@ def _train_further(session, target: int, every_s: float, resuming: bool) -> None
     _finish(session, target - session.step, every_s)
 
 
-def _create(data: Path, out: Path, settings: SessionSettings, split: str | None, device: str):
+def _create(data: Path, out: Path, settings: SessionSettings, split: str | None, device: str, start=None):
     """A new session on `data` in `out`, after one line saying how many views it trains on and why."""
 
+    if split is None and start is not None:
+        split = "train"  # a sparse start chooses among all the views (a rendered scene's pool included)
     why = f"split '{split}' of {data}"
     if split is None:
         split, why = default_split(data)
-    print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
+    count = len(load_dataset(data, split, lazy=True))
+    if start is None:
+        print(f"training on {count} views: {why}", flush=True)
+    else:
+        print(
+            f"training on {start.initial} of the {count} views of {why} (layout {start.layout}: one half of the "
+            f"object); the other {count - start.initial} are the candidates `nerfaug propose` chooses from",
+            flush=True,
+        )
     with warning_lines(), as_options():
-        session = CaptureSession.create(data, out, settings, split=split, device=device_name(device), progress=True)
+        session = CaptureSession.create(
+            data, out, settings, split=split, device=device_name(device), progress=True, start=start
+        )
     _lock(out, "train")
-    h = session.hemisphere
-    print(
-        f"session created in {out}: {session.summary().views} views; hemisphere centre "
-        f"{[round(c, 4) for c in h.centre]}, radius {h.radius:.4g}, up {[round(u, 4) for u in h.up]}"
-    )
+    print(f"session created in {out}: {session.summary().views} views; hemisphere {session.hemisphere}")
     return session
 
 

@@ -7,15 +7,15 @@ in the OpenGL convention. Transparent pixels are composited over a background co
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import torch
 
+from nerfaug.camera_schema import check_field_of_view
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import Format
-from nerfaug.data.frames import MIN_ANGLE, is_number, load_frames, require, write_image
+from nerfaug.data.frames import load_frames, require, write_image
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
 
@@ -43,14 +43,7 @@ def load_blender_split(
     root = Path(root)
     json_path = root / f"transforms_{split}.json"
     meta = read_json(json_path)
-    angle = require(meta, "camera_angle_x", json_path)
-    if not is_number(angle) or not MIN_ANGLE < float(angle) < math.pi:
-        raise DatasetError(
-            json_path,
-            f"camera_angle_x must be a number in ({MIN_ANGLE:g}, pi) radians",
-            field="camera_angle_x",
-            value=angle,
-        )
+    angle = check_field_of_view(require(meta, "camera_angle_x", json_path), json_path, "camera_angle_x")
     frames = require(meta, "frames", json_path)
     if not isinstance(frames, list) or not frames:
         raise DatasetError(
@@ -59,7 +52,16 @@ def load_blender_split(
             field="frames",
             value=frames if not isinstance(frames, list) else [],
         )
-    return load_frames(root, json_path, frames, background, downscale, lazy, lambda w, h, i: (float(angle), None))
+    return load_frames(
+        root,
+        json_path,
+        frames,
+        background,
+        downscale,
+        lazy,
+        lambda w, h, i: (angle, None),
+        camera_field=lambda i: "camera_angle_x",
+    )
 
 
 def load_blender(root: str | Path, splits=SPLITS, **kwargs) -> dict[str, Views]:

@@ -126,6 +126,10 @@ class Format(ABC):
         """Whether any frame of the listing has a lens distortion (its images are distorted photos)."""
         return False
 
+    def has_masks(self, root: Path) -> bool:
+        """Whether the folder keeps masks apart from its images (its reader makes them the alpha)."""
+        return False
+
     # -- writing --
 
     @abstractmethod
@@ -170,15 +174,19 @@ class Format(ABC):
 
         Every image is found before anything is written; images are copied byte for byte,
         except those this format's readers do not take (`png_only`), which become lossless PNGs,
-        and distorted photos going to another format, which are written undistorted (resampled).
+        distorted photos going to another format, which are written undistorted (resampled), and
+        photos with masks kept apart (`has_masks`), which are written as the source's reader gives
+        them: the masks as their alpha (RGBA images, or this format's own masks).
         From the same format the listing's camera keys are kept as they are; from another the
         cameras are described anew (ValueError unless they fit).
 
         Returns the new listing's path.
         """
         header, frames = source.read()
-        if type(source.format) is not type(self) and source.format.lens_distortion(header, frames):
-            # Another format would describe distorted photos as pinhole images: write them undistorted.
+        distorted = type(source.format) is not type(self) and source.format.lens_distortion(header, frames)
+        if distorted or source.format.has_masks(Path(source.root)):
+            # Another format would describe distorted photos as pinhole images, and a byte copy of
+            # the photos would leave their masks behind: write the views the source's reader gives.
             views = source.load()
             if not self.fits(views.cameras):
                 raise ValueError(f"these cameras do not fit the {self.name} format ({self.fits_rule})")
@@ -262,14 +270,17 @@ class DatasetSplit:
     root: Path
     format: Format
     split: str = "train"
+    only: tuple[int, ...] | None = None
+    """the frames this handle holds (indices into the listing, in this order); None: every one."""
 
     @property
     def listing(self) -> Path:
         return self.format.listing(Path(self.root), self.split)
 
     def read(self) -> tuple[dict, list]:
-        """The listing's header and frames."""
-        return self.format.read_listing(Path(self.root), self.split)
+        """The listing's header and frames (those of `only`)."""
+        header, frames = self.format.read_listing(Path(self.root), self.split)
+        return header, frames if self.only is None else [frames[i] for i in self.only]
 
     def frames(self) -> list:
         return self.read()[1]
@@ -284,8 +295,9 @@ class DatasetSplit:
         ]
 
     def load(self, **kwargs) -> Views:
-        """The split as `Views` (kwargs: background, downscale, lazy)."""
-        return self.format.load(Path(self.root), self.split, **kwargs)
+        """The split (the frames of `only`) as `Views` (kwargs: background, downscale, lazy)."""
+        views = self.format.load(Path(self.root), self.split, **kwargs)
+        return views if self.only is None else views.subset(list(self.only))
 
     def append(self, new: Sequence[NewFrame], camera: Cameras) -> list[dict]:
         return self.format.append(Path(self.root), self.split, new, camera)

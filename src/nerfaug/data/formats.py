@@ -13,6 +13,7 @@ import contextlib
 from collections.abc import Iterator
 from pathlib import Path
 
+from nerfaug.containment import inside
 from nerfaug.data.blender import BlenderFormat
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import DatasetSplit, Format
@@ -90,9 +91,7 @@ def find_split(root: str | Path, split: str = "train") -> DatasetSplit:
     found = detect_format(root, split)
     if found is None:
         raise _missing(root, split)
-    path = found.listing(root, split)
-    if root.resolve() not in path.resolve().parents:
-        raise DatasetError(path, "this file links to a file outside the dataset folder", value=str(path.resolve()))
+    inside(root, found.listing(root, split), "this listing")
     return DatasetSplit(root, found, split)
 
 
@@ -123,20 +122,21 @@ def load_dataset(root: str | Path, split: str = "train", **kwargs) -> Views:
     (background, downscale, lazy).
 
     Raises:
-        DatasetError: the folder does not exist, holds no known format, or its files are bad.
+        DatasetError: the folder does not exist, holds no known format, or its files are bad
+            (`PathRefused` for one that leads outside `root`).
     """
-    root = Path(root)
-    found = detect_format(root, split)
-    if found is None:
-        raise _missing(root, split)
-    return found.load(root, split, **kwargs)
+    return find_split(root, split).load(**kwargs)
 
 
 def plainest_format(source: DatasetSplit, cameras) -> Format:
     """The format a copy of `source` is kept in: the first of `FORMATS` when it describes
-    `cameras` exactly and the source records no lens distortion, else the source's own."""
+    `cameras` exactly and the source records no lens distortion; else the source's own, or, when
+    that keeps masks apart from the images, `EXCHANGE_FORMAT` (whose images carry the masks as
+    their alpha: what a session reads its views with)."""
     plainest = next(iter(FORMATS.values()))
     header, frames = source.read()
     if plainest.fits(cameras) and not source.format.lens_distortion(header, frames):
         return plainest
+    if source.format.has_masks(Path(source.root)):
+        return FORMATS[EXCHANGE_FORMAT]
     return source.format

@@ -100,6 +100,18 @@ def pole_tilt_degrees(camera_to_world: Tensor, up) -> float | None:
     return math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
 
 
+def plain_number(value: float, decimals: int = 4) -> str:
+    """`value` rounded to `decimals` places as a person writes it: no "-0", no exponent for the
+    float noise of a zero (6.95e-08 -> "0").
+
+    Example:
+        >>> plain_number(-0.0), plain_number(6.95e-08), plain_number(2.5), plain_number(-1.23456)
+        ('0', '0', '2.5', '-1.2346')
+    """
+    rounded = round(float(value), decimals) + 0.0  # + 0.0 turns -0.0 into 0.0
+    return f"{rounded:.{decimals}f}".rstrip("0").rstrip(".")
+
+
 @dataclass(frozen=True)
 class Hemisphere:
     """The upper half, relative to `up`, of the sphere of `radius` about `centre` (world frame).
@@ -132,6 +144,14 @@ class Hemisphere:
         object.__setattr__(self, "centre", centre)
         object.__setattr__(self, "radius", float(self.radius))
         object.__setattr__(self, "up", tuple(float(u) for u in up / np.linalg.norm(up)))
+
+    def __str__(self) -> str:
+        """As a person reads it: "centre (0, 0, 0), radius 4, up (0, 0, 1)" (4 decimals, no -0)."""
+
+        def plain(values) -> str:
+            return "(" + ", ".join(plain_number(v) for v in values) + ")"
+
+        return f"centre {plain(self.centre)}, radius {plain_number(self.radius)}, up {plain(self.up)}"
 
     @property
     def scale(self) -> float:

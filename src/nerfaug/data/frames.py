@@ -16,7 +16,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nerfaug import camera_schema
 from nerfaug.cameras import Cameras
+from nerfaug.containment import inside
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_bytes
@@ -24,8 +26,6 @@ from nerfaug.jsonio import atomic_write_bytes
 IMAGE_SUFFIXES = ("", ".png", ".jpg", ".jpeg", ".PNG", ".JPG", ".exr")
 # Image files every reader of every format takes as they are; others are stored as PNG.
 STORED_SUFFIXES = (".png", ".jpg", ".jpeg")
-# Smallest field of view accepted (radians): a smaller one gives a focal length float32 cannot hold.
-MIN_ANGLE = 1e-6
 
 
 def require(data: dict, key: str, path: Path, where: str = ""):
@@ -53,39 +53,9 @@ def check_number(value, path: Path, field: str, low: float = -math.inf, high: fl
 
 
 def check_pose(matrix, path: Path, field: str) -> Tensor:
-    """A validated rigid 4x4 camera-to-world matrix as float32 of shape (4, 4).
-
-    Args:
-        matrix: nested lists (as read from JSON) or an array; its entries must be numbers (no
-            strings or bools) that stay finite in float32.
-    """
-    try:
-        pose = np.asarray(matrix)
-    except (TypeError, ValueError, OverflowError):  # ragged rows and the like
-        pose = None
-    if pose is None or pose.dtype.kind not in "iuf":  # strings, bools, None, huge ints (object)
-        raise DatasetError(path, "transform_matrix must be 4 rows of 4 numbers", field=field, value=matrix)
-    if pose.shape != (4, 4):
-        raise DatasetError(path, f"transform_matrix must be 4x4, has shape {pose.shape}", field=field, value=matrix)
-    pose = pose.astype(np.float64)
-    with np.errstate(over="ignore"):
-        finite = np.isfinite(pose.astype(np.float32)).all()
-    if not finite:
-        raise DatasetError(
-            path, "transform_matrix has non-finite entries (or beyond float32 range)", field=field, value=pose.tolist()
-        )
-    rotation = pose[:3, :3]
-    # Blender exports are float32; 1e-3 accepts their round-off, rejects scaled or sheared matrices.
-    if np.abs(rotation.T @ rotation - np.eye(3)).max() > 1e-3 or abs(np.linalg.det(rotation) - 1) > 1e-3:
-        raise DatasetError(
-            path,
-            "transform_matrix rotation is not rigid (R^T R != I or det(R) != 1)",
-            field=field,
-            value=np.round(rotation, 4).tolist(),
-        )
-    if np.abs(pose[3] - np.array([0, 0, 0, 1])).max() > 1e-6:
-        raise DatasetError(path, "transform_matrix last row must be [0, 0, 0, 1]", field=field, value=pose[3].tolist())
-    return torch.from_numpy(pose).float()
+    """A rigid, finite 4x4 camera-to-world matrix (`nerfaug.camera_schema.check_pose`) as float32
+    of shape (4, 4)."""
+    return torch.from_numpy(camera_schema.check_pose(matrix, path, field)).float()
 
 
 def check_file_path(value, path: Path, field: str) -> str:
@@ -99,7 +69,7 @@ def check_file_path(value, path: Path, field: str) -> str:
 
 def resolve_image(root: Path, file_path: str, json_path: Path, field: str) -> Path:
     """The image file a frame's `file_path` names (the Blender format omits the extension),
-    resolved (symlinks followed); it must lie inside `root`.
+    resolved (symlinks followed); it must lie inside `root` (`nerfaug.containment.inside`).
 
     Raises:
         DatasetError: naming `json_path`, `field` and `file_path`, when no image file exists, the
@@ -107,28 +77,28 @@ def resolve_image(root: Path, file_path: str, json_path: Path, field: str) -> Pa
             (through `..`, an absolute path or a symlink): a dataset never reads other files.
     """
     file_path = check_file_path(file_path, json_path, field)
-    try:
-        real_root = root.resolve(strict=True)
-        for suffix in IMAGE_SUFFIXES:
-            candidate = root / (file_path + suffix)
-            if not candidate.is_file():
-                continue
-            resolved = candidate.resolve(strict=True)
-            if not resolved.is_relative_to(real_root):
-                raise DatasetError(
-                    json_path,
-                    f"image path leads outside the dataset folder {real_root} (to {resolved})",
-                    field=field,
-                    value=file_path,
-                )
-            return resolved
-    except (OSError, RuntimeError, ValueError) as error:  # DatasetError is a ValueError: let it pass
-        if isinstance(error, DatasetError):
-            raise
-        reason = getattr(error, "strerror", None) or type(error).__name__
-        raise DatasetError(json_path, f"cannot use this image path ({reason})", field=field, value=file_path) from None
+    for suffix in IMAGE_SUFFIXES:
+        # Checked before the file is looked at: a refusal says nothing of what lies outside.
+        real = inside(
+            root, root / (file_path + suffix), "image path", listed_in=json_path, field=field, value=file_path
+        )
+        try:
+            if real.is_file():
+                return real
+        except (OSError, ValueError) as error:  # a name too long; a NUL byte
+            reason = getattr(error, "strerror", None) or type(error).__name__
+            raise DatasetError(
+                json_path, f"cannot use this image path ({reason})", field=field, value=file_path
+            ) from None
     base = os.path.normpath(root.absolute() / file_path)  # no resolve(): a symlink loop would raise
     raise DatasetError(json_path, f"image file not found: {base}[.png]", field=field, value=file_path)
+
+
+def resolve_mask(root: Path, mask: Path, json_path: Path, field: str) -> Path:
+    """A mask file beside a captured set's images, resolved; it must lie inside `root`, as an
+    image must (`resolve_image`), and is refused before it is opened."""
+    shown = mask.relative_to(root).as_posix() if mask.is_relative_to(root) else str(mask)
+    return inside(root, mask, "mask path", listed_in=json_path, field=field, value=shown)
 
 
 def _first_line(error: BaseException) -> str:
@@ -311,6 +281,7 @@ def load_frames(
     intrinsics_of: IntrinsicsOf,
     masks: Sequence[Path] | None = None,
     warp_of: Callable[[int], Callable[[np.ndarray], np.ndarray] | None] | None = None,
+    camera_field: Callable[[int], camera_schema.FieldNames] = lambda i: f"frames[{i}]",
 ) -> Views:
     """The views a listing's `frames` list describes, for any format.
 
@@ -326,6 +297,9 @@ def load_frames(
         masks: one mask file per frame (`read_image`), or None to take alpha from the images.
         warp_of: `warp_of(i)` resamples frame i's image (`read_image`'s `warp`), or is None;
             `intrinsics_of` then gives the intrinsics of the resampled image.
+        camera_field: where the listing gives frame i's camera, as errors name it: one name, or
+            a function of "fx", "fy", "cx", "cy", "width", "height"; every camera is held to
+            `nerfaug.camera_schema.check_pinhole`.
     """
     background = torch.as_tensor(background, dtype=torch.float32)
     poses, paths, names = [], [], []
@@ -338,6 +312,8 @@ def load_frames(
         poses.append(check_pose(matrix, json_path, f"{field}.transform_matrix"))
         paths.append(resolve_image(root, file_path, json_path, f"{field}.file_path"))
         names.append(file_path)
+    if masks is not None:  # each refused before any is opened, as an image is
+        masks = [resolve_mask(root, mask, json_path, f"frames[{i}].mask") for i, mask in enumerate(masks)]
 
     def load(i: int):
         mask = None if masks is None else masks[i]
@@ -358,6 +334,10 @@ def load_frames(
     full_w, full_h = width * downscale, height * downscale
     c2w = torch.stack(poses)
     per_frame = [intrinsics_of(full_w, full_h, i) for i in range(len(frames))]
+    for i, (angle, intrinsics) in enumerate(per_frame):
+        focal = None if angle is None else 0.5 * full_w / math.tan(0.5 * angle)
+        fx, fy, cx, cy = intrinsics or (focal, focal, full_w / 2.0, full_h / 2.0)
+        camera_schema.check_pinhole(fx, fy, cx, cy, full_w, full_h, json_path, camera_field(i))
     if per_frame[0][0] is not None:
         cameras = Cameras.from_fov(c2w, per_frame[0][0], full_w, full_h)
     else:

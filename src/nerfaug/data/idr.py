@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.camera_schema import check_projection, check_scene_distance, check_similarity
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import CapturedSetFormat
@@ -45,6 +46,7 @@ def decompose_projection(projection: np.ndarray) -> tuple[np.ndarray, np.ndarray
     import scipy.linalg  # here, not at the top: every command imports the formats' modules
 
     projection = np.asarray(projection, dtype=np.float64)
+    projection = projection / np.abs(projection).max()  # P and s P are one camera: keep the numbers near 1
     if np.linalg.det(projection[:, :3]) < 0:
         projection = -projection
     intrinsics, rotation = scipy.linalg.rq(projection[:, :3])
@@ -72,17 +74,18 @@ class IdrFormat(CapturedSetFormat):
     name = "idr"
     fits_rule = "any pinhole cameras"
     listing_name, images, masks = LISTING, IMAGE_FOLDERS[0], MASKS
+    camera_keys = ("K",)  # each frame's, as `read_listing` gives it: a copy into this format keeps them
 
     def stored_image_folder(self, root: Path) -> str:
         """The image folder a folder uses: `image/`, or `images/` where only that exists."""
-        return next((f for f in IMAGE_FOLDERS if image_files(Path(root) / f)), IMAGE_FOLDERS[0])
+        return next((f for f in IMAGE_FOLDERS if image_files(Path(root), f)), IMAGE_FOLDERS[0])
 
     def read_listing(self, root: Path, split: str) -> tuple[dict, list]:
         """Frames with `file_path`, `transform_matrix` (OpenGL, the sphere's frame) and `K`."""
         root = Path(root)
         path = self.listing(root, split)
         folder = self.stored_image_folder(root)
-        images = image_files(root / folder)
+        images = image_files(root, folder)
         if not images:
             raise DatasetError(path, f"no images in {root / IMAGE_FOLDERS[0]} (nor {root / IMAGE_FOLDERS[1]})")
         try:
@@ -94,10 +97,13 @@ class IdrFormat(CapturedSetFormat):
         for i, image in enumerate(images):
             world = self._matrix(arrays, f"world_mat_{i}", path, required=True)
             scale = self._matrix(arrays, f"scale_mat_{i}", path, required=False)
-            if abs(np.linalg.det(world[:3, :3])) < 1e-12:
-                raise DatasetError(path, "projection matrix is singular", field=f"world_mat_{i}", value=world.tolist())
+            # Both are defined up to scale (P and s P are one camera): judged scale-free.
+            check_projection(world, path, f"world_mat_{i}")
+            check_similarity(scale, path, f"scale_mat_{i}")
             intrinsics, pose = decompose_projection((world @ scale)[:3, :4])
             check_pose(pose, path, f"world_mat_{i}")
+            if f"scale_mat_{i}" in arrays:  # the scene's scale: the object inside the unit sphere
+                check_scene_distance(float(np.linalg.norm(pose[:3, 3])), path, f"scale_mat_{i}")
             frames.append(
                 {
                     "file_path": f"{folder}/{image.name}",
@@ -139,7 +145,7 @@ class IdrFormat(CapturedSetFormat):
         root = Path(root)
         path = self.listing(root, split)
         _, frames = self.read_listing(root, split)
-        masks = image_files(root / MASKS)
+        masks = image_files(root, MASKS)
         if masks and len(masks) != len(frames):
             raise DatasetError(
                 path,
@@ -152,7 +158,20 @@ class IdrFormat(CapturedSetFormat):
             fx, fy, cx, cy, _ = frames[i]["K"]  # a skew this small (DTU: < 1e-2 px) is dropped
             return None, (fx, fy, cx, cy)
 
-        return load_frames(root, path, frames, background, downscale, lazy, intrinsics_of, masks or None)
+        return load_frames(
+            root,
+            path,
+            frames,
+            background,
+            downscale,
+            lazy,
+            intrinsics_of,
+            masks or None,
+            camera_field=lambda i: f"world_mat_{i}",
+        )
+
+    def has_masks(self, root: Path) -> bool:
+        return bool(image_files(Path(root), MASKS))
 
     def fits(self, cameras: Cameras) -> bool:
         return True

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
+from nerfaug.camera_schema import MIN_PHOTO_PIXELS_PER_PIXEL, check_photo_pixels
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import check_number
 
@@ -128,12 +129,15 @@ def undistorted_camera(lens: Lens, intrinsics: tuple[float, float, float, float]
 
     It keeps the photo's size and principal point; its focal lengths are the photo's times the
     smallest s (at least 1/8) for which every pixel lies inside the photo and the distortion does
-    not fold over inside the frame (as OpenCV's "alpha = 0": no pixel made up). s is the same at
+    not fold over inside the frame (as OpenCV's "alpha = 0": no pixel made up), and every pixel
+    draws on at least `MIN_PHOTO_PIXELS_PER_PIXEL` of a photo pixel (near a fold the lens squeezes
+    many rays into one photo pixel: the frame narrows until it leaves that ring). s is the same at
     any image scale (the border's normalised coordinates do not change when the intrinsics and the
     size scale together), so a shrunk photo's camera is the full photo's, shrunk.
 
     Raises:
-        ValueError: no focal length keeps the frame inside the photo.
+        ValueError: no focal length keeps the frame inside the photo, or none draws on enough of
+            it (`nerfaug.camera_schema.check_photo_pixels`: a calibration no lens has).
     """
     fx, fy, cx, cy = intrinsics
     # The border of the new image: where a pixel is likeliest to leave the photo.
@@ -166,7 +170,42 @@ def undistorted_camera(lens: Lens, intrinsics: tuple[float, float, float, float]
         for _ in range(50):  # bisection to ~1e-15 relative
             middle = 0.5 * (low + high)
             low, high = (low, middle) if fits(middle) else (middle, high)
-    return fx * high, fy * high, cx, cy
+    scale = _drawing_enough(lens, intrinsics, width, height, high)
+    return fx * scale, fy * scale, cx, cy
+
+
+def _drawing_enough(lens: Lens, intrinsics, width: int, height: int, scale: float) -> float:
+    """The smallest s >= `scale` (to 1 %) at which every pixel of the pinhole image draws on at
+    least `MIN_PHOTO_PIXELS_PER_PIXEL` of a photo pixel; ValueError when none does.
+
+    A pixel at the image's centre draws on 1/s^2 of one (the lens is a pinhole there), so s stays
+    below 1/sqrt(MIN_PHOTO_PIXELS_PER_PIXEL); narrowing the frame only helps near its border."""
+    fx, fy, cx, cy = intrinsics
+    grid = np.linspace(0.0, 1.0, 65)
+    x, y = np.meshgrid((grid * width - cx) / fx, (grid * height - cy) / fy)
+    largest = 1.0 / math.sqrt(MIN_PHOTO_PIXELS_PER_PIXEL)
+
+    def drawn(s: float) -> float:
+        return float(_area_ratio(lens, x / s, y / s).min()) / s**2
+
+    best = least = drawn(scale)
+    while least < MIN_PHOTO_PIXELS_PER_PIXEL and scale * 1.01 <= largest:
+        scale *= 1.01
+        least = drawn(scale)
+        best = max(best, least)
+    check_photo_pixels(best)
+    return scale
+
+
+def _area_ratio(lens: Lens, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """det of the distortion's Jacobian at normalised points (x, y): the photo's area (normalised)
+    per unit area of the pinhole image; <= 0 where the lens folds over."""
+    step = 1e-6
+    xr, yr = lens.distort(x + step, y)
+    xl, yl = lens.distort(x - step, y)
+    xu, yu = lens.distort(x, y + step)
+    xd, yd = lens.distort(x, y - step)
+    return ((xr - xl) * (yu - yd) - (xu - xd) * (yr - yl)) / (4 * step * step)
 
 
 @lru_cache(maxsize=2)  # frames mostly share one camera; a map is two float32 a pixel

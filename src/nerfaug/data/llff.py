@@ -23,7 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.camera_schema import check_pinhole
 from nerfaug.cameras import Cameras
+from nerfaug.containment import inside
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import CapturedSetFormat
 from nerfaug.data.frames import check_pose, load_frames
@@ -38,21 +40,31 @@ IMAGE_FILE_SUFFIXES = (".png", ".jpg", ".jpeg")
 LLFF_TO_GL = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
-def image_files(folder: Path) -> list[Path]:
-    """The image files directly in `folder`, sorted by name (the order LLFF and IDR list them in)."""
+def image_files(root: Path, name: str) -> list[Path]:
+    """The image files directly in the folder `name` of the dataset folder `root`, sorted by name
+    (the order LLFF and IDR list them in).
+
+    The folder must lie inside `root` (`PathRefused` before it is listed); a symbolic link in it is
+    listed whatever it leads to (its reader refuses one that leads outside `root`), so that what
+    the listing holds says nothing of the files outside.
+    """
+    folder = inside(root, Path(root) / name, f"{name}/ folder")
     if not folder.is_dir():
         return []
-    return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_FILE_SUFFIXES)
+    return sorted(
+        p for p in folder.iterdir() if (p.is_symlink() or p.is_file()) and p.suffix.lower() in IMAGE_FILE_SUFFIXES
+    )
 
 
-def matching_masks(images: list[Path], folder: Path, listing: Path) -> list[Path] | None:
-    """The mask of each image in `folder` (`NAME.*` or `NAME_mask.*`), or None when `folder`
+def matching_masks(images: list[Path], root: Path, listing: Path) -> list[Path] | None:
+    """The mask of each image in `root`'s `masks/` (`NAME.*` or `NAME_mask.*`), or None when it
     holds no masks.
 
     Raises:
         DatasetError: some images have a mask and this one has none.
     """
-    masks = image_files(folder)
+    folder = Path(root) / MASKS
+    masks = image_files(root, MASKS)
     if not masks:
         return None
     by_stem = {p.stem: p for p in masks}
@@ -93,11 +105,13 @@ def read_poses_bounds(path: Path) -> np.ndarray:
     bad = np.flatnonzero(~np.isfinite(array).all(axis=1))
     if bad.size:
         raise DatasetError(path, "has non-finite entries", field=f"row {bad[0]}", value=array[bad[0]].tolist())
-    hwf = array[:, :15].reshape(-1, 3, 5)[:, :, 4]
-    bad = np.flatnonzero((hwf <= 0).any(axis=1))
+    for i, (height, width, focal) in enumerate(array[:, :15].reshape(-1, 3, 5)[:, :, 4]):
+        # LLFF's pinhole: one focal length, the principal point at the centre.
+        check_pinhole(focal, focal, width / 2, height / 2, width, height, path, f"row {i}")
+    bad = np.flatnonzero(~((array[:, 15] > 0) & (array[:, 16] > array[:, 15])))
     if bad.size:
         raise DatasetError(
-            path, "height, width and focal length must be > 0", field=f"row {bad[0]}", value=hwf[bad[0]].tolist()
+            path, "depth bounds must be 0 < near < far", field=f"row {bad[0]}", value=array[bad[0], 15:].tolist()
         )
     return array
 
@@ -108,13 +122,14 @@ class LlffFormat(CapturedSetFormat):
     name = "llff"
     fits_rule = "square pixels and the principal point at the image centre"
     listing_name, images, masks = LISTING, IMAGES, MASKS
+    camera_keys = ("hwf", "bounds")  # each frame's, as `read_listing` gives them: a copy into this format keeps them
 
     def read_listing(self, root: Path, split: str) -> tuple[dict, list]:
         """Frames with `file_path`, `transform_matrix` (OpenGL), `hwf` and `bounds`."""
         root = Path(root)
         path = self.listing(root, split)
         array = read_poses_bounds(path)
-        images = image_files(root / IMAGES)
+        images = image_files(root, IMAGES)
         if len(images) != len(array):
             raise DatasetError(
                 path,
@@ -163,7 +178,7 @@ class LlffFormat(CapturedSetFormat):
         path = self.listing(root, split)
         _, frames = self.read_listing(root, split)
         images = [root / f["file_path"] for f in frames]
-        masks = matching_masks(images, root / MASKS, path)
+        masks = matching_masks(images, root, path)
 
         def intrinsics_of(width: int, height: int, i: int):
             h, w, focal = frames[i]["hwf"]
@@ -171,7 +186,12 @@ class LlffFormat(CapturedSetFormat):
             scale = width / w
             return None, (focal * scale, focal * scale, width / 2.0, height / 2.0)
 
-        return load_frames(root, path, frames, background, downscale, lazy, intrinsics_of, masks)
+        return load_frames(
+            root, path, frames, background, downscale, lazy, intrinsics_of, masks, camera_field=lambda i: f"row {i}"
+        )
+
+    def has_masks(self, root: Path) -> bool:
+        return bool(image_files(Path(root), MASKS))
 
     def fits(self, cameras: Cameras) -> bool:
         fx, fy = cameras.fx.double(), cameras.fy.double()

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.camera_schema import check_field_of_view, check_pinhole
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.format import Format
 from nerfaug.data.frames import (
-    MIN_ANGLE,
     check_number,
     load_frames,
     require,
@@ -40,6 +40,10 @@ CAMERA_KEYS = (
     "p2",
     "camera_angle_x",
 )
+
+
+# The listing's key of each quantity of `nerfaug.camera_schema.check_pinhole`.
+LISTED_AS = {"fx": "fl_x", "fy": "fl_y", "cx": "cx", "cy": "cy", "width": "w", "height": "h"}
 
 
 def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int = 1, lazy: bool = False) -> Views:
@@ -80,32 +84,21 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
                     "missing intrinsics: need fl_x (and fl_y, cx, cy) or camera_angle_x",
                     field=f"frames[{i}].fl_x",
                 )
-            angle = check_number(get("camera_angle_x"), json_path, field("camera_angle_x"), MIN_ANGLE, math.pi)
+            angle = check_field_of_view(get("camera_angle_x"), json_path, field("camera_angle_x"))
             # As Cameras.from_fov: frames may mix a field of view with focal lengths.
             focal = 0.5 * width / math.tan(0.5 * angle)
             return None, (focal, focal, width / 2.0, height / 2.0)
         # Intrinsics are given for the stored (w, h); scale them to the actual file resolution.
         w = width if get("w") is None else check_number(get("w"), json_path, field("w"), 0)
         h = height if get("h") is None else check_number(get("h"), json_path, field("h"), 0)
-        for key, value in (("w", w), ("h", h)):
-            if value < 1:
-                raise DatasetError(json_path, "image size must be at least 1 pixel", field=field(key), value=get(key))
         fx = check_number(get("fl_x"), json_path, field("fl_x"), 0)
         fy = fx if get("fl_y") is None else check_number(get("fl_y"), json_path, field("fl_y"), 0)
         cx = w / 2 if get("cx") is None else check_number(get("cx"), json_path, field("cx"))
         cy = h / 2 if get("cy") is None else check_number(get("cy"), json_path, field("cy"))
+        # The camera as listed, then at the file's size (a field of view does not change with it).
+        check_pinhole(fx, fy, cx, cy, w, h, json_path, lambda key: field(LISTED_AS[key]))
         sx, sy = width / w, height / h
-        scaled = (fx * sx, fy * sy, cx * sx, cy * sy)
-        for key, value in zip(("fl_x", "fl_y", "cx", "cy"), scaled):
-            # float32 must hold it: a focal of 1e-300 pixels would become 0, one of 1e300 inf.
-            if not (1e-6 < value < 1e30 if key.startswith("fl") else abs(value) < 1e30):
-                raise DatasetError(
-                    json_path,
-                    f"intrinsic out of range once scaled to the image's {width}x{height} (w, h = {w:g}, {h:g})",
-                    field=field(key),
-                    value=get(key),
-                )
-        return None, scaled
+        return None, (fx * sx, fy * sy, cx * sx, cy * sy)
 
     def photo_intrinsics(width: int, height: int, i: int) -> tuple[float, float, float, float]:
         angle, intrinsics = pinhole_of(width, height, i)
@@ -118,8 +111,9 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
         """Frame i's camera at the file's size: the listing's, or the pinhole camera its photo is undistorted to."""
         if lenses[i] is None:
             return pinhole_of(width, height, i)
+        photo = photo_intrinsics(width, height, i)
         try:
-            return None, undistorted_camera(lenses[i], photo_intrinsics(width, height, i), width, height)
+            return None, undistorted_camera(lenses[i], photo, width, height)
         except ValueError as error:
             raise DatasetError(json_path, str(error), field=f"frames[{i}]", value=lenses[i].describe()) from None
 
@@ -134,7 +128,12 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
 
         return warp
 
-    return load_frames(root, json_path, frames, background, downscale, lazy, intrinsics_of, warp_of=warp_of)
+    def camera_field(i: int):
+        return lambda key: field_of(i)(LISTED_AS[key])
+
+    return load_frames(
+        root, json_path, frames, background, downscale, lazy, intrinsics_of, warp_of=warp_of, camera_field=camera_field
+    )
 
 
 def write_nerfstudio(root: str | Path, views: Views, image_folder: str = "images") -> Path:

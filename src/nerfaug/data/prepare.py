@@ -22,13 +22,23 @@ from nerfaug.data.formats import FORMATS, find_split, has_split
 from nerfaug.data.nerfstudio import write_nerfstudio
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
-from nerfaug.owned import is_empty, mark, marked
+from nerfaug.owned import is_empty, mark, marked, overlaps, remove_owned
 from nerfaug.progress import progress_bar
 
 PREPARED = "prepared.json"
 MARKER_KIND = "prepared-dataset"
 SPLITS = ("train", "val", "test", "initial")
 LICENCE_NAMES = ("LICENSE", "LICENSE.md", "LICENSE.txt", "LICENCE", "README.md", "README.txt")
+# What a preparation writes into its folder (`nerfaug.owned.foreign_files`): an interrupted one is
+# removed and started again only when the folder holds nothing else.
+HOLDS = (
+    PREPARED,
+    "transforms.json",
+    "transforms_*.json",
+    "images/*.png",
+    *(f"{split}/*.png" for split in SPLITS),
+    *(f"SOURCE-{name}" for name in LICENCE_NAMES),
+)
 
 
 def source_digest(source: Path) -> str:
@@ -78,9 +88,15 @@ def prepare_dataset(source: Path, out: Path, width: int) -> Path:
 
     Raises:
         DatasetError: the source is missing or malformed (naming file, field and value).
-        ValueError: `width` is not between 1 and the source's width, or `out` holds other files.
+        ValueError: `width` is not between 1 and the source's width, `out` holds other files, or
+            lies inside the source (which is only read) or holds it.
+        FolderRefused: `out` is an interrupted preparation holding a file nerfaug did not write.
     """
     source, out = Path(source), Path(out)
+    if overlaps(out, source):
+        raise ValueError(
+            f"--out {out}: lies inside or holds the source {source}, which is only read; choose a folder outside it"
+        )
     train = find_split(source, "train")
     full = train.load(lazy=True)
     if not 1 <= width <= full.cameras.width:
@@ -94,8 +110,8 @@ def prepare_dataset(source: Path, out: Path, width: int) -> Path:
         if {k: previous.get(k) for k in record} == record:
             return out
         raise ValueError(f"{out}: prepared from another source or at another width; choose another --out")
-    if marked(out, MARKER_KIND) and not (out / PREPARED).is_file():
-        shutil.rmtree(out)  # an interrupted preparation of ours: start it again
+    if marked(out, MARKER_KIND) and not (out / PREPARED).is_file():  # an interrupted preparation: start again
+        remove_owned(out, MARKER_KIND, "move your files out of it, or choose another --out", HOLDS)
     if not is_empty(out):
         raise ValueError(f"{out}: exists and holds files nerfaug did not write; choose an empty or new folder")
     mark(out, MARKER_KIND)

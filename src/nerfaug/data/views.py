@@ -53,8 +53,12 @@ class Views:
         return Views(self.cameras, torch.stack([im for im, _ in loaded]), list(self.names), alphas)
 
     def subset(self, indices) -> Views:
-        """The views at `indices` (a list of ints), in that order."""
+        """The views at `indices` (a list of ints), in that order (lazy views stay lazy)."""
         indices = [int(i) for i in indices]
+        if self.images is None and self.loader is not None:
+            loader = self.loader
+            names = [self.names[i] for i in indices]
+            return Views(self.cameras[indices], None, names, loader=lambda k: loader(indices[k]))
         full = self.materialised()
         return Views(
             full.cameras[indices],

@@ -229,3 +229,13 @@ paper's protocol at 100x100 (6 initial views, 6 added at step 200, 2000 steps, a
 test views); "gpu" the same at the paper's scale for its engine (400 px, 10k steps, 200 test
 views); "tiny" is the tests' smoke preset (its runs take seconds; built-in scenes are
 rendered first, which takes minutes)."""
+
+# Concurrent runs a sweep may start (`--workers`): beyond any machine's cores, and the C int a process pool takes.
+MAX_WORKERS = 1024
+
+
+def check_workers(workers) -> int:
+    """`workers` (concurrent runs); ValueError naming --workers unless an integer in 1..`MAX_WORKERS`."""
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_WORKERS:
+        raise ValueError(f"--workers {workers!r}: must be an integer from 1 to {MAX_WORKERS}")
+    return workers

@@ -30,7 +30,7 @@ from nerfaug.experiment.runfolder import (
     write_selection,
     write_view_uncertainty,
 )
-from nerfaug.experiment.scene_views import initial_in_half, layout_halves, split_captured
+from nerfaug.experiment.scene_views import split_captured
 from nerfaug.experiment.store import (
     RunKey,
     code_version,
@@ -41,11 +41,13 @@ from nerfaug.experiment.store import (
 )
 from nerfaug.health import model_health
 from nerfaug.hemisphere import angles_from_pose
+from nerfaug.layouts import initial_in_half, layout_halves
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.nerf.batch_trainer import BatchTrainer
 from nerfaug.nerf.config import BATCH_ENGINE_VERSION
 from nerfaug.nerf.trainer import Trainer
 from nerfaug.oracle import PoolOracle
+from nerfaug.registry import did_you_mean
 from nerfaug.scenes import BUILTIN_SCENES
 from nerfaug.scenes.cache import folder_digest, load_split_cached
 from nerfaug.scenes.render import dataset_manifest, render_scene_dataset, scene_spec
@@ -98,7 +100,8 @@ def scene_folder(scene: str) -> Path | None:
     if Path(scene).is_dir():
         return Path(scene)
     raise ValueError(
-        f"unknown scene {scene!r}: not a dataset folder and not one of the built-in scenes {', '.join(BUILTIN_SCENES)}"
+        f"unknown scene {scene!r}: {did_you_mean(scene, BUILTIN_SCENES)}not a dataset folder and not one of the "
+        f"built-in scenes {', '.join(BUILTIN_SCENES)}"
     )
 
 
@@ -120,7 +123,10 @@ def prepare_scene(root: Path, scene: str, config: ExperimentConfig, progress: bo
         return folder
 
     if scene not in BUILTIN_SCENES:
-        raise ValueError(f"unknown scene {scene!r}: not a folder and not one of the built-in scenes {BUILTIN_SCENES}")
+        raise ValueError(
+            f"unknown scene {scene!r}: {did_you_mean(scene, BUILTIN_SCENES)}not a folder and not one of the "
+            f"built-in scenes {', '.join(BUILTIN_SCENES)}"
+        )
     return render_builtin(scene, folder, config, progress)
 
 
@@ -391,6 +397,7 @@ def finish_run(
         data.pool.cameras.camera_to_world[chosen],
         path=folder / FILES.uncertainty,
         title=f"{key.scene}: {key.method}",
+        label=selection.score_label(config.selection),
         train_label="initial views",
     )
     write_metrics(folder, evaluation.to_dict())

@@ -26,7 +26,7 @@ import tyro
 
 from nerfaug.data.prepare import PREPARED
 from nerfaug.device import resolve_device
-from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
+from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig, check_workers
 from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.protocol import render_builtin, scene_folder
 from nerfaug.experiment.store import RunKey
@@ -220,6 +220,7 @@ def run_study(
     past it (`run_sweep`). Returns engine -> {"failed": {run: reason}, "results": n valid results,
     "unstarted": n runs left, None for an engine not begun}."""
     began = time.monotonic()
+    check_workers(workers)  # before anything is written
     study = StudyFolder(plan.out)
     plan.out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(study.record, merged_record(study.record, plan.record()))

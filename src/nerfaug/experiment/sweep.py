@@ -25,7 +25,7 @@ from nerfaug.data import find_split, has_split, require_split
 from nerfaug.device import device_kind
 from nerfaug.experiment import protocol
 from nerfaug.experiment.budget import Budget
-from nerfaug.experiment.config import ExperimentConfig
+from nerfaug.experiment.config import ExperimentConfig, check_workers
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, run_trial_batch, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.scene_views import split_captured
@@ -45,6 +45,7 @@ from nerfaug.experiment.store import (
 from nerfaug.nerf.config import NerfConfig, batch_support
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
+from nerfaug.registry import did_you_mean
 from nerfaug.selection import METHODS, get_method
 
 Backend = Literal["local", "ray"]
@@ -122,7 +123,7 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
             method in METHODS,
             "methods",
             method,
-            f"unknown selection method; choose one of: {', '.join(METHODS)} (`nerfaug methods`)",
+            f"unknown selection method; {did_you_mean(method, METHODS)}see `nerfaug methods`: {', '.join(METHODS)}",
         )
     _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
     try:
@@ -371,7 +372,7 @@ def run_sweep(
     """
     began = time.monotonic()
     root = Path(root)
-    _need(isinstance(workers, int) and workers >= 1, "workers", workers, "must be an integer >= 1")
+    check_workers(workers)
     _need(budget_s is None or budget_s > 0, "budget_s", budget_s, "must be > 0 seconds")
     record = sweep_record(config, command, check_config(config) if checked is None else checked)
     keys = plan_runs(config)

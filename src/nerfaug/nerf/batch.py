@@ -369,27 +369,33 @@ class BatchModel(nn.Module):
         rgbs = torch.where(visible[..., None], colours.reshape(-1, n, 3), 0.0)
         return weights, rgbs
 
-    def run_losses(self, output: RenderOutput, target: Tensor) -> tuple[Tensor, Tensor]:
-        """Each run's training loss and photometric error.
+    def run_losses(self, output: RenderOutput, target: Tensor) -> tuple[Tensor, dict[str, Tensor]]:
+        """Each run's training loss, and its parts named as `NerfModel.losses` ("rgb",
+        "distortion", "interlevel"), weighted alike.
 
         Args:
             output: a training pass's `forward` output.
             target: Tensor with shape (K * n_rays, 3), the rays' colours.
 
         Returns:
-            loss, mse: Tensors with shape (K,): run k's mean squared error plus its distortion
-            and interlevel losses (weighted as `NerfModel.auxiliary_loss`), and the error alone.
+            loss: Tensor with shape (K,): run k's mean squared error plus its distortion and
+                interlevel losses (summed per ray, then averaged: the engine version's rounding).
+            named: name -> Tensor with shape (K,), each part alone.
         """
         config, runs = self.config, self.runs
         mse = (output.rgb.float() - target).square().reshape(runs, -1).mean(dim=-1)
         edges = torch.cat([output.t_starts, output.t_ends[:, -1:]], dim=-1)
-        per_ray = config.distortion_loss_mult * distortion_per_ray(edges, output.weights)
+        distortion = config.distortion_loss_mult * distortion_per_ray(edges, output.weights)
+        named = {"rgb": mse, "distortion": distortion.reshape(runs, -1).mean(dim=-1)}
+        per_ray = distortion
         extras = output.extras or {}
         if "proposal_edges" in extras:
-            per_ray = per_ray + config.interlevel_loss_mult * interlevel_loss_per_ray(
+            interlevel = config.interlevel_loss_mult * interlevel_loss_per_ray(
                 edges, output.weights, extras["proposal_edges"], extras["proposal_weights"]
             )
-        return mse + per_ray.reshape(runs, -1).mean(dim=-1), mse
+            named["interlevel"] = interlevel.reshape(runs, -1).mean(dim=-1)
+            per_ray = per_ray + interlevel
+        return mse + per_ray.reshape(runs, -1).mean(dim=-1), named
 
     def copy_run_into(self, run: int, model: NerfModel) -> None:
         """Write run `run`'s parameters and sampler state into `model` (a `NerfModel` of the same

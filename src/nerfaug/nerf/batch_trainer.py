@@ -145,15 +145,15 @@ class BatchTrainer:
         return origins, directions, target, background
 
     def train_step(self) -> list[dict | None]:
-        """Run one step of every run. Returns each run's history entry ({"step", "loss", "psnr"}),
+        """Run one step of every run. Returns each run's history entry ({"step", "loss", "psnr", "losses"}),
         None for a run that has diverged (now or before: `failure` says when)."""
         self.model.train()
         generators = [run.step_generator(self.step) for run in self.runs]
         self.model.before_step(self.step)
         origins, directions, target, background = self._batch(generators)
         output = self.model(origins, directions, background, generator=RunGenerators(generators))
-        losses, mse = self.model.run_losses(output, target)
-        values, errors = losses.detach().tolist(), mse.detach().tolist()
+        losses, named = self.model.run_losses(output, target)
+        values, *per_name = torch.stack([losses.detach(), *(v.detach() for v in named.values())]).tolist()
         for run, value in zip(self.runs, values):
             if run.failure is None and not math.isfinite(value):
                 run.failure = TrainingDiverged(self.step, value)
@@ -170,7 +170,8 @@ class BatchTrainer:
         for k, run in enumerate(self.runs):
             entry = None
             if run.failure is None:
-                entry = {"step": self.step, "loss": values[k], "psnr": psnr_from_mse(errors[k])}
+                own = {name: per_name[i][k] for i, name in enumerate(named)}
+                entry = {"step": self.step, "loss": values[k], "psnr": psnr_from_mse(own["rgb"]), "losses": own}
                 run.history.append(entry)
             entries.append(entry)
         return entries

@@ -99,7 +99,7 @@ class NerfModel(nn.Module):
 
         Returns:
             RenderOutput with n_samples = config.num_samples; in `extras` what the sampler's
-            `auxiliary_loss` needs (the proposal histograms).
+            `auxiliary_losses` needs (the proposal histograms).
         """
         edges, extras = self._sample(origins, directions, generator)
         t_starts, t_ends = edges[:, :-1], edges[:, 1:]
@@ -164,10 +164,18 @@ class NerfModel(nn.Module):
         rgbs = colours.new_zeros(n_rays * n, 3).index_put((colour_index,), colours).reshape(n_rays, n, 3)
         return weights, rgbs
 
+    def losses(self, output: RenderOutput, target: Tensor) -> dict[str, Tensor]:
+        """The training losses of a pass, each named (scalar Tensors): "rgb", the mean squared
+        error against `target` (n_rays, 3), then the sampler's (the proposal sampler's
+        "distortion" and "interlevel"; none for the occupancy grid). Their sum is the loss."""
+        return {
+            "rgb": torch.nn.functional.mse_loss(output.rgb.float(), target),
+            **self.sampler.auxiliary_losses(output),
+        }
+
     def auxiliary_loss(self, output: RenderOutput) -> Tensor:
-        """Losses besides photometric error: the sampler's (the proposal sampler's interlevel
-        and distortion losses; 0 for the occupancy sampler)."""
-        return self.sampler.auxiliary_loss(output)
+        """The sampler's losses summed (0 without any), in the order they are named."""
+        return total_loss(self.sampler.auxiliary_losses(output), output.rgb.new_zeros(()))
 
     def _eval_slices(
         self, origins: Tensor, directions: Tensor, chunk: int | None
@@ -260,3 +268,18 @@ def _rename_old_keys(module, state_dict, prefix, *args) -> None:
             if local.startswith(old):
                 state_dict[prefix + new + local[len(old) :]] = state_dict.pop(key)
                 break
+
+
+def total_loss(losses: dict[str, Tensor], start: Tensor | None = None) -> Tensor:
+    """The sum of `losses` (scalars or per-run Tensors of one shape) in their order, added to
+    `start` when given: "rgb" + ("distortion" + "interlevel") keeps the sum's rounding as it was
+    when the sampler returned one summed loss."""
+    values = list(losses.values())
+    if start is None:
+        start, values = values[0], values[1:]
+    if not values:
+        return start
+    auxiliary = values[0]
+    for value in values[1:]:
+        auxiliary = auxiliary + value
+    return start + auxiliary

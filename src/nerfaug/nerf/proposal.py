@@ -261,14 +261,15 @@ class ProposalSampler(Sampler):
         self.anneal.fill_(proposal_anneal(step, self.anneal_steps, self.anneal_slope))
         self.update_networks = self.schedule.updates(step)
 
-    def auxiliary_loss(self, output: RenderOutput) -> Tensor:
-        """The distortion loss of the final weights and, when the pass kept the proposal
-        histograms, the interlevel loss, weighted by the config's multipliers."""
+    def auxiliary_losses(self, output: RenderOutput) -> dict[str, Tensor]:
+        """{"distortion": the distortion loss of the final weights, "interlevel": the
+        interlevel loss (when the pass kept the proposal histograms)}, weighted by the config's
+        multipliers."""
         edges = torch.cat([output.t_starts, output.t_ends[:, -1:]], dim=-1)
         extras = output.extras or {}
-        loss = self.distortion_loss_mult * distortion_loss(edges, output.weights)
+        losses = {"distortion": self.distortion_loss_mult * distortion_loss(edges, output.weights)}
         if "proposal_edges" in extras:
-            loss = loss + self.interlevel_loss_mult * interlevel_loss(
+            losses["interlevel"] = self.interlevel_loss_mult * interlevel_loss(
                 edges, output.weights, extras["proposal_edges"], extras["proposal_weights"]
             )
-        return loss
+        return losses

@@ -42,7 +42,7 @@ class Sampler(nn.Module, ABC):
 
         Returns:
             edges: Tensor with shape (n_rays, n_samples + 1).
-            extras: what `auxiliary_loss` needs of this pass (put in `RenderOutput.extras`).
+            extras: what `auxiliary_losses` needs of this pass (put in `RenderOutput.extras`).
         """
 
     @property
@@ -62,6 +62,7 @@ class Sampler(nn.Module, ABC):
         """Bookkeeping before training step `step`; `density_fn` maps world points (n, 3) to
         the field's densities (n,)."""
 
-    def auxiliary_loss(self, output: RenderOutput) -> Tensor:
-        """The sampler's losses for one rendered batch (a scalar Tensor; 0 by default)."""
-        return output.rgb.new_zeros(())
+    def auxiliary_losses(self, output: RenderOutput) -> dict[str, Tensor]:
+        """The sampler's losses for one rendered batch, each weighted and named (scalar Tensors;
+        none by default)."""
+        return {}

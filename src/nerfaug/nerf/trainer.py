@@ -22,7 +22,7 @@ from nerfaug.cameras import Cameras, generate_rays
 from nerfaug.data.views import Views
 from nerfaug.device import autocast_dtype, resolve_device
 from nerfaug.nerf.config import NerfConfig
-from nerfaug.nerf.model import NerfModel
+from nerfaug.nerf.model import NerfModel, total_loss
 from nerfaug.nerf.registry import DEFAULT_FIELD, build_field
 from nerfaug.progress import progress_bar
 
@@ -124,7 +124,9 @@ class Trainer:
         model: the `NerfModel` being trained.
         step: completed training steps.
         train_views: the current training views (materialised).
-        history: one dict per completed step: {"step", "loss", "psnr"} (psnr of the batch's rgb).
+        history: one dict per completed step: {"step", "loss", "psnr", "losses"}: the loss, the PSNR
+            of the batch's rgb, and each loss by name (`NerfModel.losses`: "rgb", and the
+            proposal sampler's "distortion" and "interlevel"), whose sum is the loss.
         generator: the trainer's only source of randomness on the CPU (on a GPU, see
             `step_generator`).
         scaler: the float16 `GradScaler` when training under fp16 autocast (cuda), else None.
@@ -240,9 +242,10 @@ class Trainer:
             # losses below stay float32.
             with torch.autocast(self.device.type, dtype=self._autocast):
                 output = self.model(origins, directions, background, generator=generator)
-        mse = torch.nn.functional.mse_loss(output.rgb.float(), target)
-        loss = mse + self.model.auxiliary_loss(output)
-        loss_value = float(loss.detach())
+        named = self.model.losses(output, target)
+        loss = total_loss(named)
+        # One transfer for every number the entry keeps (each float() of a GPU tensor waits for it).
+        loss_value, *values = torch.stack([loss.detach(), *(v.detach() for v in named.values())]).tolist()
         if not math.isfinite(loss_value):
             path = self._checkpoint_path
             kept = path if path is not None and path.exists() else None
@@ -257,7 +260,8 @@ class Trainer:
             self.scaler.step(self.optimizer)
             self.scaler.update()
         self.step += 1
-        entry = {"step": self.step, "loss": loss_value, "psnr": psnr_from_mse(float(mse.detach()))}
+        losses = dict(zip(named, values))
+        entry = {"step": self.step, "loss": loss_value, "psnr": psnr_from_mse(losses["rgb"]), "losses": losses}
         self.history.append(entry)
         return entry
 

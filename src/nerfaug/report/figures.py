@@ -223,6 +223,22 @@ def history_series(history) -> tuple[str, np.ndarray, np.ndarray] | None:
     return None
 
 
+def loss_series(history) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each named loss of a history.json's per-step records ({"step", "losses": {name: value}}),
+    as name -> (steps, values); empty for a history without named losses."""
+    if not isinstance(history, list):
+        return {}
+    found: dict[str, list[tuple[float, float]]] = {}
+    for record in history:
+        losses = record.get("losses") if isinstance(record, dict) else None
+        if not isinstance(losses, dict) or not isinstance(record.get("step"), (int, float)):
+            continue
+        for name, value in losses.items():
+            if isinstance(value, (int, float)) and math.isfinite(value) and value > 0:
+                found.setdefault(name, []).append((float(record["step"]), float(value)))
+    return {name: tuple(np.array(pairs).T) for name, pairs in found.items() if len(pairs) >= 2}
+
+
 CURVE_POINTS = 200  # per-step batch PSNR is noisy: average it over windows down to about this many points
 
 
@@ -245,25 +261,38 @@ def _median_curve(series: list[tuple[np.ndarray, np.ndarray]]):
     return grid, median, q1, q3
 
 
-def plot_training_curves(results: Results, path: Path) -> Path | None:
-    """Training PSNR (or loss) against step: median over trials per method, IQR shaded, one panel per scene."""
-    panels = []
+def training_curves_figure(results: Results):
+    """Training PSNR (or loss) against step: median over trials per method, IQR shaded, one panel
+    per scene. The runs record the PSNR of each step's training batch (no held-out views): the axis
+    says so, and the step where views were added is drawn, where the batch's PSNR dips as it meets
+    them. A second row draws each named loss (`history.json`'s "losses": rgb, distortion,
+    interlevel), median over the scene's runs, on a log scale. None when no run recorded a history."""
+    panels, losses = [], {}
     for scene in results.scenes:
-        curves = {}
+        curves, named = {}, {}
         for method in results.methods:
-            found = [history_series(read_history(r.folder)) for r in results.runs_of(scene, method)]
-            found = [f for f in found if f is not None]
+            histories = [read_history(r.folder) for r in results.runs_of(scene, method)]
+            found = [f for f in map(history_series, histories) if f is not None]
             if found:
                 key = found[0][0]
                 curves[method] = (key, [_smooth(s, v) for k, s, v in found if k == key])
+            for history in histories:
+                for name, (steps, values) in loss_series(history).items():
+                    named.setdefault(name, []).append(_smooth(steps, values))
         if curves:
             panels.append((scene, curves))
+            losses[scene] = named
     if not panels:
         return None
     colours = method_colours(results.methods)
-    figure = new_figure(5.2 * len(panels), 3.8)
-    axes = np.atleast_1d(figure.subplots(1, len(panels)))
+    rows = 2 if any(losses.values()) else 1
+    figure = new_figure(5.2 * len(panels), 3.8 * rows)
+    grid_axes = np.atleast_2d(figure.subplots(rows, len(panels))).reshape(rows, len(panels))
+    axes = grid_axes[0]
     add_at = results.config.get("add_at_step")
+    if rows == 2:
+        for ax, (scene, _curves) in zip(grid_axes[1], panels):
+            _draw_losses(ax, losses[scene], add_at)
     for ax, (scene, curves) in zip(axes, panels):
         for method, (_key, series) in curves.items():
             grid, median, q1, q3 = _median_curve(series)
@@ -292,8 +321,38 @@ def plot_training_curves(results: Results, path: Path) -> Path | None:
         fontsize=8,
         frameon=False,
     )
-    figure.suptitle("Training curves: median over trials, IQR shaded", fontsize=11, y=1.03)
-    return save_figure(figure, path)
+    shown = {key for _, curves in panels for key, _ in curves.values()}
+    held_out = " (training batches, not held-out views)" if shown & {"psnr", "train_psnr"} else ""
+    figure.suptitle(f"Training curves{held_out}: median over trials, IQR shaded", fontsize=11, y=1.03)
+    return figure
+
+
+LOSS_STYLES = {"rgb": "-", "distortion": "--", "interlevel": ":"}
+
+
+def _draw_losses(ax, named: dict[str, list], add_at) -> None:
+    """Each named loss of one scene's runs (every method's: the losses are the engine's, not the
+    selection's): median over runs, IQR shaded, on a log scale."""
+    order = [n for n in LOSS_STYLES if n in named] + sorted(n for n in named if n not in LOSS_STYLES)
+    for i, name in enumerate(order):
+        series = named[name]
+        grid, median, q1, q3 = _median_curve(series)
+        colour = f"C{i}"
+        ax.plot(grid, median, color=colour, linestyle=LOSS_STYLES.get(name, "-"), label=name, linewidth=1.4)
+        ax.fill_between(grid, q1, q3, color=colour, alpha=0.15, linewidth=0)
+    ax.set_yscale("log")
+    ax.set_ylabel("each loss (weighted, as summed)")
+    ax.set_xlabel("step")
+    if add_at is not None:
+        ax.axvline(add_at, color="0.3", linestyle="--", linewidth=1)
+    ax.legend(fontsize=8, frameon=False)
+    ax.grid(alpha=0.3)
+
+
+def plot_training_curves(results: Results, path: Path) -> Path | None:
+    """`training_curves_figure` written to `path`; None (nothing written) when it has nothing to draw."""
+    figure = training_curves_figure(results)
+    return None if figure is None else save_figure(figure, path)
 
 
 @dataclass
@@ -339,4 +398,5 @@ __all__ = [
     "plot_render_grid",
     "plot_training_curves",
     "plot_uncertainty_maps",
+    "training_curves_figure",
 ]

@@ -44,13 +44,22 @@ from nerfaug.hemisphere import (
     sample_uniform_poses,
 )
 from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.owned import foreign_files
 from nerfaug.progress import progress_bar
+from nerfaug.registry import did_you_mean
 from nerfaug.scenes import builtin, worker
 from nerfaug.scenes.builtin import BUILTIN_SCENES
 
 # Bump when the layout or meaning of a rendered dataset changes; older caches then re-render.
 DATASET_FORMAT = 1
 DATASET_SPLITS = ("train", "initial", "test", "val")
+# What one render may ask for (checked before anything is rendered): views per split, and below
+# the image size, Cycles' samples and its seed (a C int).
+MAX_VIEWS = 100_000
+MAX_SAMPLES = 16_777_216
+RENDER_BOUNDS = {"resolution": (1, 16_384), "samples": (1, MAX_SAMPLES), "seed": (0, 2**31 - 1)}
+# What a rendered dataset folder holds (`nerfaug.owned.foreign_files`): one holding anything else is not replaced.
+RENDERED_HOLDS = ("scene.json", "transforms_*.json", *(f"{split}/*.png" for split in DATASET_SPLITS))
 _SCENE_CODE = (Path(__file__).with_name("builders.py"), Path(__file__).with_name("worker.py"))
 
 
@@ -79,7 +88,10 @@ def scene_spec(scene: str | Path) -> dict:
     path = Path(scene).expanduser()
     if path.suffix == ".blend" and path.is_file():
         return {"blend": str(path.resolve())}
-    raise ValueError(f"unknown scene {str(scene)!r}: expected one of {BUILTIN_SCENES} or an existing .blend file")
+    raise ValueError(
+        f"unknown scene {str(scene)!r}: {did_you_mean(scene, BUILTIN_SCENES)}expected one of "
+        f"{', '.join(BUILTIN_SCENES)} or an existing .blend file"
+    )
 
 
 def render_poses(
@@ -362,12 +374,15 @@ def render_scene_dataset(
 
     Raises:
         BlenderNotAvailable: bpy is not installed.
-        FileExistsError: `out` is a non-empty folder that is not a rendered scene dataset.
+        FileExistsError: `out` is a non-empty folder that is not a rendered scene dataset, or
+            one holding a file nerfaug did not write.
     """
     require_bpy()
     counts = {"resolution": resolution, "pool": pool, "test": test, "initial": initial, "val": val, "samples": samples}
-    if any(int(v) != v or v < 1 for v in counts.values()):
-        raise ValueError(f"these must be positive integers: {counts}")
+    for name, value in {**counts, "seed": seed}.items():
+        low, high = RENDER_BOUNDS.get(name, (1, MAX_VIEWS))
+        if int(value) != value or not low <= value <= high:
+            raise ValueError(f"{name} {value!r}: must be an integer from {low} to {high}")
     out = Path(out)
     manifest = dataset_manifest(scene_spec(scene), resolution, pool, test, initial, val, samples, seed)
     if is_complete(out, manifest):
@@ -376,6 +391,12 @@ def render_scene_dataset(
         return out
     if out.is_dir() and any(out.iterdir()) and not (out / "scene.json").exists():
         raise FileExistsError(f"{out} is not empty and holds no scene.json: refusing to replace it")
+    foreign = foreign_files(out, RENDERED_HOLDS) if out.is_dir() else []
+    if foreign:  # a rendered dataset with a user's file in it: replacing it would delete the file
+        raise FileExistsError(
+            f"{out}: holds {foreign[0]}, which nerfaug did not write, so the dataset is not replaced; "
+            "move it elsewhere, or choose another --out"
+        )
     # Two processes asked for the same folder (e.g. two sweeps, or a sweep and `nerfaug scene
     # render`) would share one staging folder: the second waits for the first, then finds the
     # dataset complete. The lock is on the parent folder, so nothing is left behind.

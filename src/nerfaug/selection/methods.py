@@ -83,6 +83,64 @@ class MethodSpec:
         """Plain data that identifies what the method computes (for results fingerprints)."""
         return {"estimator": self.estimator, "selector": self.selector, "settings": dict(self.settings)}
 
+    def score_label(self, config: SelectionConfig | None = None, exponent: float | None = None) -> str:
+        """What this method's candidate scores are, with their unit: the colour bar of its map.
+
+        Args:
+            config: the caller's settings (this method's own are applied over them).
+            exponent: 1/T when a sampler sharpened the scores (`Estimate.exponent`); None otherwise.
+
+        Example:
+            >>> print(METHODS["entropy"].score_label())
+            uncertainty U = H′ (no unit; ′: min-max scaled)
+            H: mean ray entropy (bits)
+        """
+        config = self.effective_config(config)
+        if self.estimator == "none":
+            return "no score (the selector ignores scores)"
+        label = (
+            "FisherRF information gain (no unit)"
+            if self.estimator == "fisher"
+            else _uncertainty_label(self.estimator, config)
+        )
+        if exponent is not None and exponent != 1.0:
+            label += f"\nraised to the power {exponent:.3g} (the sampler's 1/T)"
+        return label
+
+
+def _uncertainty_label(estimator: str, config: SelectionConfig) -> str:
+    """U = a H + b D of the estimators "combined", "entropy" and "distance" as `combined_uncertainty`
+    computes it with `config`: its terms, their units and their normalisation, a line each."""
+    weights = {
+        "combined": (config.entropy_weight, config.distance_weight),
+        "entropy": (1.0, 0.0),
+        "distance": (0.0, 1.0),
+    }[estimator]
+    authors_entropy = config.entropy_mode == "authors"
+    terms = [
+        (weight, symbol, meaning, unit)
+        for weight, symbol, meaning, unit in (
+            (weights[0], "H", "the authors' entropy score" if authors_entropy else "mean ray entropy", "bits"),
+            (weights[1], "D", "SO(3) distance to the training views", "rad²"),
+        )
+        if weight
+    ]
+    scaled = config.normalisation != "none"
+    prime = "′" if scaled else ""
+    formula = " + ".join(f"{symbol}{prime}" if w == 1 else f"{w:g}·{symbol}{prime}" for w, symbol, _, _ in terms)
+    units = [u for _, symbol, _, u in terms if not (symbol == "H" and authors_entropy)]
+    if not scaled:
+        unit = f" ({' + '.join(units)})" if units else ""
+    elif config.normalisation == "authors":
+        unit = " (no unit; ′: min-max scaled, U / max U)"
+    else:
+        unit = " (no unit; ′: min-max scaled)"
+    meanings = [
+        f"{symbol}: {meaning}" + ("" if symbol == "H" and authors_entropy else f" ({u})")
+        for _, symbol, meaning, u in terms
+    ]
+    return "\n".join([f"uncertainty U = {formula}{unit}", *meanings])
+
 
 def _line(name: str, estimator: str, selector: str, description: str, label: str = "", **settings) -> MethodSpec:
     return MethodSpec(name, estimator, selector, description, label, settings)

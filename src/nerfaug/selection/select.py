@@ -47,6 +47,13 @@ class Selection:
             "components": {k: [float(x) for x in v.tolist()] for k, v in self.components.items()},
         } | ({"uniform_fill": self.uniform_fill} if self.uniform_fill else {})
 
+    def score_label(self, config: SelectionConfig | None = None) -> str:
+        """What `scores` are, with their unit (`MethodSpec.score_label`; a hemisphere map's colour
+        bar), given the caller's settings."""
+        exponent = self.components.get("exponent")
+        exponent = float(exponent[0]) if exponent is not None and len(exponent) else None
+        return get_method(self.method).score_label(config, exponent)
+
     @classmethod
     def from_dict(cls, data: dict) -> Selection:
         return cls(

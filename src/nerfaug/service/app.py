@@ -1,7 +1,7 @@
 """The HTTP API over a `SessionHub`: FastAPI routes, thin over the library (the same
 `CaptureSession` calls the CLI makes, with the capture core's schemas as request models), the token
-check, the body limits (`limits`), and every error as `{"detail": "one line"}`
-(`nerfaug.service.errors`).
+check, the body limits (`limits`), a log line per request (`RequestLog`), and every error as
+`{"detail": "one line"}` (`nerfaug.service.errors`).
 
 Health and session states are answered on the event loop from snapshots; every other request's
 work runs in the hub's bounded per-session queues (`work`), so a busy session never delays them.
@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import asyncio
 import hmac
+import logging
+import time
 from contextlib import asynccontextmanager
 from typing import Annotated
 
@@ -39,12 +41,12 @@ import nerfaug
 from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.evaluate import trained_on_count
 from nerfaug.capture.pool import Job, SessionStatus
-from nerfaug.capture.requests import Poses, RequestError
+from nerfaug.capture.requests import UNKNOWN_FIELD, Poses, RequestError
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 from nerfaug.errors import NerfaugError
 from nerfaug.service import models
-from nerfaug.service.errors import ServiceError, field_line, headers_of, status_of
+from nerfaug.service.errors import ServiceError, bad_input, field_line, headers_of, public_text, status_of
 from nerfaug.service.hub import SessionHub
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
 from nerfaug.service.uploads import form_json, read_uploads
@@ -55,7 +57,30 @@ from nerfaug.service.uploads import form_json, read_uploads
 DOCS_ASSETS = "/docs-assets"
 # The library's errors that are answers (a 4xx or a 503, `status_of`); anything else is a 500 (also logged).
 ANSWERED = (ServiceError, NerfaugError, ValueError, FileNotFoundError, Exception)
-router = APIRouter()
+FORMS = ("multipart/form-data", "application/x-www-form-urlencoded")
+
+
+async def known_fields_only(request: Request) -> None:
+    """Refuse a query parameter or form field the route does not take (422 naming it): a field a
+    client sends is used or refused, never ignored. A JSON body's fields are its model's (their
+    config forbids others)."""
+    taken = request.scope["route"].dependant
+    sent, known = list(request.query_params), _names(taken, "query_params")
+    if request.headers.get("content-type", "").startswith(FORMS):
+        sent += list((await request.form()).keys())  # parsed once: FastAPI reads the same form
+        known |= _names(taken, "body_params")
+    for name in sent:
+        if name not in known:
+            raise bad_input(field_line(name, UNKNOWN_FIELD))
+
+
+def _names(dependant, kind: str) -> set[str]:
+    """The names of the `kind` parameters ("query_params", "body_params") a route's `dependant`
+    takes, its dependencies' too."""
+    return {p.alias for p in getattr(dependant, kind)}.union(*(_names(d, kind) for d in dependant.dependencies))
+
+
+router = APIRouter(dependencies=[Depends(known_fields_only)])
 
 
 def validation_line(errors: list[dict]) -> str:
@@ -218,7 +243,8 @@ async def evaluate(session_id: str, request: models.EvaluateRequest, hub: Hub):
     def score(session):
         views = session.held_out(data, request.split, request.max_views)
         result = session.evaluate(views, lpips="auto" if request.lpips else None)
-        found = {"views": len(views), **result.mean, "lpips_status": result.lpips_status, "per_view": result.per_view}
+        status = public_text(result.lpips_status, hub.root.resolve())  # no server path in the answer
+        found = {"views": len(views), **result.mean, "lpips_status": status, "per_view": result.per_view}
         found["trained_on"] = trained_on_count(result)
         return {"step": session.step, "dataset": request.dataset, "split": request.split, **found}
 
@@ -258,13 +284,44 @@ def create_app(hub: SessionHub, token: str | None = None, max_upload_mb: float =
     app.mount(DOCS_ASSETS, StaticFiles(directory=str(swagger_ui_path)), name="docs-assets")
     app.add_api_route("/docs", _docs_page, include_in_schema=False)
     _guard(app, token)
-    app.add_middleware(BodyLimit, max_upload_bytes=app.state.upload_limit)  # outermost: before anything reads the body
+    app.add_middleware(BodyLimit, max_upload_bytes=app.state.upload_limit)  # before anything reads the body
+    app.add_middleware(RequestLog)  # outermost: every answer logged, the refused ones too
     for kind in ANSWERED:
         app.add_exception_handler(kind, _answer)
     app.add_exception_handler(RequestValidationError, _invalid)
     app.add_exception_handler(HTTPException, _http_error)
     app.include_router(router)
     return app
+
+
+# One line per request (`RequestLog`); `nerfaug serve` prints them on stderr.
+log = logging.getLogger(__name__)
+
+
+class RequestLog:
+    """ASGI middleware: one log line per HTTP request when its answer is sent: method, path, status
+    and milliseconds, e.g. "POST /sessions/s1/proposals 200 5321 ms" (500 when the app raised)."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        start, status = time.perf_counter(), 500
+
+        async def sending(message):
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, sending)
+        finally:
+            elapsed = (time.perf_counter() - start) * 1000
+            log.info("%s %s %d %.0f ms", scope["method"], scope["path"], status, elapsed)
 
 
 def _docs_page(request: Request):

@@ -4,12 +4,16 @@ file on the server holds)."""
 
 from __future__ import annotations
 
+import re
+from pathlib import Path
+
 from nerfaug.capture.lock import SessionBusy
 from nerfaug.capture.pool import TrainingFull
 from nerfaug.capture.requests import RequestError
 from nerfaug.capture.state import SessionError
 from nerfaug.data import DatasetError
 from nerfaug.errors import FolderRefused
+from nerfaug.health import EmptyModel
 
 
 class ServiceError(Exception):
@@ -38,7 +42,8 @@ def status_of(error: BaseException) -> tuple[int, str]:
 
     422: bad input (`DatasetError`, `ValueError`: a value, pose or image the client sent);
     409: the session's folder refuses the operation, is inconsistent, or another process (or a
-    training job) is changing it (`FolderRefused`, `SessionError`, `SessionBusy`); 404: a file or
+    training job) is changing it (`FolderRefused`, `SessionError`, `SessionBusy`), or its NeRF is
+    empty and the proposal did not say `allow_empty` (`EmptyModel`); 404: a file or
     session the request names does not exist; 503: as many sessions are training as the service
     runs at once (`TrainingFull`, with Retry-After: `headers_of`); 500: anything else, named as an
     internal error.
@@ -54,13 +59,36 @@ def status_of(error: BaseException) -> tuple[int, str]:
         text = " ".join(f"{error.path}{field}: {error.problem}".split())
     if isinstance(error, TrainingFull):
         return 503, text
-    if isinstance(error, (FolderRefused, SessionError, SessionBusy)):
+    if isinstance(error, (FolderRefused, SessionError, SessionBusy, EmptyModel)):
         return 409, text
     if isinstance(error, (DatasetError, ValueError)):
         return 422, text
     if isinstance(error, FileNotFoundError):
         return 404, text
     return 500, f"internal error ({type(error).__name__}: {text})"
+
+
+# An absolute path in a message (not the "//" of a URL, nor the second half of "a/b").
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.:/])/(?:[^\s/,;'\"()]+/)*[^\s/,;'\"()]+")
+
+
+def public_text(text: str, root: Path) -> str:
+    """`text` as a client may read it: a path under the service's `root` relative to it (as the
+    client names files), any other absolute path by its file name alone (the server's own layout is
+    none of the client's business).
+
+    Example:
+        >>> public_text("weights from /srv/venv/lpips/alexnet.ckpt; data /srv/root/held-out/test", Path("/srv/root"))
+        'weights from alexnet.ckpt; data held-out/test'
+    """
+
+    def shown(match: re.Match) -> str:
+        path = Path(match.group(0))
+        if path.is_relative_to(root):
+            return str(path.relative_to(root)) if path != root else "."
+        return path.name
+
+    return _ABSOLUTE_PATH.sub(shown, text)
 
 
 def headers_of(error: BaseException) -> dict[str, str] | None:

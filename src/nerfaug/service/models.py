@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field
 
 from nerfaug.capture.pool import SessionStatus
 from nerfaug.capture.requests import (
@@ -30,6 +30,9 @@ from nerfaug.capture.requests import (
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST
 
 Dataset = Annotated[str, Field(max_length=1024, description="a dataset folder, relative to the service root")]
+# The service's own request models, as the core's schemas (`SCHEMA`): a field they do not have is
+# refused (422 naming it), never ignored.
+REQUEST = ConfigDict(extra="forbid")
 
 
 @dataclass(kw_only=True)
@@ -61,10 +64,14 @@ class FromUploads(SessionSettings):
 
 
 class TrainRequest(BaseModel):
+    model_config = REQUEST
+
     steps: int = Field(ge=1, le=MAX_STEPS, description="training steps to run in the background")
 
 
 class UncertaintyRequest(BaseModel):
+    model_config = REQUEST
+
     pose: Pose = Field(description="the view's 4x4 camera-to-world pose")
     width: ImageWidth | None = Field(None, description="pixels across; default: the training resolution")
     fisher: bool = Field(True, description="also FisherRF's per-pixel score (slower)")
@@ -74,6 +81,8 @@ class UncertaintyRequest(BaseModel):
 
 class EvaluateRequest(BaseModel):
     """Held-out views to score the session's NeRF on (as `nerfaug eval RUN --data DATA`)."""
+
+    model_config = REQUEST
 
     dataset: Dataset
     split: Split = Field("test", description="the split to score")
