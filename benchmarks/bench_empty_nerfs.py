@@ -4,7 +4,8 @@ on prepared real scenes, per engine, seed and number of views, as `nerfaug train
     python benchmarks/bench_empty_nerfs.py data/real/mic --engines cpu nerfacto-cpu --seeds 0 1 2 \\
         --views 12 all --steps 1000 --out docs/benchmarks/empty-nerfs.json
 
-"12" starts sparse (`SparseStart`: 12 views on one half, layout 0); "all" trains on the whole
+An engine may be a variant ("cpu+average_init_density=0.01"). "12" starts sparse (`SparseStart`:
+12 views on one half, layout 0); "all" trains on the whole
 train split (the default of `nerfaug train`). Each run is a capture session on the CPU, one torch
 thread, one at a time; the record keeps the health check, the training PSNR, the share of the
 occupancy grid's cells left occupied (occupancy engines) and the seconds. Prints a Markdown table.
@@ -24,13 +25,17 @@ import torch
 
 from nerfaug.capture import CaptureSession, SessionSettings
 from nerfaug.capture.requests import SparseStart
+from nerfaug.nerf.config import NerfConfig, parse_variant
 
 
 def one_run(data: Path, engine: str, seed: int, views: str, steps: int) -> dict:
     start = None if views == "all" else SparseStart(initial=int(views))
     with tempfile.TemporaryDirectory(prefix="nerfaug-empty-") as tmp:
         began = time.perf_counter()
-        session = CaptureSession.create(data, Path(tmp) / "run", SessionSettings(preset=engine, seed=seed), start=start)
+        base, changes = parse_variant(engine)  # a preset, or a variant: "cpu+average_init_density=0.01"
+        settings = SessionSettings(preset=base, seed=seed)
+        config = NerfConfig.preset(base, **changes) if changes else None
+        session = CaptureSession.create(data, Path(tmp) / "run", settings, config=config, start=start)
         last = session.train(steps)
         seconds = time.perf_counter() - began
         health = session.health()

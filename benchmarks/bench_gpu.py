@@ -588,7 +588,7 @@ def protocol(args) -> dict:
         print(f"  finished runs archived in {summary['archive']}: pass it to --resume-from on the next machine")
     summary["report"] = None
     if args.report and results:
-        from nerfaug.cli.run import paper_tables
+        from nerfaug.cli.run_work import paper_tables
         from nerfaug.report import write_report
 
         try:  # the figures above are the benchmark; a report failure must not hide them

@@ -128,7 +128,7 @@ def unpack(packs: Path, into: Path) -> dict[str, Path]:
 
 def run(args) -> dict:
     """The next runs of the plan that the table lacks, within the budget; the archive of what finished."""
-    from nerfaug.cli.study import record_table
+    from nerfaug.cli.study_work import record_table
     from nerfaug.device import configure_process
     from nerfaug.experiment.study import StudySpec, make_plan, run_study
     from nerfaug.report.study_table import read_table

@@ -34,7 +34,7 @@ import imageio.v3 as iio
 import numpy as np
 import tyro
 
-from nerfaug.cli_hints import none_means
+from nerfaug.capture.requests import replaced_by
 
 HOST = "127.0.0.1"
 
@@ -114,16 +114,16 @@ def evaluate(client: httpx.Client, session: str, held_out: str, max_views: int) 
 class Options:
     """Drive a capture session through rounds of propose -> capture -> add -> train -> evaluate."""
 
-    url: Annotated[str | None, none_means("start one on ROOT, stopped at the end", "URL")] = None
+    url: Annotated[str | None, replaced_by("start one on ROOT, stopped at the end", "URL")] = None
     """a running `nerfaug serve`."""
     root: Path = Path("results/robot-service")
     """the service's root folder (the session and a copy of the held-out views go there)."""
-    token: Annotated[str | None, none_means("none", "STR")] = None
+    token: Annotated[str | None, replaced_by("none", "STR")] = None
     """the service's token, when it has one."""
     session: str = "robot"
     """the session's id (an existing session of that id is resumed)."""
     data: Annotated[
-        Path | None, none_means("data/SCENE-RESOLUTION, rendered there by `nerfaug scene render` when absent", "PATH")
+        Path | None, replaced_by("data/SCENE-RESOLUTION, rendered there by `nerfaug scene render` when absent", "PATH")
     ] = None
     """a Blender dataset of SCENE (initial split: the first captures; test: the held-out views)."""
     scene: str = "lego"

@@ -121,7 +121,7 @@ def test_reflow_joins_paragraphs_and_argument_descriptions_but_keeps_headings():
 
 
 def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_defaults(monkeypatch, tmp_path):
-    import nerfaug.cli.study as study_cli
+    import nerfaug.cli.study_work as study_cli
     import nerfaug.experiment.study as study_module
     import nerfaug.report.study_page as study_page
 
@@ -205,6 +205,17 @@ def test_the_light_help_test_names_every_command():
     from nerfaug.cli import COMMANDS
 
     assert {command.split()[0] for command in EVERY_COMMAND} == set(COMMANDS)
+
+
+def test_exports_format_names_are_the_registered_formats():
+    """`nerfaug export --format` names the formats without importing their registry (torch)."""
+    import typing
+
+    from nerfaug.cli.session import EXCHANGE_FORMAT, FormatName
+    from nerfaug.data import formats
+
+    assert typing.get_args(FormatName) == tuple(formats.FORMATS)
+    assert EXCHANGE_FORMAT == formats.EXCHANGE_FORMAT
 
 
 @pytest.mark.parametrize("command", EVERY_COMMAND)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from nerfaug.cli.run import paper_tables
+from nerfaug.cli.run_work import paper_tables
 from nerfaug.experiment.config import PROTOCOL_PRESETS
 from nerfaug.experiment.runfolder import (
     FILES,

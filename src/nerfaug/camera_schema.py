@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 
 from nerfaug.errors import DatasetError
 
+# numpy is imported inside the checks that use it: every command's `--help` reads this module.
 if TYPE_CHECKING:
     import numpy as np
 
@@ -128,7 +129,7 @@ def check_pose(matrix, path: str | Path, field: str) -> np.ndarray:
         matrix: nested lists (as read from JSON) or an array; its entries must be numbers (no
             strings or bools) that stay finite in float32.
     """
-    import numpy as np  # here: `nerfaug train --help` reads this module and loads no numpy
+    import numpy as np
 
     try:
         pose = np.asarray(matrix)
@@ -159,7 +160,7 @@ def check_pose(matrix, path: str | Path, field: str) -> np.ndarray:
 
 
 def _is_rotation(matrix: np.ndarray) -> bool:
-    import numpy as np  # here: `nerfaug train --help` reads this module and loads no numpy
+    import numpy as np
 
     return bool(
         np.abs(matrix.T @ matrix - np.eye(3)).max() <= ROTATION_TOLERANCE
@@ -170,7 +171,7 @@ def _is_rotation(matrix: np.ndarray) -> bool:
 def check_projection(matrix: np.ndarray, path: str | Path, field: str) -> None:
     """Refuse a 3x3 (or wider) projection K R whose first three columns are singular, judged
     scale-free: its condition number (largest over smallest singular value) above `MAX_CONDITION`."""
-    import numpy as np  # here: `nerfaug train --help` reads this module and loads no numpy
+    import numpy as np
 
     singular_values = np.linalg.svd(np.asarray(matrix, dtype=np.float64)[:3, :3], compute_uv=False)
     if not singular_values[-1] > singular_values[0] / MAX_CONDITION:
@@ -185,7 +186,7 @@ def check_projection(matrix: np.ndarray, path: str | Path, field: str) -> None:
 def check_similarity(matrix: np.ndarray, path: str | Path, field: str) -> float:
     """A 4x4 similarity (a rotation times one positive scale, then a shift; last row [0, 0, 0, 1],
     all up to scale) checked; returns its scale. DatasetError naming `field` otherwise."""
-    import numpy as np  # here: `nerfaug train --help` reads this module and loads no numpy
+    import numpy as np
 
     matrix = np.asarray(matrix, dtype=np.float64)
     linear = matrix[:3, :3]

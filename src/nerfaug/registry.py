@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import difflib
+import importlib
 from collections.abc import Iterable, Mapping
 from typing import Literal, TypeVar
 
@@ -109,3 +110,27 @@ class Presets(dict[str, C]):
     def name_type(self) -> type:
         """The names as a `Literal` type, for a command-line parser (tyro) to offer and check."""
         return Literal[tuple(self)]  # type: ignore[return-value]
+
+
+def lazy_exports(package: str, homes: Mapping[str, str], namespace: dict):
+    """(`__getattr__`, `__dir__`) for a package whose names are imported on first use (PEP 562),
+    so that importing it (e.g. for a command's `--help`) loads none of its heavy modules.
+
+    Args:
+        package: the package's `__name__`.
+        homes: each exported name -> the module that defines it.
+        namespace: the package's `globals()`, where a looked-up name is kept so later look-ups
+            skip `__getattr__`.
+    """
+
+    def __getattr__(name: str):
+        if name not in homes:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(homes[name]), name)
+        namespace[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(namespace) | set(homes))
+
+    return __getattr__, __dir__

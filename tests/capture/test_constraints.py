@@ -17,6 +17,7 @@ from nerfaug.capture.constraints import (
     angle_range_mask,
     azimuth_mask,
     constrained_indices,
+    constraints_mask,
     keep_out_mask,
 )
 from nerfaug.capture.requests import RequestError
@@ -74,14 +75,16 @@ def test_constraints_on_known_poses_about_an_off_origin_centre():
     azimuths = [10.0, 200.0, 100.0, 350.0, 90.0]
     poses = poses_at(elevations, azimuths, 2.0, centre)
     poses[4, :3, 3] = torch.tensor(centre) + 1.5 * (poses[4, :3, 3] - torch.tensor(centre)) / 2.0  # radius 1.5
-    assert ViewConstraints(elevation=(20, 60)).mask(poses, hemisphere).tolist() == [True, False, False, True, True]
-    assert ViewConstraints(azimuth=(-20, 20)).mask(poses, hemisphere).tolist() == [True, False, False, True, False]
-    assert ViewConstraints(radius=(1.9, 2.1)).mask(poses, hemisphere).tolist() == [True, True, True, True, False]
+
+    def kept(constraints: ViewConstraints) -> list[bool]:
+        return constraints_mask(constraints, poses, hemisphere).tolist()
+
+    assert kept(ViewConstraints(elevation=(20, 60))) == [True, False, False, True, True]
+    assert kept(ViewConstraints(azimuth=(-20, 20))) == [True, False, False, True, False]
+    assert kept(ViewConstraints(radius=(1.9, 2.1))) == [True, True, True, True, False]
     # A cone straight up (half-angle 20 deg) holds the pose at elevation 80 only.
-    up_cone = ViewConstraints(keep_out=((0, 0, 1, 20),))
-    assert up_cone.mask(poses, hemisphere).tolist() == [True, False, True, True, True]
-    both = ViewConstraints(elevation=(20, 60), azimuth=(0, 180))
-    assert both.mask(poses, hemisphere).tolist() == [True, False, False, False, True]
+    assert kept(ViewConstraints(keep_out=((0, 0, 1, 20),))) == [True, False, True, True, True]
+    assert kept(ViewConstraints(elevation=(20, 60), azimuth=(0, 180))) == [True, False, False, False, True]
 
 
 def test_elevation_follows_the_hemispheres_up_axis():
@@ -92,8 +95,8 @@ def test_elevation_follows_the_hemispheres_up_axis():
     beside = torch.eye(4)[None].clone()
     beside[0, :3, 3] = torch.tensor([0.0, 0.0, 2.0])
     poses = torch.cat([above, beside])
-    assert ViewConstraints(elevation=(80, 90)).mask(poses, hemisphere).tolist() == [True, False]
-    assert ViewConstraints(elevation=(-5, 5)).mask(poses, hemisphere).tolist() == [False, True]
+    assert constraints_mask(ViewConstraints(elevation=(80, 90)), poses, hemisphere).tolist() == [True, False]
+    assert constraints_mask(ViewConstraints(elevation=(-5, 5)), poses, hemisphere).tolist() == [False, True]
 
 
 def test_too_few_candidates_names_the_numbers():
@@ -169,8 +172,8 @@ def test_a_session_proposes_within_the_constraints(session_dir):
         ProposalRequest(allow_empty=True, n=3, n_candidates=80, selection=FAST, constraints=constraints), map=False
     )
     assert len(proposal) == 3
-    assert constraints.mask(proposal.poses, session.hemisphere).all()
-    assert constraints.mask(proposal.candidates.camera_to_world, session.hemisphere).all()
+    assert constraints_mask(constraints, proposal.poses, session.hemisphere).all()
+    assert constraints_mask(constraints, proposal.candidates.camera_to_world, session.hemisphere).all()
     elevation = 90 - torch.rad2deg(proposal.polar)
     assert ((elevation >= 30) & (elevation <= 70)).all()
     assert session.proposals[-1].model_extra["constraints"] == constraints.checked().to_dict()

@@ -13,7 +13,7 @@ import torch
 from pydantic import TypeAdapter, ValidationError
 
 from nerfaug.capture import Intrinsics, ProposalRequest, SessionSettings, SessionState, ViewConstraints
-from nerfaug.capture.choose import MAX_CANDIDATES, MAX_REACHABLE_POSES, MAX_VIEWS
+from nerfaug.capture.proposal_request import MAX_CANDIDATES, MAX_REACHABLE_POSES, MAX_VIEWS
 from nerfaug.capture.requests import (
     RequestError,
     as_pose_list,

@@ -45,7 +45,7 @@ def tiny_config(scene: Path, **changes):
 
 
 def test_tiny_sweep_writes_every_file_and_a_report(tiny_scene, tmp_path):
-    from nerfaug.cli.run import paper_tables
+    from nerfaug.cli.run_work import paper_tables
     from nerfaug.report import write_report
 
     config = tiny_config(tiny_scene)

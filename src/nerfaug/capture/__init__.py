@@ -9,9 +9,10 @@ read and write on disk goes through the dataset's format, `nerfaug.data.formats`
 (session.json as a typed model, and what a session reports), `runfolder` (the run folder's names,
 and which folders may become one), `folder` (`SessionFolder`: a run folder read without its
 model), `session` (`CaptureSession`: create, open, save, train; it coordinates), and the steps it
-calls with the narrow pieces they need: `choose` (proposing the next views, `ProposalRequest`),
-`constraints` (where views may lie), `add` (adding captured views), `export` (writing the dataset
-in any format), and, through `model` (`SessionModel`: the NeRF seen from the world frame),
+calls with the narrow pieces they need: `choose` (proposing the next views; what is asked,
+`ProposalRequest` and `ViewConstraints`, is `proposal_request`, light), `constraints` (applying
+where views may lie), `add` (adding captured views), `export` (writing the dataset in any
+format), and, through `model` (`SessionModel`: the NeRF seen from the world frame),
 `evaluate` and `uncertainty_images`; `simulate` (a simulated capture: proposed poses rendered by
 Blender with the session's camera); `pool` (`SessionPool`: the sessions under one root, trained in
 the background, their jobs resumed when the pool is made again: what `nerfaug serve` serves).
@@ -34,8 +35,8 @@ _HOMES = {
     "Proposal": "proposal",
     "proposal_seed": "proposal",
     "read_poses": "proposal",
-    "ProposalRequest": "choose",
-    "ViewConstraints": "constraints",
+    "ProposalRequest": "proposal_request",
+    "ViewConstraints": "proposal_request",
     "Intrinsics": "requests",
     "SessionSettings": "requests",
     "ENGINE_RADIUS": "nerfaug.data.frame",

@@ -1,135 +1,29 @@
-"""How a session chooses its next views: what is asked (`ProposalRequest`, checked here for the
-library, the CLI and the service), the candidate cameras, the selection method's call on the
+"""How a session chooses its next views: what is asked (`ProposalRequest`, a light schema of
+`nerfaug.capture.proposal_request`), the candidate cameras, the selection method's call on the
 session's NeRF (`SessionModel`), and the proposal's record."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated
 
 import numpy as np
 import torch
-import tyro
-from pydantic import AfterValidator, BeforeValidator, Field, PlainValidator, WithJsonSchema, WrapValidator
-from tyro.constructors import PrimitiveConstructorSpec
 
 from nerfaug.cameras import Cameras
-from nerfaug.capture.constraints import ViewConstraints, constrained_indices
+from nerfaug.capture.constraints import constrained_indices
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.requests import SCHEMA, Pose, Schema, Seed, as_pose_list, replaced_by
+from nerfaug.capture.proposal_request import ProposalRequest, ViewConstraints
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frame import ENGINE_RADIUS
 from nerfaug.data.frames import check_pose
 from nerfaug.health import EmptyModel, Health
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.progress import progress_bar
-from nerfaug.registry import check_name
-from nerfaug.selection import METHODS, SelectionConfig, get_method, hemisphere_candidates, matching_poses, select_views
+from nerfaug.selection import get_method, hemisphere_candidates, matching_poses, select_views
 from nerfaug.selection.candidates import with_poses
-
-# Two proposed views closer than this (degrees about the hemisphere's centre) see nearly the same
-# image (a NeRF-synthetic camera's field of view is about 40 degrees) and parallax: the second
-# is nearly wasted. Sampling methods draw such pairs freely (two views 5 degrees apart on the lego);
-# the paper's experiments keep no separation and never read this default (`experiment` selects
-# without it). Six views 15 degrees apart fit many times over on the hemisphere.
-DEFAULT_MIN_SEPARATION = 15.0
-
-# What one proposal may ask: views, hemisphere candidates to score, reachable poses to choose from.
-MAX_VIEWS = 1000
-MAX_CANDIDATES = 20_000
-MAX_REACHABLE_POSES = 10_000
-# The selection settings whose value sets the work of a proposal, and their largest values.
-SELECTION_BOUNDS = {
-    "entropy_resolution": 256,
-    "fisher_resolution": 256,
-    "fisher_train_pixels": 65_536,
-    "fisher_train_chunk": 4096,
-    "fisher_train_probes": 64,
-    "fisher_probes": 64,
-    "fisher_cache_floats": 2**28,
-    "chunk": 65_536,
-    "max_draws": 10_000_000,
-}
-
-
-def _known_method(method: str) -> str:
-    check_name("selection method", method, METHODS)
-    return method
-
-
-def _reachable(value, handler):
-    """A transforms JSON of poses (a `Path`: from Python or the command line, never from JSON),
-    or the poses themselves, checked."""
-    return value if isinstance(value, Path) else handler(value)
-
-
-def _selection(value) -> SelectionConfig:
-    """A `SelectionConfig` (or the dict of its fields), within `SELECTION_BOUNDS`."""
-    config = SelectionConfig.from_dict(value) if isinstance(value, dict) else value
-    if not isinstance(config, SelectionConfig):
-        raise ValueError("must be an object of selection settings (`SelectionConfig` fields)")
-    for name, most in SELECTION_BOUNDS.items():
-        given = getattr(config, name)
-        if isinstance(given, (int, float)) and not isinstance(given, bool) and given > most:
-            raise ValueError(f"{name} {given}: at most {most} in one proposal")
-    return config
-
-
-# `--candidates PATH` on the command line: a transforms JSON of reachable poses.
-_FILE = PrimitiveConstructorSpec(
-    nargs=1,
-    metavar="PATH",
-    instance_from_str=lambda words: Path(words[0]),
-    is_instance=lambda value: value is None or isinstance(value, (Path, list)),
-    str_from_instance=lambda value: ["None" if value is None else str(value)],
-)
-Reachable = Annotated[
-    list[Pose],
-    BeforeValidator(as_pose_list),
-    Field(min_length=1, max_length=MAX_REACHABLE_POSES),
-    WrapValidator(_reachable),
-]
-_SELECTION_SCHEMA = {
-    "type": "object",
-    "description": "SelectionConfig fields (`--selection.*`), each of its type; the ones that set the work are "
-    "bounded: " + ", ".join(f"{k} <= {v}" for k, v in SELECTION_BOUNDS.items()),
-}
-
-
-@dataclass(kw_only=True)
-class ProposalRequest(Schema):
-    """What to propose: which views, by which method, from which candidates, where they may lie.
-
-    `checked()` is the one place its values are checked: the library, the CLI (before it opens the
-    session) and the service (as its request model) call it.
-    """
-
-    __pydantic_config__ = SCHEMA
-
-    n: Annotated[int, Field(ge=1, le=MAX_VIEWS)] = 6
-    """views to propose."""
-    method: Annotated[str, Field(max_length=100), AfterValidator(_known_method)] = "ours"
-    """the selection method (`nerfaug methods` lists them); "ours" is the paper's."""
-    candidates: Annotated[Reachable | None, _FILE, replaced_by("the hemisphere", "PATH")] = None
-    """reachable poses (a robot's) to choose from instead of the hemisphere: a transforms JSON, or 4x4 poses."""
-    n_candidates: Annotated[int, Field(ge=1, le=MAX_CANDIDATES)] = 500
-    """hemisphere candidates to score."""
-    seed: Annotated[Seed | None, replaced_by("the session's, per proposal", "INT")] = None
-    """seed this proposal (0 to 2^63-1); by default the session's seed and proposal number seed it."""
-    selection: Annotated[SelectionConfig, PlainValidator(_selection), WithJsonSchema(_SELECTION_SCHEMA)] = field(
-        default_factory=SelectionConfig
-    )
-    """options of the selection method (recorded with the proposal); a method's own settings apply over them."""
-    constraints: Annotated[ViewConstraints, tyro.conf.arg(name="")] = field(default_factory=ViewConstraints)
-    """where views may lie, applied to the hemisphere's candidates or to the reachable poses."""
-    min_separation: Annotated[float, Field(ge=0, lt=180)] = DEFAULT_MIN_SEPARATION
-    """keep every two proposed views this many degrees apart, seen from the hemisphere's centre (0: off)."""
-    allow_empty: bool = False
-    """propose even from a NeRF whose renders of its training views are background only (refused otherwise)."""
 
 
 def describe_candidates(candidates, pool: bool = False) -> str:

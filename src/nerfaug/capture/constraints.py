@@ -10,19 +10,17 @@ the centre (world frame) and a half-angle: cameras whose position lies within th
 
 Hemisphere candidates all lie at the hemisphere's radius, so a radius range keeps all or none of
 them; it is meant for a list of reachable poses.
+
+The constraints as asked, checked, are `ViewConstraints` (`nerfaug.capture.proposal_request`);
+here they are applied (`constraints_mask`, `constrained_indices`).
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass
-from typing import Annotated
-
 import torch
-from pydantic import AfterValidator, Field
 from torch import Tensor
 
-from nerfaug.capture.requests import RADIUS_RANGE, SCHEMA, Schema, replaced_by, validated
+from nerfaug.capture.proposal_request import ViewConstraints
 from nerfaug.data.frame import Hemisphere
 
 
@@ -96,99 +94,33 @@ def keep_out_mask(positions: Tensor, centre: Tensor, axes: Tensor, half_angles: 
     return ~inside.any(dim=-1)
 
 
-# The ranges a constraint may state: elevation in degrees about the equator, azimuth in degrees
-# (an arc may wrap, up to two turns either way), distances in world units.
-Elevation = Annotated[float, Field(ge=-90, le=90)]
-Azimuth = Annotated[float, Field(ge=-720, le=720)]
-Distance = Annotated[float, Field(ge=0, le=RADIUS_RANGE[1] * 1000)]
-HalfAngle = Annotated[float, Field(gt=0, lt=180)]
-# Keep-out cones one request may state.
-MAX_KEEP_OUT = 64
+def constraints_mask(constraints: ViewConstraints, camera_to_world: Tensor, hemisphere: Hemisphere) -> Tensor:
+    """Which poses satisfy every constraint of `constraints`.
 
+    Args:
+        camera_to_world: Tensor with shape (n, 4, 4), world frame.
+        hemisphere: the session's hemisphere (centre, radius, up).
 
-def _ordered(pair: tuple[float, float]) -> tuple[float, float]:
-    if pair[0] > pair[1]:
-        raise ValueError("low must be <= high")
-    return pair
-
-
-def _pointing(cone: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
-    if math.hypot(*cone[:3]) < 1e-12:
-        raise ValueError("the direction (x, y, z) must not be zero")
-    return cone
-
-
-Cone = Annotated[tuple[float, float, float, HalfAngle], AfterValidator(_pointing)]
-
-
-@dataclass(kw_only=True)
-class ViewConstraints(Schema):
-    """Where proposed views may lie (degrees, world units): ranges about the session's hemisphere,
-    applied to the hemisphere's candidates or to reachable poses, and keep-out cones."""
-
-    __pydantic_config__ = SCHEMA
-
-    elevation: Annotated[
-        Annotated[tuple[Elevation, Elevation], AfterValidator(_ordered)] | None, replaced_by("any", "LOW HIGH")
-    ] = None
-    """(low, high) degrees above the hemisphere's equator, in [-90, 90]."""
-    azimuth: Annotated[
-        Annotated[tuple[Azimuth, Azimuth], AfterValidator(_ordered)] | None, replaced_by("any", "LOW HIGH")
-    ] = None
-    """(low, high) degrees about the hemisphere's up, counter-clockwise, in [-720, 720]; may wrap: 315 405."""
-    radius: Annotated[
-        Annotated[tuple[Distance, Distance], AfterValidator(_ordered)] | None, replaced_by("any", "LOW HIGH")
-    ] = None
-    """(low, high) distance from the hemisphere's centre, world units (for reachable poses)."""
-    keep_out: Annotated[
-        tuple[Cone, ...],
-        Field(max_length=MAX_KEEP_OUT),
-        replaced_by("no cone", "X Y Z HALF_ANGLE [X Y Z HALF_ANGLE ...]"),
-    ] = ()
-    """cones to stay out of: a world-frame direction from the centre and a half-angle (0, 180) degrees each."""
-
-    @property
-    def empty(self) -> bool:
-        """True when nothing is constrained."""
-        return self.elevation is None and self.azimuth is None and self.radius is None and not self.keep_out
-
-    def mask(self, camera_to_world: Tensor, hemisphere: Hemisphere) -> Tensor:
-        """Which poses satisfy every constraint.
-
-        Args:
-            camera_to_world: Tensor with shape (n, 4, 4), world frame.
-            hemisphere: the session's hemisphere (centre, radius, up).
-
-        Returns:
-            Tensor with shape (n,), bool.
-        """
-        poses = torch.as_tensor(camera_to_world).reshape(-1, 4, 4)
-        keep = torch.ones(poses.shape[0], dtype=torch.bool)
-        if poses.shape[0] == 0 or self.empty:
-            return keep
-        azimuth, polar, radius = hemisphere.angles(poses)
-        if self.elevation is not None:
-            keep &= angle_range_mask(90.0 - torch.rad2deg(polar.double()), *self.elevation)
-        if self.azimuth is not None:
-            keep &= azimuth_mask(torch.rad2deg(azimuth.double()), *self.azimuth)
-        if self.radius is not None:
-            keep &= angle_range_mask(radius.double(), *self.radius)
-        if self.keep_out:
-            cones = torch.tensor(self.keep_out, dtype=torch.float64)
-            keep &= keep_out_mask(
-                poses[:, :3, 3], torch.tensor(hemisphere.centre, dtype=torch.float64), cones[:, :3], cones[:, 3]
-            )
+    Returns:
+        Tensor with shape (n,), bool.
+    """
+    poses = torch.as_tensor(camera_to_world).reshape(-1, 4, 4)
+    keep = torch.ones(poses.shape[0], dtype=torch.bool)
+    if poses.shape[0] == 0 or constraints.empty:
         return keep
-
-    def to_dict(self) -> dict:
-        """JSON-ready: lists for the ranges and cones (recorded with a proposal)."""
-        ranges = {k: None if v is None else list(v) for k, v in asdict(self).items() if k != "keep_out"}
-        return {**ranges, "keep_out": [list(c) for c in self.keep_out]}
-
-    @classmethod
-    def from_dict(cls, data: dict | None) -> ViewConstraints:
-        """The inverse of `to_dict`, checked (RequestError naming the field otherwise)."""
-        return validated(cls, data or {})
+    azimuth, polar, radius = hemisphere.angles(poses)
+    if constraints.elevation is not None:
+        keep &= angle_range_mask(90.0 - torch.rad2deg(polar.double()), *constraints.elevation)
+    if constraints.azimuth is not None:
+        keep &= azimuth_mask(torch.rad2deg(azimuth.double()), *constraints.azimuth)
+    if constraints.radius is not None:
+        keep &= angle_range_mask(radius.double(), *constraints.radius)
+    if constraints.keep_out:
+        cones = torch.tensor(constraints.keep_out, dtype=torch.float64)
+        keep &= keep_out_mask(
+            poses[:, :3, 3], torch.tensor(hemisphere.centre, dtype=torch.float64), cones[:, :3], cones[:, 3]
+        )
+    return keep
 
 
 class TooFewCandidates(ValueError):
@@ -215,7 +147,7 @@ def constrained_indices(
     total = int(torch.as_tensor(camera_to_world).reshape(-1, 4, 4).shape[0])
     if constraints is None or constraints.empty:
         return torch.arange(total)
-    kept = torch.nonzero(constraints.mask(camera_to_world, hemisphere)).reshape(-1)
+    kept = torch.nonzero(constraints_mask(constraints, camera_to_world, hemisphere)).reshape(-1)
     if kept.numel() < n:
         raise TooFewCandidates(
             f"constraints leave {kept.numel()} of {total} candidates; {n} asked (widen the ranges, "

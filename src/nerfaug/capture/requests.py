@@ -4,10 +4,9 @@ place of its fields, defaults, ranges and error text, used unchanged by the libr
 
 Here: a new session's settings (`SessionSettings`), the camera of captured images (`Intrinsics`),
 world-frame poses (`Pose`, `Poses`), a session's id (`SessionId`), the bounds the proposal
-request (`nerfaug.capture.choose.ProposalRequest`) and the view constraints
-(`nerfaug.capture.constraints.ViewConstraints`) build on, and those of training steps, the save
-period, thread counts and uncertainty images' widths (`check_steps`, `check_checkpoint_every`,
-`check_threads`, `check_image_widths`).
+request and the view constraints (`nerfaug.capture.proposal_request`) build on, and those of
+training steps, the save period, thread counts and uncertainty images' widths (`check_steps`,
+`check_checkpoint_every`, `check_threads`, `check_image_widths`).
 
 The classes tyro reads are dataclasses with one validator each, `checked()` (pydantic, from their
 annotations): tyro builds them from the options without checking, so that a refused value ends

@@ -8,29 +8,26 @@ are in `nerfaug.cli.train`.
     nerfaug train RUN --steps 3000                 train an existing session until step 3000
     nerfaug export RUN --format nerfstudio --out DIR
     nerfaug eval RUN --data DATASET --split test   PSNR/SSIM/LPIPS on held-out views
+
+Here are their options and help; their work, which loads torch, is `nerfaug.cli.session_work`,
+imported when a command runs, so that `--help` answers at once.
 """
 
 from __future__ import annotations
 
-import math
-import sys
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.capture.choose import ProposalRequest
-from nerfaug.capture.evaluate import check_evaluation_out, trained_on_count, write_evaluation
-from nerfaug.capture.folder import SessionFolder
-from nerfaug.capture.proposal import check_poses_out
+from nerfaug.capture.proposal_request import ProposalRequest
 from nerfaug.capture.requests import replaced_by
-from nerfaug.capture.simulate import render_proposals as simulated_capture
-from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train import THREADS, Device, RunFolder
-from nerfaug.cli.train_work import configure, open_session, warning_lines
-from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS
 
-FormatName = Literal[tuple(FORMATS)]  # the registered dataset formats' names
+# The registered dataset formats' names (`nerfaug.data.formats.FORMATS`, which loads torch:
+# tests/test_cli_help.py checks that the two agree) and the one an export writes by default.
+FormatName = Literal["blender", "nerfstudio", "idr", "llff"]
+EXCHANGE_FORMAT = "nerfstudio"
 Request = Annotated[ProposalRequest, tyro.conf.arg(name="")]
 
 
@@ -59,20 +56,9 @@ def propose(
             (never inside a capture session's folder: its proposals are its own record).
         threads: torch threads for scoring the candidates.
     """
-    request = checked(request)  # before the session is opened: a refused call loads nothing
-    check_poses_out(out, force)
-    configure(threads)
-    session = open_session(run, device, changing="propose")
-    with warning_lines():
-        proposal = session.propose(request)
-    path = proposal.write(out)
-    session.save()
-    print(
-        f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path} (angles in "
-        f"radians), map {path.with_suffix('.png')}"
-    )
-    for name, a, e in zip(proposal.names, proposal.azimuth.tolist(), proposal.elevation.tolist()):
-        print(f"  {name}: azimuth {math.degrees(a):6.1f} deg, elevation {math.degrees(e):5.1f} deg")
+    from nerfaug.cli import session_work  # torch: here, so that `nerfaug propose --help` loads none
+
+    session_work.propose(run, request, out, device, force, threads)
 
 
 def export(
@@ -91,13 +77,9 @@ def export(
         out: the folder to write.
         format: the dataset format to write.
     """
-    folder = SessionFolder.open(run)  # exporting reads only the dataset folder
-    path = folder.export(out, format)
-    print(f"exported {folder.summary().views} views to {path}")
+    from nerfaug.cli import session_work  # torch: here, so that `nerfaug export --help` loads none
 
-
-def _metric(value, digits: int) -> str:
-    return "n/a" if value is None else f"{value:.{digits}f}"
+    session_work.export(run, out, format)
 
 
 def evaluate(
@@ -122,27 +104,9 @@ def evaluate(
         device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
         threads: torch threads for rendering and scoring.
     """
-    if out is not None:
-        check_evaluation_out(out, data)
-    configure(threads)
-    session = open_session(run, device)
-    views = session.held_out(data, split)
-    result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
-    m = result.mean
-    print(f"{run} (step {session.step}) on split '{split}' of {data}: {len(views)} views")
-    print(f"  PSNR {_metric(m['psnr'], 2)} dB   SSIM {_metric(m['ssim'], 4)}   LPIPS {_metric(m['lpips'], 4)}")
-    if m["lpips"] is None:
-        print(f"  LPIPS {result.lpips_status}")
-    if trained := trained_on_count(result):
-        print(
-            f"warning: {trained} of the {len(views)} views have the pose of a view the session trains on, so "
-            "they score how well it was fitted, not held-out views (a captured set keeps one listing: every "
-            "--split of it is all of it)",
-            file=sys.stderr,
-        )
-    if out is not None:
-        write_evaluation(out, result, run, session.step, data, split)
-        print(f"  written to {out}")
+    from nerfaug.cli import session_work  # torch: here, so that `nerfaug eval --help` loads none
+
+    session_work.evaluate(run, data, split, out, lpips, device, threads)
 
 
 def render_proposals(
@@ -166,6 +130,6 @@ def render_proposals(
         seed: Cycles noise seed.
         threads: CPU threads for Cycles.
     """
-    with as_options():
-        paths = simulated_capture(run, poses, scene, out, samples, seed, threads)
-    print(f"rendered {len(paths)} views to {out}")
+    from nerfaug.cli import session_work  # torch: here, so that `--help` loads none
+
+    session_work.render_proposals(run, poses, scene, out, samples, seed, threads)

@@ -9,8 +9,9 @@ which raises its `DatasetError`) stay free of torch and imageio.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from nerfaug.registry import lazy_exports
 
 _HOMES = {
     "DatasetError": "nerfaug.data.errors",
@@ -57,16 +58,7 @@ if TYPE_CHECKING:
     from nerfaug.data.views import Views
 
 
-def __getattr__(name: str):
-    if name not in _HOMES:
-        raise AttributeError(f"module 'nerfaug.data' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_HOMES[name]), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_HOMES))
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES, globals())
 
 
 __all__ = [

@@ -1,4 +1,8 @@
-"""What a sweep runs: scenes x methods x trials under one protocol, with the paper's presets."""
+"""What a sweep runs: scenes x methods x trials under one protocol, with the paper's presets.
+
+Light: `nerfaug run --help` and `nerfaug study --help` read it, so torch (`nerfaug.device`) is
+imported only where the device is resolved.
+"""
 
 from __future__ import annotations
 
@@ -10,14 +14,13 @@ from typing import Annotated, Literal
 
 import tyro
 
-from nerfaug.device import device_kind
 from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
 from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
 from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
-from nerfaug.selection.methods import (  # noqa: F401 (re-exported)
+from nerfaug.selection.families import (  # noqa: F401 (re-exported)
     AUTHORS_VARIANTS,
     BATCH_AWARE,
     FAMILIES,
@@ -130,6 +133,8 @@ class ExperimentConfig:
             "field_lr",
             "threads_per_run",
         )
+        from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
+
         record = {k: getattr(self, k) for k in keep} | {"device": device_kind(self.device)}
         if self.compile is not None:  # absent by default, so results made before it stay valid
             record["compile"] = self.compile
@@ -147,6 +152,8 @@ class ExperimentConfig:
         run's numbers beyond rounding; only this choice is fingerprinted."""
         if self.batch != 0:
             return self.batch > 1
+        from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
+
         return device_kind(self.device) == "cuda" and batch_support(NerfConfig.preset(self.engine)) is None
 
     def replace(self, **changes) -> ExperimentConfig:

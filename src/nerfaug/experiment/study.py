@@ -19,10 +19,8 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal
 
 import torch
-import tyro
 
 from nerfaug.data.prepare import PREPARED
 from nerfaug.device import resolve_device
@@ -30,11 +28,12 @@ from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig, check_wor
 from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.protocol import render_builtin, scene_folder
 from nerfaug.experiment.store import RunKey
+from nerfaug.experiment.study_spec import PROCEDURAL_SCENES, StudySpec
 from nerfaug.experiment.sweep import check_config, run_sweep
 from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.nerf.config import PRESETS, NerfConfig
 from nerfaug.nerf.registry import check_names
-from nerfaug.selection.methods import FAMILIES
+from nerfaug.selection.families import FAMILIES
 from nerfaug.statistics import min_attainable_paired_p
 
 DEFAULT_TRIALS = 10
@@ -51,8 +50,6 @@ BY_NAME_ONLY_ENGINES = {
     "(docs/results-real.md); run it by name with --engines nerfacto-cpu-last-sample",
 }
 """Engine presets a default study leaves out, with why: still runnable by name."""
-StudyPreset = STUDY_PRESETS.name_type()
-DEFAULT_PRESET = "study"
 
 
 def study_methods() -> tuple[str, ...]:
@@ -192,9 +189,6 @@ def prepared_source(folder: Path) -> dict | None:
     return {k: prepared.get(k) for k in ("source_digest", "format", "width")}
 
 
-PROCEDURAL_SCENES = ("lego", "chair", "materials")
-"""The study's default scenes: the procedural stand-ins of the paper's three (the cow, a real
-mesh, and real captures are given by name or folder, as the real-scene study does)."""
 REAL_STUDY_SCENES = ("mic", "maryRose", "dtu_scan24", "cow", "moldGoldCape")
 """The real-scene study's planned scenes (docs/study-plan.md; the last is held back for
 replication; `nerfaug.report.study_hypotheses` judges its hypotheses on the same names)."""
@@ -290,95 +284,6 @@ def with_design(record: dict, out: Path) -> dict:
         found = {k.removeprefix("engine."): v for k, v in fingerprinted.items() if k.startswith("engine.")}
         settings[engine] = found or settings.get(engine, {})
     return {**record, "engine_settings": settings}
-
-
-# How `nerfaug study --help` shows the options whose default (None) is decided when the study is planned.
-Engines = Annotated[
-    tuple[str, ...] | None,
-    tyro.conf.arg(
-        metavar="ENGINE [ENGINE ...]",
-        help_behavior_hint="(default: every preset but the test one, and the paper's only on a GPU; the reason "
-        "is printed)",
-    ),
-]
-Scenes = Annotated[
-    tuple[str, ...] | None,
-    tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(PROCEDURAL_SCENES)})"),
-]
-Methods = Annotated[
-    tuple[str, ...] | None,
-    tyro.conf.arg(metavar="METHOD [METHOD ...]", help_behavior_hint='(default: the registry\'s "study" family)'),
-]
-Trials = Annotated[
-    int | None,
-    tyro.conf.arg(
-        metavar="INT",
-        help_behavior_hint="(default: 10, or more when Bonferroni over the comparisons with uniform needs more "
-        "for p < 0.05 to be reachable)",
-    ),
-]
-Table = Annotated[
-    Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint=f"(default: {StudyFolder(Path('OUT')).table})")
-]
-
-
-@dataclass(frozen=True)
-class StudySpec:
-    """What a study runs: the options of `nerfaug study` that decide its runs (None: decided when
-    it is planned, `make_plan`).
-
-    Args:
-        out: the study folder.
-        engines: engine presets, or variants written BASE+FIELD=VALUE.
-        scenes: built-in scene names or dataset folders.
-        methods: selection methods (`nerfaug methods`).
-        trials: trials per (scene, method, engine).
-        resolution: image size of the built-in scenes (and the width dataset folders are shrunk to).
-        layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
-            views come from turned by 1/LAYOUTS of the way round each time.
-        steps: training steps per run (the preset's unless given).
-        device: auto (cuda when there is a GPU), cpu or cuda.
-        preset: the study's protocol, which --steps and --selection.* change: study (the paper's
-            at 100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
-        table: the per-run table to record runs in and summarise; runs it records with their
-            current fingerprint are not run again.
-        batch: runs trained together as one trial batch; 1: each run alone; 0: auto (1 on a
-            CPU, more on a GPU for engines that batch).
-    """
-
-    out: Path = Path("results/study")
-    engines: Engines = None
-    scenes: Scenes = None
-    methods: Methods = None
-    trials: Trials = None
-    resolution: int = 100
-    layouts: int = 1
-    steps: int = STUDY_PRESETS[DEFAULT_PRESET].steps
-    device: Literal["auto", "cpu", "cuda"] = "auto"
-    preset: StudyPreset = DEFAULT_PRESET
-    table: Table = None
-    batch: int = 0
-
-    def command(self) -> list[str]:
-        """The command line that plans this study again (--steps only where it is not the preset's)."""
-        command = ["nerfaug", "study", "--out", str(self.out)]
-        if self.table is not None:
-            command += ["--table", str(self.table)]
-        for flag, values in (("--engines", self.engines), ("--scenes", self.scenes), ("--methods", self.methods)):
-            if values:
-                command += [flag, *map(str, values)]
-        for flag, value in (
-            ("--trials", self.trials),
-            ("--resolution", self.resolution),
-            ("--steps", None if self.steps == STUDY_PRESETS[self.preset].steps else self.steps),
-            ("--device", self.device),
-            ("--preset", self.preset),
-            ("--layouts", self.layouts if self.layouts != 1 else None),
-            ("--batch", self.batch if self.batch != 0 else None),
-        ):
-            if value is not None:
-                command += [flag, str(value)]
-        return command
 
 
 def make_plan(spec: StudySpec, command: list[str], progress: bool = True) -> StudyPlan:

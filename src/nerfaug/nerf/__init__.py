@@ -7,8 +7,9 @@ answers without loading it.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from nerfaug.registry import lazy_exports
 
 _HOMES = {
     "NerfConfig": "nerfaug.nerf.config",
@@ -36,16 +37,7 @@ if TYPE_CHECKING:
     from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
 
 
-def __getattr__(name: str):
-    if name not in _HOMES:
-        raise AttributeError(f"module 'nerfaug.nerf' has no attribute {name!r}")
-    value = getattr(importlib.import_module(_HOMES[name]), name)
-    globals()[name] = value  # later look-ups skip this function
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_HOMES))
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES, globals())
 
 
 __all__ = [

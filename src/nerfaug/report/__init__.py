@@ -57,7 +57,7 @@ def write_report(results_dir: Path, paper: PaperTables) -> list[Path]:
     Args:
         results_dir: the folder holding sweep.json and runs/<scene>/<method>/trial_<k>/.
         paper: the paper's ablation tables' rows and its protocol's image side
-            (`nerfaug.cli.run.paper_tables()` gives the method registry's).
+            (`nerfaug.cli.run_work.paper_tables()` gives the method registry's).
 
     Returns:
         The paths written: report.md, report.html, then the figures.

@@ -3,7 +3,11 @@ code uses where the paper is silent (`AUTHORS_SETTINGS`).
 
 The names a choice field may take are listed here, next to the field: `REJECTION_SAMPLERS`
 (`sampler`: the rejection sampler's variants; the engine's ray samplers are
-`nerfaug.nerf.SAMPLERS`) and `DISTANCE_ROTATIONS` (`distance_rotations`).
+`nerfaug.nerf.SAMPLERS`) and `DISTANCE_ROTATIONS` (`distance_rotations`); the uncertainty measures'
+modes are `nerfaug.uncertainty.choices`'.
+
+Nothing here imports torch, nor numpy until a metric is checked: `nerfaug run`, `study` and
+`propose` offer these options, and their `--help` loads neither.
 """
 
 from __future__ import annotations
@@ -17,17 +21,16 @@ from dataclasses import asdict, dataclass, fields, replace
 from types import MappingProxyType
 from typing import Annotated
 
-import numpy as np
 import tyro
 from tyro.constructors import PrimitiveConstructorSpec
 
-from nerfaug.uncertainty.combined import NORMALISATIONS
-from nerfaug.uncertainty.entropy import ENTROPY_MODES
-from nerfaug.uncertainty.fisher import (
+from nerfaug.uncertainty.choices import (
     CACHE_FLOATS,
     DEFAULT_METHOD,
+    ENTROPY_MODES,
     FISHER_LAMBDA,
     FISHER_METHODS,
+    NORMALISATIONS,
 )
 
 # The rejection sampler's variants (`selectors.rejection_sample`): the paper's, and the authors'
@@ -124,6 +127,8 @@ def _type_problem(config) -> str | None:
 def _metric_problem(metric) -> str | None:
     """What keeps `metric` from being the coverage term's M (a symmetric positive-definite 3x3
     matrix of finite numbers), or None."""
+    import numpy as np  # here: `--help` reads this module (above)
+
     try:
         matrix = np.array(metric, dtype=float)
     except (TypeError, ValueError):

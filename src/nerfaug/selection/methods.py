@@ -1,8 +1,8 @@
 """The registry of view-selection methods: an estimator (what scores the candidates) paired with a
 selector (how n are chosen from the scores), plus the settings the method fixes, so every row of
 the paper's Tables I and II, the authors' code's variants and the batch-aware variants are
-configurations of one `select_views`; and the method families (the tables, the comparisons and
-the study).
+configurations of one `select_views`. The method families (the tables, the comparisons and the
+study) name them in `selection.families`.
 
 Estimators (`selection.estimators`): "combined" (the paper's U = a H + b D), "entropy" (H only),
 "distance" (D only), "fisher" (FisherRF's expected information gain), "none" (no scores).
@@ -258,46 +258,6 @@ METHODS: dict[str, MethodSpec] = {
             "Furthest",
         ),
     ]
-}
-
-# Method families: the one source of truth for the tables, the comparisons and the study.
-# Table I (terms), as (row label, method).
-TABLE_I_ROWS = (("Combined (ours)", "ours"), ("Entropy only", "entropy-sampling"), ("Distance only", "distance"))
-# Table II (NBV vs sampling), as (family, variant, method), in the paper's order.
-TABLE_II_ROWS = (
-    ("Ours", "NBV", "ours-nbv"),
-    ("Ours", "Sampling", "ours"),
-    ("FisherRF", "NBV", "fisherrf"),
-    ("FisherRF", "Sampling", "fisherrf-sampling"),
-    ("Entropy", "NBV", "entropy"),
-    ("Entropy", "Sampling", "entropy-sampling"),
-)
-TABLE_I = tuple(m for _, m in TABLE_I_ROWS)
-TABLE_II = ("ours", "ours-nbv", "fisherrf", "fisherrf-sampling", "entropy", "entropy-sampling")
-# The paper's main comparison (Sec. IV): ours first, then the three baselines.
-MAIN_COMPARISON = ("ours", "uniform", "entropy", "fisherrf")
-# The authors' code's variants beside the paper's definition.
-AUTHORS_VARIANTS = ("ours", "ours-authors", "entropy-authors-nbv", "distance-authors-nbv")
-# Beyond the paper: batch-aware sampling beside plain sampling.
-BATCH_AWARE = ("ours", "ours-batch", "ours-batch-local", "ours-batch-sharp")
-# The study: ours (min-max and the raw sum as written), its authors' variant, the batch-aware variant and the baselines.
-STUDY_METHODS = (
-    "ours",
-    "ours-paper-sum",
-    "ours-authors",
-    "ours-batch-sharp",
-    "uniform",
-    "entropy",
-    "fisherrf",
-    "furthest",
-)
-FAMILIES: dict[str, tuple[str, ...]] = {
-    "table-i": TABLE_I,
-    "table-ii": TABLE_II,
-    "main": MAIN_COMPARISON,
-    "authors": AUTHORS_VARIANTS,
-    "batch": BATCH_AWARE,
-    "study": STUDY_METHODS,
 }
 
 

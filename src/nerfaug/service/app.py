@@ -38,9 +38,9 @@ from starlette.exceptions import HTTPException
 from swagger_ui_bundle import swagger_ui_path
 
 import nerfaug
-from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.evaluate import trained_on_count
 from nerfaug.capture.pool import Job, SessionStatus
+from nerfaug.capture.proposal_request import ProposalRequest
 from nerfaug.capture.requests import UNKNOWN_FIELD, Poses, RequestError
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes

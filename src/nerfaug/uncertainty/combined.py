@@ -24,9 +24,8 @@ from __future__ import annotations
 from torch import Tensor
 
 from nerfaug.registry import check_name
+from nerfaug.uncertainty.choices import NORMALISATIONS
 from nerfaug.uncertainty.entropy import minmax_normalise
-
-NORMALISATIONS = ("minmax", "none", "authors")
 
 
 def combined_uncertainty(

@@ -32,9 +32,8 @@ from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras
 from nerfaug.registry import check_name, unknown
+from nerfaug.uncertainty.choices import ENTROPY_MODES
 from nerfaug.uncertainty.rays import reduced_cameras, render_weights_no_grad, view_batches, views_rays
-
-ENTROPY_MODES = ("escape", "renormalise", "raw", "authors")
 
 # The authors' code: epsilon inside the log when some probability is 0, and the scale factor.
 AUTHORS_LOG_EPS = 1e-9

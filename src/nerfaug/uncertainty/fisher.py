@@ -52,15 +52,11 @@ from torch.func import functional_call, jacrev, vmap
 
 from nerfaug.cameras import Cameras, generate_rays
 from nerfaug.registry import check_name
+from nerfaug.uncertainty.choices import CACHE_FLOATS, DEFAULT_METHOD, FISHER_LAMBDA, FISHER_METHODS
 from nerfaug.uncertainty.rays import model_device
 
-FISHER_METHODS = ("random-sign", "exact")
-DEFAULT_METHOD = "random-sign"
-FISHER_LAMBDA = 1e-6
 # Bound on the per-chunk Jacobian (rays x 3 x parameters floats) held by the vmap estimator.
 _JACOBIAN_BUDGET_FLOATS = 2**25
-# Default bound on the candidates' Fisher diagonals kept for the greedy selection (1 GiB).
-CACHE_FLOATS = 2**28
 
 
 def trainable_parameters(model: nn.Module) -> dict[str, Tensor]:

@@ -1,0 +1,125 @@
+"""The work of the experiment's commands (`nerfaug.cli.run`): the sweep of `nerfaug run` and its
+report, `nerfaug report`, `nerfaug methods`, and the paper's tables for the report. It loads torch
+(the sweep, the device) and matplotlib (the report's figures), so `nerfaug.cli.run` imports it only
+when a command runs.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+from nerfaug.cli.run_size import per_cell, size_line
+from nerfaug.device import resolve_device
+from nerfaug.errors import Interrupted
+from nerfaug.experiment import sweep
+from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig
+from nerfaug.experiment.store import finished_runs
+from nerfaug.report import PaperTables, ReportError, write_report
+from nerfaug.scenes.builtin import BUILTIN_SCENES
+from nerfaug.selection import METHODS, TABLE_I_ROWS, TABLE_II_ROWS
+
+
+def run(
+    protocol: ExperimentConfig,
+    out: Path,
+    data: Path | None,
+    backend: str,
+    workers: int | None,
+    address: str | None,
+    force: bool,
+    report: bool,
+) -> None:
+    """`nerfaug run`: the sweep of `protocol` (`--data` as its one scene) into `out`, then its report."""
+    config = run_config(protocol, data)
+    workers = workers if workers is not None else sweep.default_workers(config)
+    checked = sweep.check_config(config)  # a refusal comes before the plan it would contradict
+    print(run_size_line(config, out, workers), flush=True)
+    try:
+        outcome = sweep.run_sweep(
+            config,
+            out,
+            backend=backend,
+            workers=workers,
+            address=address,
+            force=force,
+            command=["nerfaug", *sys.argv[1:]],
+            checked=checked,
+        )
+    except KeyboardInterrupt:
+        raise Interrupted(
+            f"{out}: interrupted; its {len(finished_runs(out))} finished run(s) are kept; re-run the "
+            "same command to resume"
+        ) from None
+    if report:
+        paths = write_report(out, paper_tables())
+        print("report: " + ", ".join(str(p) for p in paths))
+    if outcome.failed:
+        print(f"{len(outcome.failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
+        for key, why in outcome.failed.items():
+            print(f"  {key}: {why}", file=sys.stderr)
+        raise SystemExit(1)
+
+
+def run_config(protocol: ExperimentConfig, data: Path | None) -> ExperimentConfig:
+    """The protocol the runs use: `data` (`--data`) as the one scene, and the device decided here,
+    once, so every run (and the fingerprint) sees the same one."""
+    config = protocol
+    if data is not None:  # a path, never taken for a built-in scene of the same name
+        config = config.replace(scenes=(str(data) if data.is_absolute() else os.path.join(".", data),))
+    try:
+        return config.replace(device=resolve_device(config.device).type)
+    except ValueError as error:
+        raise SystemExit(f"--device: {error}") from None
+
+
+def run_size_line(config: ExperimentConfig, out: Path, workers: int) -> str:
+    """How many runs `config` makes, how big, and about how long on this device (`nerfaug.cli.run_size`)."""
+    total = len(config.scenes) * len(config.methods) * config.trials
+    finished = sweep.finished_in_plan(config, Path(out))
+    shape = " x ".join(
+        (
+            per_cell(len(config.scenes), "scene"),
+            per_cell(len(config.methods), "method"),
+            per_cell(config.trials, "trial"),
+        )
+    )
+    builtin = sum(scene in BUILTIN_SCENES for scene in config.scenes)
+    views = config.pool + config.n_test + config.n_initial
+    return size_line(
+        "nerfaug run",
+        {config.engine: total - finished},
+        finished,
+        shape,
+        config.resolution,
+        config.steps,
+        config.n_test,
+        config.device,
+        workers,
+        render=(builtin, views),
+    )
+
+
+def paper_tables() -> PaperTables:
+    """The rows of the paper's ablation tables as the method registry defines them, and its
+    protocol's image side (the paper preset's): what a report compares with the paper."""
+    return PaperTables(TABLE_I_ROWS, TABLE_II_ROWS, PROTOCOL_PRESETS["paper"].resolution)
+
+
+def report(results: Path) -> None:
+    """`nerfaug report`: report.md and report.html of the results folder `results`."""
+    try:
+        paths = write_report(results, paper_tables())
+    except ReportError as error:
+        raise SystemExit(str(error)) from None
+    for path in paths:
+        print(path)
+
+
+def methods() -> None:
+    """`nerfaug methods`: every view-selection method, what it does and the settings it fixes."""
+    width = max(len(name) for name in METHODS)
+    for name, spec in METHODS.items():
+        settings = ", ".join(f"{k}={v}" for k, v in spec.settings.items())
+        print(f"{name:<{width}}  {spec.description}" + (f" [settings: {settings}]" if settings else ""))

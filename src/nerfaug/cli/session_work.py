@@ -1,0 +1,79 @@
+"""The work of the capture loop's commands (`nerfaug.cli.session`): propose, export, eval and
+render-proposals. It loads torch (the session's NeRF, its dataset), so `nerfaug.cli.session`
+imports it only when a command runs.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+from nerfaug.capture.evaluate import check_evaluation_out, trained_on_count, write_evaluation
+from nerfaug.capture.folder import SessionFolder
+from nerfaug.capture.proposal import check_poses_out
+from nerfaug.capture.proposal_request import ProposalRequest
+from nerfaug.capture.simulate import render_proposals as simulated_capture
+from nerfaug.cli.option_names import as_options, checked
+from nerfaug.cli.train_work import configure, open_session, warning_lines
+
+
+def propose(run: Path, request: ProposalRequest, out: Path, device: str, force: bool, threads: int) -> None:
+    """`nerfaug propose`: the session's next views, written to `out` (and the map beside it)."""
+    request = checked(request)  # before the session is opened: a refused call reads nothing
+    check_poses_out(out, force)
+    configure(threads)
+    session = open_session(run, device, changing="propose")
+    with warning_lines():
+        proposal = session.propose(request)
+    path = proposal.write(out)
+    session.save()
+    print(
+        f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path} (angles in "
+        f"radians), map {path.with_suffix('.png')}"
+    )
+    for name, a, e in zip(proposal.names, proposal.azimuth.tolist(), proposal.elevation.tolist()):
+        print(f"  {name}: azimuth {math.degrees(a):6.1f} deg, elevation {math.degrees(e):5.1f} deg")
+
+
+def export(run: Path, out: Path, format: str) -> None:
+    """`nerfaug export`: the session's grown dataset written to `out` in `format`."""
+    folder = SessionFolder.open(run)  # exporting reads only the dataset folder
+    path = folder.export(out, format)
+    print(f"exported {folder.summary().views} views to {path}")
+
+
+def _metric(value, digits: int) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
+
+
+def evaluate(run: Path, data: Path, split: str, out: Path | None, lpips: bool, device: str, threads: int) -> None:
+    """`nerfaug eval`: the session's NeRF scored on the split `split` of `data` (written to `out`)."""
+    if out is not None:
+        check_evaluation_out(out, data)
+    configure(threads)
+    session = open_session(run, device)
+    views = session.held_out(data, split)
+    result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
+    m = result.mean
+    print(f"{run} (step {session.step}) on split '{split}' of {data}: {len(views)} views")
+    print(f"  PSNR {_metric(m['psnr'], 2)} dB   SSIM {_metric(m['ssim'], 4)}   LPIPS {_metric(m['lpips'], 4)}")
+    if m["lpips"] is None:
+        print(f"  LPIPS {result.lpips_status}")
+    if trained := trained_on_count(result):
+        print(
+            f"warning: {trained} of the {len(views)} views have the pose of a view the session trains on, so "
+            "they score how well it was fitted, not held-out views (a captured set keeps one listing: every "
+            "--split of it is all of it)",
+            file=sys.stderr,
+        )
+    if out is not None:
+        write_evaluation(out, result, run, session.step, data, split)
+        print(f"  written to {out}")
+
+
+def render_proposals(run: Path, poses: Path, scene: str, out: Path, samples: int, seed: int, threads: int) -> None:
+    """`nerfaug render-proposals`: the proposed poses rendered with Blender into `out`."""
+    with as_options():
+        paths = simulated_capture(run, poses, scene, out, samples, seed, threads)
+    print(f"rendered {len(paths)} views to {out}")

@@ -1,0 +1,139 @@
+"""The work of `nerfaug study` (`nerfaug.cli.study`): the study's runs (`nerfaug.experiment.study`),
+then its per-run table and its page (`nerfaug.report.study_table`, `nerfaug.report.study_page`),
+joined here because the experiments run and record while the report reads what they recorded, and
+neither imports the other. The methods' labels and definitions come from the method registry
+(`nerfaug.selection`) and are recorded in the table, which the page is generated from. It loads
+torch, so `nerfaug.cli.study` imports it only when the command runs.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from nerfaug.cli.run_size import per_cell, size_line
+from nerfaug.experiment import study as study_runs
+from nerfaug.experiment.layout import StudyFolder
+from nerfaug.experiment.study import table_keys
+from nerfaug.experiment.study_spec import StudySpec
+from nerfaug.experiment.sweep import default_workers, finished_in_plan
+from nerfaug.report import study_page, study_table
+from nerfaug.selection import METHODS
+from nerfaug.selection.config import SelectionConfig
+
+
+def study(
+    spec: StudySpec,
+    selection: SelectionConfig,
+    workers: int | None,
+    force: bool,
+    summary_only: bool,
+    results_doc: Path | None,
+    budget_s: float | None,
+) -> None:
+    """`nerfaug study`: the runs of `spec` with `selection` (none with `summary_only`), then the
+    table and the page (and `results_doc`)."""
+    out = Path(spec.out)
+    table_path = Path(spec.table) if spec.table is not None else StudyFolder(out).table
+    previous = study_table.read_table(table_path) if table_path.exists() else None
+    failed = {} if summary_only else run(spec, selection, previous, workers, force, budget_s)
+    recorded = record_table(out, table_path, previous)
+    print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
+    paths = study_page.write_study(out, recorded)
+    print("study summary: " + ", ".join(str(p) for p in paths))
+    if results_doc is not None:
+        print(f"results: {study_page.write_results_doc(recorded, table_path, results_doc)}")
+    if failed:
+        print(f"{len(failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
+        for key, why in failed.items():
+            print(f"  {key}: {why}", file=sys.stderr)
+        raise SystemExit(1)
+
+
+def method_records() -> dict[str, dict]:
+    """name -> its label, description and definition, for every method of the registry (what the
+    study's table records of the methods it ran)."""
+    return {
+        name: {"label": spec.label, "description": spec.description, "definition": spec.definition()}
+        for name, spec in METHODS.items()
+    }
+
+
+def run(
+    spec: StudySpec,
+    selection: SelectionConfig,
+    previous: dict | None,
+    workers: int | None,
+    force: bool,
+    budget_s: float | None,
+) -> dict[str, str]:
+    """Plan the study and run its sweeps (runs `previous`, the table, records are not run
+    again); the runs that failed, "engine: run" -> why."""
+    plan = study_runs.make_plan(spec, spec.command() + selection.flags())
+    plan.config = plan.config.replace(selection=selection)
+    for engine, why in plan.left_out.items():
+        print(f"study: engine {engine} left out: {why}", file=sys.stderr)
+    workers = workers if workers is not None else default_workers(plan.config)
+    print(study_size_line(plan, workers, previous), flush=True)
+    outcomes = study_runs.run_study(plan, workers=workers, force=force, table=previous, budget_s=budget_s)
+    return {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
+
+
+def study_size_line(plan, workers: int, table: dict | None = None) -> str:
+    """How many runs the study makes, how big, and about how long on this device (`nerfaug.cli.run_size`);
+    runs already finished are those of this plan in OUT or in `table` (the study's table)."""
+    config = plan.config
+    each = len(plan.scenes) * len(config.methods) * config.trials
+    study = StudyFolder(Path(plan.out))
+    done = {
+        engine: finished_in_plan(plan.engine_config(engine), study.engine(engine).root, table_keys(table, engine))
+        for engine in plan.engines
+    }
+    shape = " x ".join(
+        (
+            per_cell(len(plan.engines), "engine"),
+            per_cell(len(plan.scenes), "scene"),
+            per_cell(len(config.methods), "method"),
+            per_cell(config.trials, "trial"),
+        )
+    )
+    runs = {engine: each - done[engine] for engine in plan.engines}
+    return size_line(
+        "nerfaug study",
+        runs,
+        sum(done.values()),
+        shape,
+        config.resolution,
+        config.steps,
+        config.n_test,
+        config.device,
+        workers,
+    )
+
+
+def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
+    """The study's table: `previous` (the table at `table_path`, if any) updated with every valid
+    run under OUT, written back; `previous` itself when OUT holds no study.
+
+    Raises:
+        SystemExit: neither OUT/study.json nor the table exists.
+    """
+    path = StudyFolder(Path(out)).record
+    if not path.is_file():
+        if previous is None:
+            raise SystemExit(
+                f"study: nothing to summarise: neither {path} nor the table {table_path} exists; run a "
+                "study first, or pass --table FILE"
+            )
+        return previous
+    record = study_runs.with_design(json.loads(path.read_text()), Path(out))
+    if previous is not None:
+        record = study_runs.merge_records(previous["plan"], record)
+    rows, scenes = study_table.rows_from_folders(Path(out), record["engines"])
+    for scene, folder in record.get("datasets", {}).items():
+        if scene in scenes and (source := study_runs.prepared_source(Path(folder))) is not None:
+            scenes[scene]["source"] = source
+    recorded = study_table.make_table(record, rows, scenes, previous, method_records())
+    study_table.write_table(table_path, recorded)
+    return recorded
