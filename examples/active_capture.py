@@ -75,7 +75,7 @@ def main(
     views_per_round: int = 6,
     steps_per_round: int = 500,
     n_candidates: int = 500,
-    preset: Literal["cpu", "paper", "test"] = "cpu",
+    preset: Literal["nerfacto-cpu", "cpu", "paper", "test"] = "nerfacto-cpu",
     seed: int = 0,
     resolution: int = 100,
     pool: int = 300,

@@ -146,7 +146,7 @@ class Options:
     """the workspace's elevation band, degrees above the equator (low, high)."""
     keep_out: tuple[float, float, float, float] = (1.0, 0.0, 0.3, 35.0)
     """a cone the camera must not enter: direction x y z from the centre, half-angle in degrees."""
-    preset: Literal["cpu", "paper", "test"] = "cpu"
+    preset: Literal["nerfacto-cpu", "cpu", "paper", "test"] = "nerfacto-cpu"
     """the NeRF engine preset of the session."""
     seed: int = 0
     """seeds the session; the proposal of round k uses seed + k."""

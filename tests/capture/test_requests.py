@@ -58,7 +58,7 @@ def test_session_settings_out_of_range_name_the_field_and_value(fields, says):
 def test_session_settings_defaults_and_conversions():
     settings = SessionSettings(centre=[1, 2, 3], radius=2).checked()
     assert settings == SessionSettings(centre=(1.0, 2.0, 3.0), radius=2.0)
-    assert (settings.preset, settings.seed, settings.downscale, settings.up) == ("cpu", 0, 1, (0.0, 0.0, 1.0))
+    assert (settings.preset, settings.seed, settings.downscale, settings.up) == ("nerfacto-cpu", 0, 1, (0.0, 0.0, 1.0))
 
 
 @pytest.mark.parametrize(

@@ -51,7 +51,7 @@ COMMANDS = {
     "export": "nerfaug.cli.session:export",
     "eval": "nerfaug.cli.session:evaluate",
     "render-proposals": "nerfaug.cli.session:render_proposals",
-    "uncertainty": "nerfaug.cli.serve:uncertainty",
+    "uncertainty": "nerfaug.cli.uncertainty:uncertainty",
     "serve": "nerfaug.cli.serve:serve",
 }
 
