@@ -1,4 +1,4 @@
-"""The operations every `Format` has (`nerfaug.data.format`): copy between formats (images byte
+"""The operations every `Format` has (`nerfaug.data.interface`): copy between formats (images byte
 for byte, except non-PNG into a PNG-only format), append to a split or start one, and the checks
 `find_split` makes before anything is read from a folder."""
 

@@ -150,8 +150,8 @@ def test_a_frame_names_its_own_distortion(tmp_path):
 
 
 def test_distorted_photos_leave_their_format_undistorted_and_frames_added_later_are_pinhole(tmp_path):
-    from nerfaug.data.format import NewFrame
     from nerfaug.data.formats import find_split, get_format
+    from nerfaug.data.interface import NewFrame
 
     lens, keys = RADIAL, {"camera_model": "OPENCV", "k1": -0.21, "k2": 0.05, "k3": 0.01, "p1": 0.003, "p2": -0.002}
     square = (80.0, 80.0, 50.0, 40.0)  # fx = fy, centred: the Blender format can describe it

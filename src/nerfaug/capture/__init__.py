@@ -1,7 +1,7 @@
 """Active capture: a NeRF trained on the views you have proposes where to capture next, and grows
 its dataset with what you captured there.
 
-Rooms (the hemisphere and the engine frame are `nerfaug.data.frame`'s): `requests` (what a
+Rooms (the hemisphere and the engine frame are `nerfaug.data.world_frame`'s): `requests` (what a
 session is asked, as typed schemas: settings, intrinsics, poses, ids; light), `proposal` (proposed
 views, their JSON), `images` (captured images from any source, checked), `dataset` (what a session
 reads of its dataset: the default split, frames as the trainer sees them, repeated poses; every
@@ -39,11 +39,11 @@ _HOMES = {
     "ViewConstraints": "proposal_request",
     "Intrinsics": "requests",
     "SessionSettings": "requests",
-    "ENGINE_RADIUS": "nerfaug.data.frame",
-    "Hemisphere": "nerfaug.data.frame",
-    "estimate_centre": "nerfaug.data.frame",
-    "estimate_hemisphere": "nerfaug.data.frame",
-    "estimate_up": "nerfaug.data.frame",
+    "ENGINE_RADIUS": "nerfaug.data.world_frame",
+    "Hemisphere": "nerfaug.data.world_frame",
+    "estimate_centre": "nerfaug.data.world_frame",
+    "estimate_hemisphere": "nerfaug.data.world_frame",
+    "estimate_up": "nerfaug.data.world_frame",
 }
 __all__ = sorted(_HOMES)
 

@@ -19,8 +19,8 @@ from nerfaug.capture.integrity import sha256_bytes
 from nerfaug.capture.proposal import Proposal, read_poses
 from nerfaug.capture.state import DuplicateViews
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import DatasetSplit, NewFrame, unique_stem
 from nerfaug.data.frames import check_pose
+from nerfaug.data.interface import DatasetSplit, NewFrame, unique_stem
 from nerfaug.data.views import Views
 from nerfaug.jsonio import remove_temp_files
 

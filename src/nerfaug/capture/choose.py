@@ -17,8 +17,8 @@ from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.proposal_request import ProposalRequest, ViewConstraints
 from nerfaug.capture.state import ProposalRecord, now
-from nerfaug.data.frame import ENGINE_RADIUS
 from nerfaug.data.frames import check_pose
+from nerfaug.data.world_frame import ENGINE_RADIUS
 from nerfaug.health import EmptyModel, Health
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.progress import progress_bar

@@ -21,7 +21,7 @@ import torch
 from torch import Tensor
 
 from nerfaug.capture.proposal_request import ViewConstraints
-from nerfaug.data.frame import Hemisphere
+from nerfaug.data.world_frame import Hemisphere
 
 
 def angle_range_mask(values: Tensor, low: float, high: float) -> Tensor:

@@ -14,11 +14,11 @@ import torch
 from nerfaug.cameras import Cameras
 from nerfaug.capture.requests import START_LAYOUTS, RequestError, SparseStart
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import has_split
-from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import read_image
+from nerfaug.data.interface import DatasetSplit
 from nerfaug.data.views import Views
+from nerfaug.data.world_frame import Hemisphere
 from nerfaug.layouts import initial_views
 
 # A new frame's image name (file stem): no separators, no leading dot.

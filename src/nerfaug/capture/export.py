@@ -7,8 +7,8 @@ from pathlib import Path
 
 from nerfaug import owned
 from nerfaug.capture.runfolder import DATASET_SPLIT, EXPORT_KIND
-from nerfaug.data.format import DatasetSplit, Format
 from nerfaug.data.formats import FORMATS, find_split, has_split
+from nerfaug.data.interface import DatasetSplit, Format
 from nerfaug.errors import FolderRefused
 
 # Held-out splits of the source dataset an export in a format with splits takes along.

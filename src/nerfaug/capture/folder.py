@@ -17,10 +17,10 @@ from nerfaug.capture.requests import Intrinsics, Split, validated
 from nerfaug.capture.runfolder import CHECKPOINT_FILE, DATASET_DIR, DATASET_SPLIT, SESSION_FILE
 from nerfaug.capture.state import AdditionRecord, ProposalRecord, SessionError, SessionState, SessionSummary
 from nerfaug.containment import inside
-from nerfaug.data.format import DatasetSplit
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, get_format
-from nerfaug.data.frame import Hemisphere
+from nerfaug.data.interface import DatasetSplit
 from nerfaug.data.views import Views
+from nerfaug.data.world_frame import Hemisphere
 
 
 def camera_of(k: Intrinsics, width: int | None = None, height: int | None = None) -> Cameras:

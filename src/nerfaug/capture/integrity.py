@@ -19,7 +19,7 @@ import torch
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.state import Integrity, SessionError, UnverifiedCheckpoint
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import DatasetSplit
+from nerfaug.data.interface import DatasetSplit
 
 _RESTORE = "put the session's own file back, or start a new session with `nerfaug train DATA --out NEW_RUN`"
 

@@ -13,7 +13,7 @@ import torch
 from torch import Tensor
 
 from nerfaug.cameras import Cameras
-from nerfaug.data.frame import Hemisphere
+from nerfaug.data.world_frame import Hemisphere
 from nerfaug.selection.candidates import with_poses
 
 if TYPE_CHECKING:

@@ -18,8 +18,8 @@ from nerfaug import owned
 from nerfaug.cameras import Cameras
 from nerfaug.capture.runfolder import RUN_KIND, SESSION_FILE
 from nerfaug.data import DatasetError
-from nerfaug.data.frame import Hemisphere
 from nerfaug.data.frames import check_pose
+from nerfaug.data.world_frame import Hemisphere
 from nerfaug.errors import FolderRefused
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
 

@@ -15,7 +15,7 @@ A session lives in a run folder:
       proposals/            proposal_000.json (poses + every candidate's score), proposal_000.png (map)
 
 Poses given to and returned by a session are in the dataset's world frame; the NeRF is trained in
-the engine frame of the session's hemisphere (`nerfaug.data.frame`).
+the engine frame of the session's hemisphere (`nerfaug.data.world_frame`).
 """
 
 from __future__ import annotations
@@ -78,10 +78,10 @@ from nerfaug.capture.state import (
     now,
 )
 from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
-from nerfaug.data.format import DatasetSplit, NewFrame
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format, plainest_format
-from nerfaug.data.frame import estimate_hemisphere, pole_tilt_degrees
+from nerfaug.data.interface import DatasetSplit, NewFrame
 from nerfaug.data.views import Views
+from nerfaug.data.world_frame import estimate_hemisphere, pole_tilt_degrees
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.health import EmptyModelWarning, Health, model_health
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json

@@ -32,9 +32,9 @@ import nerfaug
 from nerfaug.capture.dataset import default_split
 from nerfaug.capture.requests import Intrinsics, RequestError, Seed, SessionSettings
 from nerfaug.capture.runfolder import DATASET_SPLIT, SESSION_FILE
-from nerfaug.data.format import Format
 from nerfaug.data.formats import FORMATS
-from nerfaug.data.frame import Hemisphere
+from nerfaug.data.interface import Format
+from nerfaug.data.world_frame import Hemisphere
 from nerfaug.errors import NerfaugError
 
 SESSION_FORMAT = 1

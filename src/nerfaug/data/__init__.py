@@ -1,8 +1,8 @@
 """Datasets: images with their cameras, read from and written to NeRF-synthetic (Blender) and
 nerfstudio/instant-ngp `transforms.json` folders, through one registry of formats (`FORMATS`).
 
-Inside the package imports go one way: errors <- views <- frames <- format <- {blender, nerfstudio}
-<- formats.
+Inside the package imports go one way: errors <- views <- frames <- interface (the `Format`) <-
+{blender, nerfstudio, llff, idr} <- formats (the registry).
 The names below are imported on first use, so that `nerfaug.data.errors` (and `nerfaug.jsonio`,
 which raises its `DatasetError`) stay free of torch and imageio.
 """
@@ -21,9 +21,9 @@ _HOMES = {
     "write_blender_split": "nerfaug.data.blender",
     "load_nerfstudio": "nerfaug.data.nerfstudio",
     "write_nerfstudio": "nerfaug.data.nerfstudio",
-    "Format": "nerfaug.data.format",
-    "DatasetSplit": "nerfaug.data.format",
-    "NewFrame": "nerfaug.data.format",
+    "Format": "nerfaug.data.interface",
+    "DatasetSplit": "nerfaug.data.interface",
+    "NewFrame": "nerfaug.data.interface",
     "EXCHANGE_FORMAT": "nerfaug.data.formats",
     "FORMATS": "nerfaug.data.formats",
     "detect_format": "nerfaug.data.formats",
@@ -42,7 +42,6 @@ if TYPE_CHECKING:
         write_blender_split,
     )
     from nerfaug.data.errors import DatasetError
-    from nerfaug.data.format import DatasetSplit, Format, NewFrame
     from nerfaug.data.formats import (
         EXCHANGE_FORMAT,
         FORMATS,
@@ -54,6 +53,7 @@ if TYPE_CHECKING:
         register_format,
         require_split,
     )
+    from nerfaug.data.interface import DatasetSplit, Format, NewFrame
     from nerfaug.data.nerfstudio import load_nerfstudio, write_nerfstudio
     from nerfaug.data.views import Views
 

@@ -14,8 +14,8 @@ import torch
 from nerfaug.camera_schema import check_field_of_view
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import Format
 from nerfaug.data.frames import load_frames, require, write_image
+from nerfaug.data.interface import Format
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
 

@@ -1,7 +1,7 @@
 """The registry of on-disk dataset formats (`FORMATS`), and what picks one: `detect_format`,
 `find_split`, `load_dataset`.
 
-A format is one `Format` object with every operation on a folder in it (`nerfaug.data.format`).
+A format is one `Format` object with every operation on a folder in it (`nerfaug.data.interface`).
 Adding a format is one module defining it plus one entry in `FORMATS` (or, for a format defined
 outside the package, `with register_format(MyFormat()):`). No format's module imports this one,
 so the formats never import back the code that picks them.
@@ -16,8 +16,8 @@ from pathlib import Path
 from nerfaug.containment import inside
 from nerfaug.data.blender import BlenderFormat
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import DatasetSplit, Format
 from nerfaug.data.idr import IdrFormat
+from nerfaug.data.interface import DatasetSplit, Format
 from nerfaug.data.llff import LlffFormat
 from nerfaug.data.nerfstudio import NerfstudioFormat
 from nerfaug.data.views import Views

@@ -22,8 +22,8 @@ import numpy as np
 from nerfaug.camera_schema import check_projection, check_scene_distance, check_similarity
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import CapturedSetFormat
 from nerfaug.data.frames import check_pose, load_frames
+from nerfaug.data.interface import CapturedSetFormat
 from nerfaug.data.llff import image_files
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_bytes

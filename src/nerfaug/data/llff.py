@@ -27,8 +27,8 @@ from nerfaug.camera_schema import check_pinhole
 from nerfaug.cameras import Cameras
 from nerfaug.containment import inside
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import CapturedSetFormat
 from nerfaug.data.frames import check_pose, load_frames
+from nerfaug.data.interface import CapturedSetFormat
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_bytes
 

@@ -12,13 +12,13 @@ import numpy as np
 from nerfaug.camera_schema import check_field_of_view, check_pinhole
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.format import Format
 from nerfaug.data.frames import (
     check_number,
     load_frames,
     require,
     write_image,
 )
+from nerfaug.data.interface import Format
 from nerfaug.data.lens import lens_of, undistort, undistorted_camera
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json

@@ -15,8 +15,8 @@ from pathlib import Path
 import torch
 
 from nerfaug.data import Views, find_split, has_split, load_dataset, require_split
-from nerfaug.data.frame import Hemisphere
 from nerfaug.data.views import spread_over_frames
+from nerfaug.data.world_frame import Hemisphere
 from nerfaug.device import configure_process, describe_device
 from nerfaug.evaluation import evaluate_views, load_lpips
 from nerfaug.experiment.config import ExperimentConfig

@@ -5,7 +5,7 @@ Three kinds of dataset reach the protocol:
 - a dataset with a test split (NeRF-synthetic): the pool is its train split, the test views are
   spread evenly over its test split (an orbit's first frames would cover only one side);
 - a captured set, one listing of every photo (LLFF, IDR/DTU, nerfstudio): the cameras are moved
-  into the engine frame (`nerfaug.data.frame`: the point they look at as origin, their mean up as
+  into the engine frame (`nerfaug.data.world_frame`: the point they look at as origin, their mean up as
   +z, their mean distance as NeRF-synthetic's 4.03), the test views are spread over all
   directions (farthest-point sampling) and never candidates, and the rest is the pool.
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from nerfaug.data.frame import estimate_hemisphere
+from nerfaug.data.world_frame import estimate_hemisphere
 from nerfaug.hemisphere import angles_from_pose
 from nerfaug.layouts import Half, directions_of, initial_in_half, layout_halves
 

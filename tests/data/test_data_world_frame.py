@@ -1,6 +1,6 @@
 """The hemisphere of a capture as a person reads it: numbers, not a repr, and no "-0"."""
 
-from nerfaug.data.frame import Hemisphere, plain_number
+from nerfaug.data.world_frame import Hemisphere, plain_number
 
 
 def test_a_hemisphere_prints_as_plain_numbers():
