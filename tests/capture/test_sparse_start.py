@@ -16,7 +16,7 @@ from nerfaug.data import write_blender_split
 from nerfaug.data.views import Views
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, angles_from_pose, sample_uniform_poses
 
-from ..data.test_data_captured_formats import llff_fixture
+from ..data.test_captured_formats import llff_fixture
 
 SIZE = 8
 VIEWS = 16

@@ -25,7 +25,7 @@ from nerfaug.capture.requests import replaced_by
 from nerfaug.cli.train import THREADS, Device, RunFolder
 
 # The registered dataset formats' names (`nerfaug.data.formats.FORMATS`, which loads torch:
-# tests/test_cli_help.py checks that the two agree) and the one an export writes by default.
+# tests/cli/test_help.py checks that the two agree) and the one an export writes by default.
 FormatName = Literal["blender", "nerfstudio", "idr", "llff"]
 EXCHANGE_FORMAT = "nerfstudio"
 Request = Annotated[ProposalRequest, tyro.conf.arg(name="")]

@@ -35,7 +35,7 @@ Device = Literal["auto", "cpu", "cuda"]
 GivenSettings = given_form(SessionSettings)
 Settings = Annotated[GivenSettings, tyro.conf.arg(name="")]
 # Torch threads of a session's training: a sweep's policy (`ExperimentConfig.threads_per_run`, one
-# per run unless told; tests/test_session_cli.py checks they agree), so a session and a study
+# per run unless told; tests/cli/test_session_commands.py checks they agree), so a session and a study
 # sharing a machine do not oversubscribe its cores.
 THREADS = 1
 

@@ -262,7 +262,7 @@ PRESETS: Presets[NerfConfig] = Presets(
 """The engine presets by name (`NerfConfig.preset` describes each)."""
 
 # A named variant is a preset with some settings changed. Each is pinned by digest like the
-# presets (tests/nerf/test_nerf_presets.py); the study compares a variant with its base cell by cell.
+# presets (tests/nerf/test_presets.py); the study compares a variant with its base cell by cell.
 PRESETS["nerfacto-cpu-last-sample"] = replace(PRESETS["nerfacto-cpu"], background_mode="last_sample")
 
 VARIANT_SEPARATOR = "+"

@@ -17,7 +17,7 @@ from nerfaug.uncertainty.fisher import FISHER_LAMBDA, fisher_views, fisherrf_sco
 from nerfaug.uncertainty.images import fisher_pixel_scores, view_images
 from nerfaug.uncertainty.rays import reduced_cameras, views_rays
 
-_spec = importlib.util.spec_from_file_location("unc_fisher_helpers", Path(__file__).with_name("test_unc_fisher.py"))
+_spec = importlib.util.spec_from_file_location("unc_fisher_helpers", Path(__file__).with_name("test_fisher.py"))
 helpers = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(helpers)
 

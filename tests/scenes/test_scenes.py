@@ -232,7 +232,7 @@ def test_a_rendered_dataset_holding_a_users_file_is_not_replaced(tmp_path):
 
 # ---- the cow: a built-in scene built from files shipped with the package -------------------------
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_cow_files_are_real_packaged_and_carry_their_licence():

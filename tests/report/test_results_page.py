@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PAGE = ROOT / "docs" / "results.md"
 TABLE = ROOT / "docs" / "results" / "study-table.json"
 FISHER = ROOT / "docs" / "results" / "fisher-stability.json"
