@@ -407,7 +407,7 @@ def _direction(value: tuple[float, float, float]) -> tuple[float, float, float]:
 
 # A capture session's engine unless told: on a real capture (NeRF-synthetic mic at 100 px, all 100
 # views, 1000 steps, seeds 0-9) `cpu` rendered 4 of 10 sessions as background only (its opaque start
-# drives the colour network to saturated white) and `nerfacto-cpu` none, in a quarter of the time
+# drives the colour network to saturated white) and `nerfacto-cpu` none, training faster
 # (BENCHMARKS.md, "Empty NeRFs on a real capture").
 DEFAULT_SESSION_ENGINE = "nerfacto-cpu"
 
