@@ -187,7 +187,7 @@ class ProposalRequest(Schema):
     n_candidates: Annotated[int, Field(ge=1, le=MAX_CANDIDATES)] = 500
     """hemisphere candidates to score."""
     seed: Annotated[Seed | None, replaced_by("the session's, per proposal", "INT")] = None
-    """seed this proposal (0 to 2^63-1); by default the session's seed and proposal number seed it."""
+    """seed this proposal (0 to 2^53-1); by default the session's seed and proposal number seed it."""
     selection: Annotated[SelectionConfig, PlainValidator(_selection), WithJsonSchema(_SELECTION_SCHEMA)] = field(
         default_factory=SelectionConfig
     )

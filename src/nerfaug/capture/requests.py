@@ -421,7 +421,7 @@ class SessionSettings(Schema):
     preset: Annotated[EnginePreset, tyro.conf.arg(name="engine")] = DEFAULT_SESSION_ENGINE
     """the NeRF engine preset: nerfacto-cpu (nerfacto shrunk), cpu (K-planes), paper (a GPU's), test."""
     seed: Seed = 0
-    """seeds the model, its training and every proposal (0 to 2^63-1)."""
+    """seeds the model, its training and every proposal (0 to 2^53-1, exact in any JSON client)."""
     downscale: Annotated[int, Field(ge=1, le=256)] = 1
     """train on images shrunk by this integer factor."""
     centre: Annotated[Vector | None, replaced_by("the point the cameras look at", "X Y Z")] = None
