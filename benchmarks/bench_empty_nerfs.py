@@ -5,10 +5,10 @@ on prepared real scenes, per engine, seed and number of views, as `nerfaug train
         --views 12 all --steps 1000 --out docs/benchmarks/empty-nerfs.json
 
 An engine may be a variant ("cpu+average_init_density=0.01"). "12" starts sparse (`SparseStart`:
-12 views on one half, layout 0); "all" trains on the whole
-train split (the default of `nerfaug train`). Each run is a capture session on the CPU, one torch
-thread, one at a time; the record keeps the health check, the training PSNR, the share of the
-occupancy grid's cells left occupied (occupancy engines) and the seconds. Prints a Markdown table.
+12 views on one half, layout 0); "all" trains on the whole train split (the default of `nerfaug
+train`). Each run is a capture session on the CPU, one torch thread, one at a time; the record
+keeps the health check, the training PSNR, the share of the occupancy grid's cells left occupied
+(occupancy engines) and the seconds. Prints a Markdown table.
 """
 
 from __future__ import annotations

@@ -223,16 +223,9 @@ def test_a_commands_help_loads_no_torch(command):
     """`nerfaug COMMAND --help` parses its options before anything heavy is imported: torch alone
     takes seconds to import (BENCHMARKS.md, "`--help` start-up"), numpy, FastAPI and matplotlib
     a good part of one; each command's options are light, its work is imported when it runs."""
-    import subprocess
-    import sys
-
-    probe = (
-        "import sys\nfrom nerfaug.cli import main\n"
-        f"try:\n    main([*{command.split()!r}, '--help'])\nexcept SystemExit:\n    pass\n"
-        "print(sorted(m for m in ('torch', 'numpy', 'fastapi', 'matplotlib') if m in sys.modules))"
+    done = help_in_a_fresh_process(
+        command.split(), "sorted(m for m in ('torch', 'numpy', 'fastapi', 'matplotlib') if m in sys.modules)"
     )
-    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
     assert f"usage: nerfaug {command}" in done.stdout
     assert done.stdout.strip().splitlines()[-1] == "[]", command
 
@@ -245,20 +238,29 @@ def test_trains_old_preset_option_names_its_new_spelling(capsys):
     assert error.startswith("nerfaug: --preset: `nerfaug train` takes the NeRF engine preset as --engine")
 
 
-@pytest.mark.parametrize("argv", [[], ["scene"], ["scene", "render"], ["scene", "prepare"]])
-def test_the_overview_and_the_scene_commands_help_load_no_command_and_no_torch(argv):
-    """`nerfaug --help` lists the commands without importing them (it took seconds, loading every
-    command's options, torch among them); `nerfaug scene render --help` reads its options alone."""
+def help_in_a_fresh_process(argv: list[str], loaded: str):
+    """`nerfaug ARGV --help` in a new Python process, which then prints the expression `loaded`
+    (over `sys.modules`) as its last line; the finished process (exit 0 checked)."""
     import subprocess
     import sys
 
     probe = (
         "import sys\nfrom nerfaug.cli import main\n"
         f"try:\n    main([*{argv!r}, '--help'])\nexcept SystemExit:\n    pass\n"
-        "print(sorted(m for m in sys.modules if m == 'torch' or m.startswith(('nerfaug.cli.run', 'nerfaug.cli.s'))))"
+        f"print({loaded})"
     )
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+    return done
+
+
+@pytest.mark.parametrize("argv", [[], ["scene"], ["scene", "render"], ["scene", "prepare"]])
+def test_the_overview_and_the_scene_commands_help_load_no_command_and_no_torch(argv):
+    """`nerfaug --help` lists the commands without importing them (it took seconds, loading every
+    command's options, torch among them); `nerfaug scene render --help` reads its options alone."""
+    done = help_in_a_fresh_process(
+        argv, "sorted(m for m in sys.modules if m == 'torch' or m.startswith(('nerfaug.cli.run', 'nerfaug.cli.s')))"
+    )
     loaded = done.stdout.strip().splitlines()[-1]
     assert loaded == ("['nerfaug.cli.scene']" if argv else "[]"), loaded
 

@@ -177,10 +177,9 @@ def test_compiled_networks_train_like_the_pure_path(sphere_views):
 def test_each_loss_is_kept_by_name_and_they_sum_to_the_loss(views):
     """A collapse is debugged loss by loss: every history entry names the photometric error and the
     proposal sampler's distortion and interlevel losses, whose sum (in that order) is the loss."""
-    proposal = dict(encoding="hash", sampler="proposal", hash_levels=4, hash_log2_table_size=10, num_samples=8)
-    proposal |= dict(proposal_samples=(16, 12), proposal_max_resolutions=(32, 64), proposal_log2_table_size=10)
-    proposal |= dict(proposal_hash_levels=3, hidden_dim=16, color_hidden_dim=16, color_layers=1)
-    trainer = Trainer(views, NerfConfig.preset("test", **proposal), seed=0, progress=False)
+    from .test_model import TINY_PROPOSAL
+
+    trainer = Trainer(views, NerfConfig.preset("test", **TINY_PROPOSAL), seed=0, progress=False)
     trainer.train(6)
     for entry in trainer.history:
         losses = entry["losses"]

@@ -97,8 +97,7 @@ def engine_views(dataset: DatasetSplit, start: int, downscale: int, background, 
 
 def sparse_start(source: DatasetSplit, views: Views, hemisphere: Hemisphere, start: SparseStart):
     """(`source` narrowed to a sparse start's initial views, their cameras, the candidate pool:
-    a transforms dict of the other views' world-frame poses and names, with the start's record
-    under "start")."""
+    a transforms dict of the other views' world-frame poses and names, the start's record)."""
     world = views.cameras.camera_to_world
     try:
         chosen = initial_views(hemisphere.to_engine(world), start.initial, start.layout, START_LAYOUTS)
@@ -114,4 +113,4 @@ def sparse_start(source: DatasetSplit, views: Views, hemisphere: Hemisphere, sta
         "of": len(views),
         "names": [views.names[i] for i in chosen],
     }
-    return replace(source, only=tuple(chosen)), views.cameras[chosen], {"frames": frames, "start": record}
+    return replace(source, only=tuple(chosen)), views.cameras[chosen], {"frames": frames}, record

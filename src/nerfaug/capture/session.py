@@ -201,13 +201,14 @@ class CaptureSession(SessionFolder):
                 "or --up X Y Z",
                 TiltedPole,
             )
-        pool = None
+        pool = record = None
         if start is not None:
-            source, cameras, pool = sparse_start(source, views, hemisphere, validated(SparseStart, start, "start"))
+            start = validated(SparseStart, start, "start")
+            source, cameras, pool, record = sparse_start(source, views, hemisphere, start)
         origin = SourceInfo(data_dir=str(data_dir), split=split, format=source.format.name)
         state = _new_state(origin, cameras, plainest_format(source, cameras), settings, config, background, hemisphere)
         if pool is not None:
-            state.start, state.pool = pool.pop("start"), POOL_FILE
+            state.start, state.pool = record, POOL_FILE
         # Everything is checked: from here on the run folder is written, and marked as nerfaug's first;
         # a failure (an unreadable image, Ctrl-C) removes what was written, leaving no half-made session.
         existed = run_dir.exists()

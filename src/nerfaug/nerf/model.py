@@ -8,6 +8,8 @@ rendering is deterministic and still differentiable with respect to every field 
 
 from __future__ import annotations
 
+import functools
+import operator
 from collections.abc import Iterator
 
 import torch
@@ -175,7 +177,8 @@ class NerfModel(nn.Module):
 
     def auxiliary_loss(self, output: RenderOutput) -> Tensor:
         """The sampler's losses summed (0 without any), in the order they are named."""
-        return total_loss(self.sampler.auxiliary_losses(output), output.rgb.new_zeros(()))
+        parts = list(self.sampler.auxiliary_losses(output).values())
+        return functools.reduce(operator.add, parts) if parts else output.rgb.new_zeros(())
 
     def _eval_slices(
         self, origins: Tensor, directions: Tensor, chunk: int | None
@@ -270,16 +273,8 @@ def _rename_old_keys(module, state_dict, prefix, *args) -> None:
                 break
 
 
-def total_loss(losses: dict[str, Tensor], start: Tensor | None = None) -> Tensor:
-    """The sum of `losses` (scalars or per-run Tensors of one shape) in their order, added to
-    `start` when given: "rgb" + ("distortion" + "interlevel") keeps the sum's rounding as it was
-    when the sampler returned one summed loss."""
-    values = list(losses.values())
-    if start is None:
-        start, values = values[0], values[1:]
-    if not values:
-        return start
-    auxiliary = values[0]
-    for value in values[1:]:
-        auxiliary = auxiliary + value
-    return start + auxiliary
+def total_loss(losses: dict[str, Tensor]) -> Tensor:
+    """The first loss ("rgb") plus the others summed in their order: "rgb" + ("distortion" +
+    "interlevel") keeps the sum's rounding as it was when the sampler returned one summed loss."""
+    first, *others = losses.values()
+    return first + functools.reduce(operator.add, others) if others else first
