@@ -218,18 +218,18 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     why = f"split '{split}' of {data}"
     if split is None:
         split, why = default_split(data)
-    count = len(load_dataset(data, split, lazy=True))
     if start is None:
-        print(f"training on {count} views: {why}", flush=True)
-    else:
+        print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
+    with warning_lines(), as_options():
+        session = CaptureSession.create(
+            data, out, settings, split=split, device=device_name(device), progress=True, start=start
+        )
+    if start is not None:  # said once the start is found possible (a refused one says only why)
+        count = session.state.start["of"]
         print(
             f"training on {start.initial} of the {count} views of {why} (layout {start.layout}: one half of the "
             f"object); the other {count - start.initial} are the candidates `nerfaug propose` chooses from",
             flush=True,
-        )
-    with warning_lines(), as_options():
-        session = CaptureSession.create(
-            data, out, settings, split=split, device=device_name(device), progress=True, start=start
         )
     _lock(out, "train")
     print(f"session created in {out}: {session.summary().views} views; hemisphere {session.hemisphere}")
