@@ -181,11 +181,11 @@ class NaiveHashEncoding(nn.Module):
 
 def naive_hash_encoding(config: NerfConfig) -> NaiveHashEncoding:
     return NaiveHashEncoding(
-        config.hash_levels,
-        config.hash_features_per_level,
-        config.hash_log2_table_size,
-        config.hash_base_resolution,
-        config.hash_max_resolution,
+        config.field.hash.levels,
+        config.field.hash.features_per_level,
+        config.field.hash.log2_table_size,
+        config.field.hash.base_resolution,
+        config.field.hash.max_resolution,
     )
 
 
@@ -195,7 +195,7 @@ def time_encodings(points: int = 32768, repeats: int = 5) -> dict:
     encodings = {}
     for preset in ("cpu", "nerfacto-cpu", "paper"):
         config = NerfConfig.preset(preset)
-        encodings[f"{config.encoding} ({preset} preset)"] = ENCODINGS[config.encoding](config)
+        encodings[f"{config.field.encoding} ({preset} preset)"] = ENCODINGS[config.field.encoding](config)
     encodings["hash, naive per-level loop (paper preset)"] = naive_hash_encoding(NerfConfig.preset("paper"))
     x = torch.rand(points, 3, generator=torch.Generator().manual_seed(0))
     times: dict[str, list[float]] = {name: [] for name in encodings}

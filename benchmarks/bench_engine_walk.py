@@ -132,8 +132,8 @@ def check_walk_reaches_paper() -> None:
 
     last = NerfConfig.preset(walk_entries()[-1][2])
     if last != NerfConfig.preset("paper"):
-        paper = NerfConfig.preset("paper").to_dict()
-        differ = {k: (v, paper[k]) for k, v in last.to_dict().items() if paper[k] != v}
+        paper = NerfConfig.preset("paper").flat()
+        differ = {k: (v, paper[k]) for k, v in last.flat().items() if paper[k] != v}
         raise AssertionError(f"the walk does not end at the paper preset: {differ}")
 
 

@@ -16,13 +16,13 @@ def test_the_walk_starts_at_the_cpu_sibling_and_ends_at_the_paper_preset(bench):
 
 
 def test_each_group_sets_paper_values_and_every_difference_is_in_one_group(bench):
-    start, paper = NerfConfig.preset("nerfacto-cpu-last-sample").to_dict(), NerfConfig.preset("paper").to_dict()
+    start, paper = NerfConfig.preset("nerfacto-cpu-last-sample").flat(), NerfConfig.preset("paper").flat()
     differing = {k for k in start if start[k] != paper[k]}
     changed = [name for _, _, changes in bench.GROUPS for name in changes]
     assert len(changed) == len(set(changed))
     assert differing <= set(changed)
     for _, _, changes in bench.GROUPS:
-        alone = NerfConfig.preset(bench.variant(changes)).to_dict()
+        alone = NerfConfig.preset(bench.variant(changes)).flat()
         assert all(alone[name] == paper[name] for name in changes), changes
 
 
@@ -33,7 +33,7 @@ def test_every_probe_is_a_valid_engine_name(bench):
 
 
 def test_the_end_probes_are_the_paper_preset_with_only_their_background_changed(bench):
-    paper = NerfConfig.preset("paper").to_dict()
+    paper = NerfConfig.preset("paper").flat()
     for name, (_, changes) in bench.END_PROBES.items():
-        probe = NerfConfig.preset(bench.all_entries()[name][1]).to_dict()
+        probe = NerfConfig.preset(bench.all_entries()[name][1]).flat()
         assert {k for k in paper if paper[k] != probe[k]} == set(changes) == {"background_mode"}, name

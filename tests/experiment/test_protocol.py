@@ -13,9 +13,9 @@ from nerfaug.layouts import initial_in_half, layout_halves
 
 def test_paper_field_learning_rate_for_chair_and_materials():
     config = ExperimentConfig(engine="cpu")
-    assert config.engine_config("chair").field_lr == 0.002
-    assert config.engine_config("/data/nerf_synthetic/materials").field_lr == 0.002
-    assert config.engine_config("lego").field_lr != 0.002
+    assert config.engine_config("chair").optimiser.field_lr == 0.002
+    assert config.engine_config("/data/nerf_synthetic/materials").optimiser.field_lr == 0.002
+    assert config.engine_config("lego").optimiser.field_lr != 0.002
 
 
 def test_initial_views_of_a_user_dataset_lie_on_one_half():

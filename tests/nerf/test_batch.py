@@ -55,8 +55,8 @@ def trained_models(config: NerfConfig, seeds, steps: int, views) -> list[NerfMod
     "config",
     [
         SMALL,
-        SMALL.__class__(**{**SMALL.to_dict(), "background_mode": "last_sample"}),
-        SMALL.__class__(**{**SMALL.to_dict(), "encoding": "kplanes", "plane_resolutions": (8, 16)}),
+        SMALL.with_settings(background_mode="last_sample"),
+        SMALL.with_settings(encoding="kplanes", plane_resolutions=(8, 16)),
     ],
     ids=["hash", "last_sample", "kplanes"],
 )

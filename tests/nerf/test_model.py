@@ -47,10 +47,10 @@ def model(request) -> NerfModel:
 def test_render_output_shapes_and_weights_sum_to_accumulation(model, generator):
     origins, directions = rays_at_origin(50, generator)
     out = model(origins, directions)
-    s = model.config.num_samples
+    s = model.config.sampler.num_samples
     assert out.rgb.shape == (50, 3) and out.weights.shape == (50, s) and out.t_starts.shape == (50, s)
     assert torch.allclose(out.weights.sum(-1), out.accumulation, atol=1e-6)
-    assert (out.t_ends >= out.t_starts).all() and (out.t_starts >= model.config.near).all()
+    assert (out.t_ends >= out.t_starts).all() and (out.t_starts >= model.config.scene.near).all()
     assert ((out.rgb >= 0) & (out.rgb <= 1)).all()
 
 

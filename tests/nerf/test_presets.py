@@ -18,7 +18,7 @@ from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.occupancy import OccupancyGrid
 from nerfaug.nerf.trainer import Trainer
 
-# sha256 of each preset's `to_dict()` as sorted JSON, recorded when the study started: a change to
+# sha256 of each preset's `flat()` settings as sorted JSON, recorded when the study started: a change to
 # any value (or a new NerfConfig field) changes these, and invalidates the study's results.
 FROZEN = {
     "cpu": "a94e724a8129081a5c3399cdb7d71d5af270d1a90bef9b3dd7f96663777080a7",
@@ -36,7 +36,7 @@ def proposal_networks(model: NerfModel) -> list[DensityField]:
 
 
 def preset_digest(name: str) -> str:
-    return hashlib.sha256(json.dumps(PRESETS[name].to_dict(), sort_keys=True).encode()).hexdigest()
+    return hashlib.sha256(json.dumps(PRESETS[name].flat(), sort_keys=True).encode()).hexdigest()
 
 
 def test_nerfacto_cpu_has_nerfactos_structure():
@@ -58,12 +58,18 @@ def test_nerfacto_cpu_has_nerfactos_structure():
         "hash_features_per_level",
         "hash_base_resolution",
     ):
-        assert getattr(config, name) == getattr(paper, name), name
-    assert config.interlevel_loss_mult > 0 and config.distortion_loss_mult > 0
+        assert config.flat()[name] == paper.flat()[name], name
+    assert config.sampler.proposal.interlevel_loss_mult > 0 and config.sampler.proposal.distortion_loss_mult > 0
     # Shrunk: fewer levels, smaller tables, fewer samples and rays than the full preset.
-    assert config.hash_levels < paper.hash_levels and config.hash_log2_table_size < paper.hash_log2_table_size
-    assert config.num_samples < paper.num_samples and config.batch_size < paper.batch_size
-    assert sum(config.proposal_samples) < sum(paper.proposal_samples)
+    assert (
+        config.field.hash.levels < paper.field.hash.levels
+        and config.field.hash.log2_table_size < paper.field.hash.log2_table_size
+    )
+    assert (
+        config.sampler.num_samples < paper.sampler.num_samples
+        and config.optimiser.batch_size < paper.optimiser.batch_size
+    )
+    assert sum(config.sampler.proposal.samples) < sum(paper.sampler.proposal.samples)
 
 
 def test_nerfacto_cpu_starts_at_nerfactos_average_density():
@@ -111,7 +117,7 @@ def test_the_study_presets_are_unchanged():
 
 
 def test_the_last_sample_engine_differs_from_nerfacto_cpu_in_its_background_only():
-    base, variant = PRESETS["nerfacto-cpu"].to_dict(), PRESETS["nerfacto-cpu-last-sample"].to_dict()
+    base, variant = PRESETS["nerfacto-cpu"].flat(), PRESETS["nerfacto-cpu-last-sample"].flat()
     assert {k for k in base if base[k] != variant[k]} == {"background_mode"}
     assert (base["background_mode"], variant["background_mode"]) == ("fixed", "last_sample")
     # The same variant written as BASE+FIELD=VALUE is the same engine, fingerprinted alike.
@@ -140,7 +146,12 @@ def test_bad_engine_variants_are_refused_by_name(name, message):
 
 def test_engine_variants_type_their_values():
     config = NerfConfig.preset("nerfacto-cpu+batch_size=256+proposal_samples=16,8+random_background=true+lr=0.005")
-    assert (config.batch_size, config.proposal_samples, config.random_background, config.lr) == (
+    assert (
+        config.optimiser.batch_size,
+        config.sampler.proposal.samples,
+        config.renderer.random_background,
+        config.optimiser.lr,
+    ) == (
         256,
         (16, 8),
         True,

@@ -72,13 +72,13 @@ def test_same_seed_gives_the_numbers_recorded_before_the_sampler_interface(case,
 @pytest.mark.parametrize("field, value", [("encoding", "nope"), ("sampler", "grid")])
 def test_an_unknown_name_is_one_line_naming_it_and_the_choices(field, value):
     with pytest.raises(ValueError) as error:
-        check_names(NerfConfig(**{field: value}))
+        check_names(NerfConfig().with_settings(**{field: value}))
     message = str(error.value)
     assert "\n" not in message and repr(value) in message
     registry = ENCODINGS if field == "encoding" else SAMPLERS
     assert all(name in message for name in registry)
     with pytest.raises(ValueError, match=re.escape(message)):  # the same line when the parts are built
-        NerfModel(NerfConfig(**{field: value}))
+        NerfModel(NerfConfig().with_settings(**{field: value}))
 
 
 def test_an_unknown_field_is_rejected():
@@ -125,7 +125,7 @@ class EvenSampler(Sampler):
 
 
 def test_a_sampler_added_by_one_registry_entry_renders(monkeypatch, generator):
-    monkeypatch.setitem(SAMPLERS, "even", lambda config: EvenSampler(config.num_samples))
+    monkeypatch.setitem(SAMPLERS, "even", lambda config: EvenSampler(config.sampler.num_samples))
     model = NerfModel(NerfConfig.preset("test", sampler="even"))
     model.before_step(0, generator)
     origins = torch.tensor([[0.0, 0.0, 4.0]]).expand(3, 3)
@@ -158,7 +158,7 @@ def test_a_model_saved_before_the_sampler_interface_loads():
     )
     for config in (proposal, NerfConfig.preset("test")):
         saved = NerfModel(config)
-        saved.sampler.before_step(300 if config.sampler == "proposal" else 8, saved.density)
+        saved.sampler.before_step(300 if config.sampler.kind == "proposal" else 8, saved.density)
         old = {}  # the layout of commit c8c1784: occupancy.*, proposals.*, anneal
         for key, value in saved.state_dict().items():
             key = key.replace("sampler.grid.", "occupancy.").replace("sampler.networks.", "proposals.")

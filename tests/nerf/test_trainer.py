@@ -60,7 +60,7 @@ def test_add_views_samples_the_new_pixels_and_keeps_the_optimiser_state(views):
         assert torch.equal(from_new, (target == torch.tensor([1.0, 0.0, 0.0])).all(-1))
         hits += int(from_new.sum())
     # Uniform over all pixels: about a third of the rays now come from the new view.
-    assert 0.2 < hits / (10 * trainer.config.batch_size) < 0.45
+    assert 0.2 < hits / (10 * trainer.config.optimiser.batch_size) < 0.45
     trainer.train(8)
 
 
@@ -138,8 +138,8 @@ def test_field_and_proposal_groups_get_their_own_learning_rates(views):
     trainer = Trainer(views, config, progress=False)
     trainer.train(2)
     lrs = {g["name"]: g["lr"] for g in trainer.optimizer.param_groups}
-    assert lrs["field"] == pytest.approx(exponential_lr(2e-3, 1e-4, 1, config.lr_decay_steps))
-    assert lrs["proposal"] == pytest.approx(exponential_lr(1e-2, 1e-4, 1, config.lr_decay_steps))
+    assert lrs["field"] == pytest.approx(exponential_lr(2e-3, 1e-4, 1, config.optimiser.lr_decay_steps))
+    assert lrs["proposal"] == pytest.approx(exponential_lr(1e-2, 1e-4, 1, config.optimiser.lr_decay_steps))
 
 
 def test_presets_and_config_round_trip():
@@ -147,13 +147,21 @@ def test_presets_and_config_round_trip():
         config = NerfConfig.preset(name)
         assert NerfConfig.from_dict(config.to_dict()) == config
     paper = NerfConfig.preset("paper")
-    assert (paper.hash_levels, paper.hash_features_per_level, paper.hash_log2_table_size) == (16, 2, 19)
-    assert (paper.batch_size, paper.adam_eps, paper.average_init_density) == (4096, 1e-15, 0.01)
-    assert NerfConfig.preset("paper", field_lr=0.002).field_lr == 0.002
+    assert (paper.field.hash.levels, paper.field.hash.features_per_level, paper.field.hash.log2_table_size) == (
+        16,
+        2,
+        19,
+    )
+    assert (paper.optimiser.batch_size, paper.optimiser.adam_eps, paper.field.average_init_density) == (
+        4096,
+        1e-15,
+        0.01,
+    )
+    assert NerfConfig.preset("paper", field_lr=0.002).optimiser.field_lr == 0.002
     with pytest.raises(ValueError, match="unknown engine preset .fast."):
         NerfConfig.preset("fast")
     with pytest.raises(ValueError, match="near"):
-        NerfConfig(near=3.0, far=2.0)
+        NerfConfig().with_settings(near=3.0, far=2.0)
     assert math.isclose(psnr_from_mse(0.01), 20.0)
 
 

@@ -20,6 +20,7 @@ from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.state import Integrity, SessionError, UnverifiedCheckpoint
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.interface import DatasetSplit
+from nerfaug.nerf.config import NerfConfig
 
 _RESTORE = "put the session's own file back, or start a new session with `nerfaug train DATA --out NEW_RUN`"
 
@@ -76,7 +77,10 @@ def check_unrecorded_checkpoint(path: Path, trainer, seed: int, engine: dict, fr
     """
     names = [str(f.get("file_path")) if isinstance(f, dict) else "?" for f in frames]
     trained = [str(n) for n in trainer.train_views.names]
-    config = json.loads(json.dumps(trainer.config.to_dict()))  # as session.json holds it (lists, not tuples)
+    # Both by flat name, as JSON holds them (lists, not tuples): session.json holds the nested
+    # settings, or the flat ones where an earlier nerfaug wrote it.
+    config = json.loads(json.dumps(trainer.config.flat()))
+    engine = json.loads(json.dumps(NerfConfig.from_dict(engine).flat()))
     differs = [k for k in sorted(set(config) & set(engine)) if config[k] != engine[k]]
     problem = None
     if int(trainer.seed) != int(seed):

@@ -143,7 +143,7 @@ class ExperimentConfig:
         if self.batched():  # likewise: the reference engine is what every earlier result ran
             record["engine_version"] = BATCH_ENGINE_VERSION
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
-        record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).to_dict().items()})
+        record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).flat().items()})
         return json.loads(json.dumps(record, default=str))
 
     def batched(self) -> bool:

@@ -120,7 +120,7 @@ class StudyPlan:
     def record(self) -> dict:
         return {
             "engines": self.engines,
-            "engine_settings": {e: NerfConfig.preset(e).to_dict() for e in self.engines},
+            "engine_settings": {e: NerfConfig.preset(e).flat() for e in self.engines},
             "left_out": self.left_out,
             "scenes": self.scenes,
             "datasets": self.datasets,

@@ -283,7 +283,7 @@ class BatchModel(nn.Module):
             [StackedDensityField([m.sampler.networks[i] for m in models]) for i in range(len(sampler.networks))]
         )
         self.samples, self.num_samples = sampler.samples, sampler.num_samples
-        self.schedule = ProposalSchedule(config.proposal_update_every, config.proposal_warmup_steps)
+        self.schedule = ProposalSchedule(config.sampler.proposal.update_every, config.sampler.proposal.warmup_steps)
         self.register_buffer("background", models[0].background.clone())
         self.register_buffer("anneal", torch.tensor(1.0))
         self.update_networks = True
@@ -294,7 +294,9 @@ class BatchModel(nn.Module):
 
     def before_step(self, step: int) -> None:
         """Anneal the proposal weights and decide whether this step updates the proposal networks."""
-        self.anneal.fill_(proposal_anneal(step, self.config.proposal_anneal_steps, self.config.proposal_anneal_slope))
+        self.anneal.fill_(
+            proposal_anneal(step, self.config.sampler.proposal.anneal_steps, self.config.sampler.proposal.anneal_slope)
+        )
         self.update_networks = self.schedule.updates(step)
 
     def forward(
@@ -318,7 +320,7 @@ class BatchModel(nn.Module):
         runs, n_rays, _ = origins.shape
         config = self.config
         o, d = origins.reshape(-1, 3), directions.reshape(-1, 3)
-        t_min, t_max = ray_box_span(o, d, config.box_half_size, config.near, config.far)
+        t_min, t_max = ray_box_span(o, d, config.scene.box_half_size, config.scene.near, config.scene.far)
 
         def weights_of(level: int, edges: Tensor) -> Tensor:
             mids = 0.5 * (edges[:, 1:] + edges[:, :-1])
@@ -338,11 +340,11 @@ class BatchModel(nn.Module):
         )
         t_starts, t_ends = edges[:, :-1], edges[:, 1:]
         weights, rgbs = self._shade(o, d, t_starts, t_ends, runs)
-        if background is None and config.background_mode == "last_sample":
+        if background is None and config.renderer.background_mode == "last_sample":
             far = self._unit_points(o, d, t_ends[:, -1:], runs)
             _, geometry = self.field.density(far)
             background = self.field.color(geometry[:, :, None], d.reshape(runs, n_rays, 3)).reshape(-1, 3)
-        elif background is None and config.background_mode == "last_composited":
+        elif background is None and config.renderer.background_mode == "last_composited":
             background = rgbs[:, -1]
         background = (self.background if background is None else background).to(weights)
         rgb, accumulation, depth = composite(weights, rgbs, t_starts, t_ends, background)
@@ -351,21 +353,21 @@ class BatchModel(nn.Module):
     def _unit_points(self, o: Tensor, d: Tensor, t: Tensor, runs: int) -> Tensor:
         """Points at distances t (K * n_rays, m) along the rays, in the unit cube: (K, n_rays * m, 3)."""
         points = o[:, None, :] + d[:, None, :] * t[..., None]
-        return unit_cube(points.reshape(runs, -1, 3), self.config.box_half_size)
+        return unit_cube(points.reshape(runs, -1, 3), self.config.scene.box_half_size)
 
     def _shade(self, o: Tensor, d: Tensor, t_starts: Tensor, t_ends: Tensor, runs: int) -> tuple[Tensor, Tensor]:
         """Weights (K * n_rays, n) and colours (K * n_rays, n, 3) of the final samples.
 
         Every sample is evaluated (fixed shapes); what a run alone skips is masked to what it
         computes there: density 0 on empty intervals, colour 0 where the transmittance is at most
-        `config.transmittance_eps`."""
+        `config.sampler.transmittance_eps`."""
         n = t_starts.shape[1]
         density, geometry = self.field.density(self._unit_points(o, d, 0.5 * (t_starts + t_ends), runs))
         live = t_ends > t_starts
         sigma = torch.where(live, density.reshape(live.shape), 0.0)
         weights, transmittance = render_weights(sigma, t_ends - t_starts)
         colours = self.field.color(geometry.reshape(runs, -1, n, self.field.geo_feat_dim), d.reshape(runs, -1, 3))
-        visible = live & (transmittance.detach() > self.config.transmittance_eps)
+        visible = live & (transmittance.detach() > self.config.sampler.transmittance_eps)
         rgbs = torch.where(visible[..., None], colours.reshape(-1, n, 3), 0.0)
         return weights, rgbs
 
@@ -385,12 +387,12 @@ class BatchModel(nn.Module):
         config, runs = self.config, self.runs
         mse = (output.rgb.float() - target).square().reshape(runs, -1).mean(dim=-1)
         edges = torch.cat([output.t_starts, output.t_ends[:, -1:]], dim=-1)
-        distortion = config.distortion_loss_mult * distortion_per_ray(edges, output.weights)
+        distortion = config.sampler.proposal.distortion_loss_mult * distortion_per_ray(edges, output.weights)
         named = {"rgb": mse, "distortion": distortion.reshape(runs, -1).mean(dim=-1)}
         per_ray = distortion
         extras = output.extras or {}
         if "proposal_edges" in extras:
-            interlevel = config.interlevel_loss_mult * interlevel_loss_per_ray(
+            interlevel = config.sampler.proposal.interlevel_loss_mult * interlevel_loss_per_ray(
                 edges, output.weights, extras["proposal_edges"], extras["proposal_weights"]
             )
             named["interlevel"] = interlevel.reshape(runs, -1).mean(dim=-1)
@@ -423,32 +425,32 @@ def estimated_run_bytes(config: NerfConfig, fused: bool) -> int:
     its backward pass (without `fused` hash kernels also the PyTorch path's rows, weights and
     gathered features of every point's 8 vertices per level). An estimate for choosing a batch's
     size; the GPU benchmark measures the peak (`benchmarks/bench_gpu.py`)."""
-    if config.encoding == "hash":
-        encoding_params = config.hash_levels * 2**config.hash_log2_table_size * config.hash_features_per_level
-        encoding_width = config.hash_levels * config.hash_features_per_level
-        corner_floats = 0 if fused else config.hash_levels * 8 * (2 + config.hash_features_per_level)
+    field, proposal = config.field, config.sampler.proposal
+    if field.encoding == "hash":
+        grid = field.hash
+        encoding_params = grid.levels * 2**grid.log2_table_size * grid.features_per_level
+        encoding_width = grid.levels * grid.features_per_level
+        corner_floats = 0 if fused else grid.levels * 8 * (2 + grid.features_per_level)
     else:
-        encoding_params = sum(3 * config.plane_features * r * r for r in config.plane_resolutions)
-        encoding_width, corner_floats = config.plane_features * len(config.plane_resolutions), 0
-    levels = len(config.proposal_samples)
-    proposal_params = levels * config.proposal_hash_levels * 2**config.proposal_log2_table_size * 2
-    rays = config.batch_size
-    field_samples, proposal_samples = rays * config.num_samples, rays * sum(config.proposal_samples)
+        planes = field.planes
+        encoding_params = sum(3 * planes.features * r * r for r in planes.resolutions)
+        encoding_width, corner_floats = planes.features * len(planes.resolutions), 0
+    levels = len(proposal.samples)
+    proposal_params = levels * proposal.hash_levels * 2**proposal.log2_table_size * 2
+    rays = config.optimiser.batch_size
+    field_samples, proposal_samples = rays * config.sampler.num_samples, rays * sum(proposal.samples)
     per_field_sample = (
         encoding_width
-        + 2 * config.hidden_dim
-        + 2 * (config.sh_levels**2 + config.geo_feat_dim)
-        + 2 * config.color_hidden_dim * config.color_layers
+        + 2 * field.hidden_dim
+        + 2 * (field.sh_levels**2 + field.geo_feat_dim)
+        + 2 * field.color_hidden_dim * field.color_layers
         + 24  # positions, densities, weights, colours, masks and their gradients
         + corner_floats
     )
     per_proposal_sample = (
-        config.proposal_hash_levels * 2
-        + 2 * config.proposal_hidden_dim
-        + 12
-        + (0 if fused else config.proposal_hash_levels * 32)
+        proposal.hash_levels * 2 + 2 * proposal.hidden_dim + 12 + (0 if fused else proposal.hash_levels * 32)
     )
-    distortion = 3 * rays * config.num_samples**2
+    distortion = 3 * rays * config.sampler.num_samples**2
     floats = 4 * (encoding_params + proposal_params) + field_samples * per_field_sample
     floats += proposal_samples * per_proposal_sample + distortion
     return 4 * floats

@@ -106,10 +106,14 @@ class BatchTrainer:
         self.model = BatchModel(models).to(self.device)
         self.optimizer = torch.optim.Adam(
             [
-                {"params": params, "lr": config.field_lr if name == "field" else config.lr, "name": name}
+                {
+                    "params": params,
+                    "lr": config.optimiser.field_lr if name == "field" else config.optimiser.lr,
+                    "name": name,
+                }
                 for name, params in self.model.param_groups().items()
             ],
-            eps=config.adam_eps,
+            eps=config.optimiser.adam_eps,
             fused=True,
         )
         self._initial_lrs = [group["lr"] for group in self.optimizer.param_groups]
@@ -160,7 +164,9 @@ class BatchTrainer:
         alive = [k for k, run in enumerate(self.runs) if run.failure is None]
         self.optimizer.zero_grad(set_to_none=True)
         for group, initial in zip(self.optimizer.param_groups, self._initial_lrs):
-            group["lr"] = exponential_lr(initial, self.config.lr_final, self.step, self.config.lr_decay_steps)
+            group["lr"] = exponential_lr(
+                initial, self.config.optimiser.lr_final, self.step, self.config.optimiser.lr_decay_steps
+            )
         if alive:
             losses[alive].sum().backward()
             self._drop_failed_gradients()

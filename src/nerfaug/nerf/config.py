@@ -1,4 +1,22 @@
-"""`NerfConfig`: every hyperparameter of the field, the sampler and the optimiser, with presets.
+"""`NerfConfig`: every setting of the engine, nested by component, with the presets.
+
+A `NerfConfig` composes one config per part of the engine, as nerfstudio's model configs compose
+their field, sampler and renderer configs:
+
+    NerfConfig
+      scene       SceneConfig       the box the scene lives in and the ray's near/far
+      field       FieldConfig       the radiance field: encoding (hash grid or K-planes), MLPs
+        hash        HashGridConfig
+        planes      PlanesConfig
+      sampler     SamplerConfig     where along a ray the field is evaluated
+        occupancy   OccupancyConfig
+        proposal    ProposalConfig
+      optimiser   OptimiserConfig   rays per step, learning rates, Adam
+      renderer    RendererConfig    what rays that pass through the scene see
+
+Every setting also has one flat name, the one results are fingerprinted by and a variant's name
+uses (`hash_levels` is `field.hash.levels`; the table is `FLAT_NAMES`): fingerprints and session
+files written before the nesting hold these names, and still read.
 
 Units: distances in world units (NeRF-synthetic: cameras about 4 units from the origin, the
 object inside a box of half-size 1.5), learning rates per Adam step.
@@ -6,148 +24,240 @@ object inside a box of half-size 1.5), learning rates per Adam step.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
-from typing import Literal
+import dataclasses
+from dataclasses import dataclass, field, fields, is_dataclass
+from typing import Annotated, Any, ClassVar, Literal, get_args, get_origin, get_type_hints
+
+import tyro
 
 from nerfaug.registry import Presets, lookup, unknown
 
-# What rays that pass through the scene see (`NerfConfig.background_mode`); the last two need no
-# background colour from the caller.
+# What rays that pass through the scene see (`RendererConfig.background_mode`); the last two need
+# no background colour from the caller.
 BACKGROUND_MODES = ("fixed", "last_sample", "last_composited")
 
 
+def _flat(name: str) -> dict:
+    """Field metadata: this setting's flat name, where it is not the group's prefix + its name."""
+    return {"flat": name}
+
+
 @dataclass(frozen=True)
-class NerfConfig:
-    """Hyperparameters of one NeRF (a nerfacto-style field trained with Adam).
-
-    Scene bounds:
-        near, far: samples lie in [near, far] along each ray (Blender: 2 and 6).
-        box_half_size: the scene is the axis-aligned box [-h, h]^3; density is 0 outside.
-
-    Field:
-        encoding: a name in `nerfaug.nerf.registry.ENCODINGS`: "hash" (multiresolution hash
-            grid, as nerfacto) or "kplanes" (factorised multi-scale tri-plane grid, much faster
-            on a CPU).
-        hash_*: levels, features per level, log2 of the table size per level, coarsest and
-            finest grid resolution.
-        plane_resolutions, plane_features: one tri-plane per resolution, `plane_features`
-            channels each.
-        hidden_dim, geo_feat_dim: density MLP width and the size of the feature it passes on
-            to the colour MLP.
-        color_hidden_dim, color_layers: colour MLP width and number of hidden layers.
-        sh_levels: spherical-harmonics levels of the direction encoding (4 -> 16 terms).
-        density_activation: "trunc_exp" (nerfacto) or "softplus".
-        average_init_density: the density of a freshly initialised field, on average.
-
-    Sampler:
-        sampler: a name in `nerfaug.nerf.registry.SAMPLERS`: "occupancy" (stratified samples;
-            empty cells of an occupancy grid are skipped) or "proposal" (nerfacto's proposal
-            density networks).
-        num_samples: colour samples per ray.
-        occupancy_*: grid cells per axis, steps between updates, warm-up steps (all cells on),
-            EMA decay of the cell opacities, opacity threshold below which a cell is empty,
-            fraction of all cells probed at random per update (besides the occupied ones).
-        transmittance_eps: colour is not evaluated where the transmittance is below this.
-        proposal_*: samples per proposal level, hash levels and finest resolution of each
-            proposal network, table size, MLP width, and the annealing of proposal weights.
-        interlevel_loss_mult, distortion_loss_mult: loss weights (proposal sampler only).
-        proposal_update_every, proposal_warmup_steps: nerfacto's proposal-update schedule. The
-            proposal networks get gradients (from the interlevel loss) only on update steps;
-            on the others they run without a graph. Steps 0-9 all update; after that a step
-            updates once more than `clip(proposal_update_every * step / proposal_warmup_steps,
-            1, proposal_update_every)` steps have passed since the last update (so every 2nd
-            step early on, every 6th after warm-up, as nerfstudio's ProposalNetworkSampler).
-            `proposal_update_every = 0` updates every step.
-
-    Optimisation:
-        batch_size: rays per step, drawn uniformly from all pixels of all training views.
-        field_lr: initial learning rate of the NeRF field (paper: 0.002 for chair/materials).
-        lr: initial learning rate of every other parameter group (the proposal networks).
-        lr_final, lr_decay_steps: each group decays exponentially to `lr_final` at this step.
-        adam_eps: Adam's epsilon.
-        background_mode: what rays that pass through see when no background is passed:
-            "fixed" (the trainer's background colour) or "last_sample" (the field's colour at
-            the far end of the ray, nerfacto's default). "last_sample" lets a faint young field
-            explain white pixels without pushing its colours to black, but with few views it
-            also explains them view by view: measured on a 100x100 lego-like scene with 12
-            views, a reduced paper preset after 400 steps had PSNR 26.4 dB on the training
-            views and 13.8 dB on test views with "last_sample", 20.7 / 19.8 dB with "fixed".
-            "last_composited" is nerfacto's definition to the letter: the colour of the ray's
-            last composited sample (which is also composited with its own weight), where
-            "last_sample" evaluates the field once more at the ray's exit from the box.
-        random_background: composite training pixels that have an alpha channel over a random
-            colour each step (nerfacto's trick against floaters on transparent data).
-        render_chunk: rays per chunk when rendering without gradients.
-    """
+class SceneConfig:
+    """The scene's bounds."""
 
     near: float = 2.0
+    """samples lie in [near, far] along each ray (Blender: 2 and 6)."""
     far: float = 6.0
+    """the far end of every ray."""
     box_half_size: float = 1.5
-
-    encoding: str = "kplanes"
-    hash_levels: int = 16
-    hash_features_per_level: int = 2
-    hash_log2_table_size: int = 19
-    hash_base_resolution: int = 16
-    hash_max_resolution: int = 2048
-    plane_resolutions: tuple[int, ...] = (64, 256)
-    plane_features: int = 8
-    hidden_dim: int = 64
-    geo_feat_dim: int = 15
-    color_hidden_dim: int = 64
-    color_layers: int = 2
-    sh_levels: int = 4
-    density_activation: Literal["trunc_exp", "softplus"] = "trunc_exp"
-    average_init_density: float = 0.01
-
-    sampler: str = "occupancy"
-    num_samples: int = 48
-    occupancy_resolution: int = 64
-    occupancy_update_every: int = 16
-    occupancy_warmup_steps: int = 256
-    occupancy_ema_decay: float = 0.95
-    occupancy_threshold: float = 0.01
-    occupancy_update_fraction: float = 0.25
-    transmittance_eps: float = 1e-4
-    proposal_samples: tuple[int, ...] = (256, 96)
-    proposal_hash_levels: int = 5
-    proposal_max_resolutions: tuple[int, ...] = (128, 256)
-    proposal_log2_table_size: int = 17
-    proposal_hidden_dim: int = 16
-    proposal_anneal_steps: int = 1000
-    proposal_anneal_slope: float = 10.0
-    interlevel_loss_mult: float = 1.0
-    distortion_loss_mult: float = 0.002
-    proposal_update_every: int = 0
-    proposal_warmup_steps: int = 5000
-
-    batch_size: int = 4096
-    field_lr: float = 1e-2
-    lr: float = 1e-2
-    lr_final: float = 1e-4
-    lr_decay_steps: int = 200_000
-    adam_eps: float = 1e-15
-    background_mode: Literal["fixed", "last_sample", "last_composited"] = "fixed"
-    random_background: bool = False
-    render_chunk: int = 16384
+    """the scene is the axis-aligned box [-h, h]^3; density is 0 outside."""
 
     def __post_init__(self) -> None:
         if not 0 <= self.near < self.far:
             raise ValueError(f"need 0 <= near < far, got near={self.near}, far={self.far}")
-        if self.sampler == "proposal" and len(self.proposal_samples) != len(self.proposal_max_resolutions):
+
+
+@dataclass(frozen=True)
+class HashGridConfig:
+    """A multiresolution hash grid (nerfacto's encoding)."""
+
+    FLAT_PREFIX: ClassVar[str] = "hash_"
+    levels: int = 16
+    """grid levels."""
+    features_per_level: int = 2
+    """features per level."""
+    log2_table_size: int = 19
+    """log2 of the hash table's entries per level."""
+    base_resolution: int = 16
+    """the coarsest grid resolution."""
+    max_resolution: int = 2048
+    """the finest grid resolution."""
+
+
+@dataclass(frozen=True)
+class PlanesConfig:
+    """A factorised multi-scale tri-plane grid (K-planes; much faster on a CPU)."""
+
+    FLAT_PREFIX: ClassVar[str] = "plane_"
+    resolutions: tuple[int, ...] = (64, 256)
+    """one tri-plane per resolution."""
+    features: int = 8
+    """channels of each plane."""
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """The radiance field: a position encoding, a density MLP and a colour MLP."""
+
+    encoding: str = "kplanes"
+    """the position encoding: "hash" (a multiresolution hash grid, as nerfacto) or "kplanes"."""
+    hash: HashGridConfig = HashGridConfig()
+    """the hash grid (encoding "hash")."""
+    planes: PlanesConfig = PlanesConfig()
+    """the tri-planes (encoding "kplanes")."""
+    hidden_dim: int = 64
+    """density MLP width."""
+    geo_feat_dim: int = 15
+    """size of the feature the density MLP passes on to the colour MLP."""
+    color_hidden_dim: int = 64
+    """colour MLP width."""
+    color_layers: int = 2
+    """colour MLP hidden layers."""
+    sh_levels: int = 4
+    """spherical-harmonics levels of the direction encoding (4 -> 16 terms)."""
+    density_activation: Literal["trunc_exp", "softplus"] = "trunc_exp"
+    """"trunc_exp" (nerfacto) or "softplus"."""
+    average_init_density: float = 0.01
+    """the density of a freshly initialised field, on average."""
+
+
+@dataclass(frozen=True)
+class OccupancyConfig:
+    """An occupancy grid whose empty cells the stratified samples skip."""
+
+    FLAT_PREFIX: ClassVar[str] = "occupancy_"
+    resolution: int = 64
+    """grid cells per axis."""
+    update_every: int = 16
+    """training steps between updates of the grid."""
+    warmup_steps: int = 256
+    """steps during which every cell counts as occupied."""
+    ema_decay: float = 0.95
+    """EMA decay of the cells' opacities."""
+    threshold: float = 0.01
+    """opacity below which a cell is empty."""
+    update_fraction: float = 0.25
+    """fraction of all cells probed at random per update (besides the occupied ones)."""
+
+
+@dataclass(frozen=True)
+class ProposalConfig:
+    """nerfacto's proposal density networks, and the losses that train them.
+
+    The update schedule: the proposal networks get gradients (from the interlevel loss) only on
+    update steps; on the others they run without a graph. Steps 0-9 all update; after that a step
+    updates once more than `clip(update_every * step / warmup_steps, 1, update_every)` steps have
+    passed since the last update (so every 2nd step early on, every 6th after warm-up, as
+    nerfstudio's ProposalNetworkSampler). `update_every = 0` updates every step.
+    """
+
+    FLAT_PREFIX: ClassVar[str] = "proposal_"
+    samples: tuple[int, ...] = (256, 96)
+    """samples per proposal level (one entry per proposal network)."""
+    hash_levels: int = 5
+    """hash levels of each proposal network."""
+    max_resolutions: tuple[int, ...] = (128, 256)
+    """finest hash resolution of each proposal network."""
+    log2_table_size: int = 17
+    """log2 of the proposal networks' hash table size."""
+    hidden_dim: int = 16
+    """proposal MLP width."""
+    anneal_steps: int = 1000
+    """steps over which the proposal weights' annealing runs."""
+    anneal_slope: float = 10.0
+    """slope of the annealing."""
+    interlevel_loss_mult: float = field(default=1.0, metadata=_flat("interlevel_loss_mult"))
+    """weight of the interlevel loss."""
+    distortion_loss_mult: float = field(default=0.002, metadata=_flat("distortion_loss_mult"))
+    """weight of the distortion loss."""
+    update_every: int = 0
+    """nerfacto's proposal-update schedule: at most this many steps between updates (0: every step)."""
+    warmup_steps: int = 5000
+    """steps over which the update interval grows to `update_every`."""
+
+
+@dataclass(frozen=True)
+class SamplerConfig:
+    """Where along a ray the field is evaluated."""
+
+    kind: str = field(default="occupancy", metadata=_flat("sampler"))
+    """"occupancy" (stratified samples, empty cells of an occupancy grid skipped) or "proposal"
+    (nerfacto's proposal networks)."""
+    num_samples: int = 48
+    """colour samples per ray."""
+    transmittance_eps: float = 1e-4
+    """colour is not evaluated where the transmittance is below this."""
+    occupancy: OccupancyConfig = OccupancyConfig()
+    """the occupancy grid (sampler "occupancy")."""
+    proposal: ProposalConfig = ProposalConfig()
+    """the proposal networks (sampler "proposal")."""
+
+    def __post_init__(self) -> None:
+        if self.kind == "proposal" and len(self.proposal.samples) != len(self.proposal.max_resolutions):
             raise ValueError(
-                f"proposal_samples {self.proposal_samples} and proposal_max_resolutions "
-                f"{self.proposal_max_resolutions} must have one entry per proposal network"
+                f"proposal_samples {self.proposal.samples} and proposal_max_resolutions "
+                f"{self.proposal.max_resolutions} must have one entry per proposal network"
             )
+
+
+@dataclass(frozen=True)
+class OptimiserConfig:
+    """What each step trains on, and Adam's settings."""
+
+    batch_size: int = 4096
+    """rays per step, drawn uniformly from all pixels of all training views."""
+    field_lr: float = 1e-2
+    """initial learning rate of the NeRF field (paper: 0.002 for chair/materials)."""
+    lr: float = 1e-2
+    """initial learning rate of every other parameter group (the proposal networks)."""
+    lr_final: float = 1e-4
+    """each group decays exponentially to this at step `lr_decay_steps`."""
+    lr_decay_steps: int = 200_000
+    """the step at which the learning rates reach `lr_final`."""
+    adam_eps: float = 1e-15
+    """Adam's epsilon."""
+
+
+@dataclass(frozen=True)
+class RendererConfig:
+    """What a ray that passes through the scene sees, and how renders are chunked."""
+
+    background_mode: Literal["fixed", "last_sample", "last_composited"] = "fixed"
+    """"fixed" (the trainer's background colour), "last_sample" (the field's colour at the ray's
+    exit from the box, nerfacto's default) or "last_composited" (the colour of the ray's last
+    composited sample, nerfacto's definition to the letter). "last_sample" lets a faint young
+    field explain white pixels without pushing its colours to black, but with few views it also
+    explains them view by view: measured on a 100x100 lego-like scene with 12 views, a reduced
+    paper preset after 400 steps had PSNR 26.4 dB on the training views and 13.8 dB on test views
+    with "last_sample", 20.7 / 19.8 dB with "fixed"."""
+    random_background: bool = False
+    """composite training pixels that have an alpha channel over a random colour each step
+    (nerfacto's trick against floaters on transparent data)."""
+    render_chunk: int = 16384
+    """rays per chunk when rendering without gradients."""
+
+    def __post_init__(self) -> None:
         if self.background_mode not in BACKGROUND_MODES:
             choices = ", ".join(BACKGROUND_MODES)
             raise ValueError(f"background_mode must be one of {choices}, got {self.background_mode!r}")
-        # `encoding` and `sampler` are names in `nerf.registry`, which imports this module: they
-        # are checked there (`check_names`), where an engine is named and where parts are built.
+
+
+@dataclass(frozen=True)
+class NerfConfig:
+    """Every setting of one NeRF (a nerfacto-style field trained with Adam), by component.
+
+    `NerfConfig.preset(name)` gives a named engine; `flat()` and `with_settings(...)` read and
+    change settings by their flat names (`FLAT_NAMES`).
+    """
+
+    scene: SceneConfig = SceneConfig()
+    """the scene's bounds."""
+    field: FieldConfig = FieldConfig()
+    """the radiance field."""
+    sampler: SamplerConfig = SamplerConfig()
+    """the ray sampler."""
+    optimiser: OptimiserConfig = OptimiserConfig()
+    """rays per step and the optimiser."""
+    renderer: RendererConfig = RendererConfig()
+    """the background and render chunks."""
+
+    # `field.encoding` and `sampler.kind` are names in `nerf.registry`, which imports this module:
+    # they are checked there (`check_names`), where an engine is named and where parts are built.
 
     @classmethod
-    def preset(cls, name: str, **overrides) -> NerfConfig:
-        """A named configuration, optionally with some fields overridden.
+    def preset(cls, name: str, **settings) -> NerfConfig:
+        """A named engine, optionally with some settings (flat names) changed.
 
         - "paper": nerfacto's defaults as the paper ran them (16-level hash grid, 2 features per
           level, 2^19 entries, proposal sampling 256/96/48, 4096 rays, lr 1e-2 -> 1e-4 over 200k
@@ -162,7 +272,8 @@ class NerfConfig:
           starts as an opaque fog (average density 1, nerfstudio's default) and has a one-layer
           colour MLP: starting from density 0.01 with two colour layers, the colour MLP's
           sigmoid saturated at 0 within 20 steps (while the faint field asked every object pixel
-          for "darker") and never recovered.
+          for "darker") and never recovered. On real captures its opaque start can end empty
+          (BENCHMARKS.md, "Empty NeRFs on a real capture").
         - "nerfacto-cpu": nerfacto's structure (hash grid, two hash-grid proposal networks with
           the interlevel and distortion losses, trunc_exp density starting at 0.01, two-layer
           colour MLP, the paper preset's optimiser) shrunk for one CPU core: 6 hash levels of
@@ -178,84 +289,155 @@ class NerfConfig:
           it out by default (`nerfaug.experiment.study.BY_NAME_ONLY_ENGINES`).
         - "test": tiny, for unit tests.
 
-        A variant of a preset that changes some settings is named `BASE+FIELD=VALUE[+...]`, e.g.
-        "nerfacto-cpu+background_mode=last_sample" (`parse_variant`); its settings are the
+        A variant of a preset that changes some settings is named `BASE+FLAT_NAME=VALUE[+...]`,
+        e.g. "nerfacto-cpu+background_mode=last_sample" (`parse_variant`); its settings are the
         preset's with those changed, so it is fingerprinted like any preset.
         """
         base, changes = parse_variant(name)
-        return PRESETS.choose(base, **{**changes, **overrides})
+        return lookup(PRESETS, PRESETS.kind, base).with_settings(**{**changes, **settings})
+
+    def flat(self) -> dict[str, Any]:
+        """Every setting by its flat name (`FLAT_NAMES`), as results are fingerprinted."""
+        return {flat: _get(self, path) for flat, path in FLAT_NAMES.items()}
+
+    def with_settings(self, **settings) -> NerfConfig:
+        """A copy with the settings given by flat name changed, e.g. `with_settings(hash_levels=8)`.
+
+        Raises:
+            ValueError: an unknown name (with the closest known ones), or a value a component refuses.
+        """
+        data = self.to_dict()
+        for name, value in settings.items():
+            if name not in FLAT_NAMES:
+                raise ValueError(unknown("engine setting", name, sorted(FLAT_NAMES)))
+            *groups, leaf = FLAT_NAMES[name]
+            group = data
+            for step in groups:
+                group = group[step]
+            group[leaf] = value
+        return _build(NerfConfig, data, "engine")  # built once: each group checks its settings together
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The nested settings as plain data (tuples stay tuples; JSON makes them lists)."""
+        return dataclasses.asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> NerfConfig:
-        """The inverse of `to_dict` (lists, e.g. from JSON, become tuples)."""
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"unknown NerfConfig fields: {sorted(unknown)}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+        """The inverse of `to_dict`; also reads the flat form (`flat()`) that files written before
+        the settings were nested hold. Lists, e.g. from JSON, become tuples.
+
+        Raises:
+            ValueError: a setting no engine has.
+        """
+        if set(data) <= set(FLAT_NAMES) and data:
+            return cls().with_settings(**data)
+        return _build(cls, data, "engine")
+
+    def batch_support(self) -> str | None:
+        """Why this engine cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
+        if self.sampler.kind != "proposal":
+            return (
+                f"trial batches need the proposal sampler; this engine uses {self.sampler.kind!r}: run it with batch 1"
+            )
+        return None
+
+
+def _leaves(cls: type, path: tuple[str, ...] = (), prefix: str = "") -> dict[str, tuple[str, ...]]:
+    """flat name -> path of every setting under the dataclass `cls` (groups are dataclasses)."""
+    hints = get_type_hints(cls)
+    names: dict[str, tuple[str, ...]] = {}
+    for f in fields(cls):
+        kind = hints[f.name]
+        if is_dataclass(kind):
+            names |= _leaves(kind, (*path, f.name), getattr(kind, "FLAT_PREFIX", ""))
+        else:
+            names[f.metadata.get("flat", prefix + f.name)] = (*path, f.name)
+    return names
+
+
+FLAT_NAMES: dict[str, tuple[str, ...]] = _leaves(NerfConfig)
+"""Each setting's flat name -> its path in `NerfConfig`, e.g. "hash_levels" -> ("field", "hash",
+"levels"). The flat names are those of fingerprints, variants and files written before nesting."""
+
+
+def _get(config: Any, path: tuple[str, ...]) -> Any:
+    for name in path:
+        config = getattr(config, name)
+    return config
+
+
+def _build(cls: type, data: dict, where: str) -> Any:
+    """A nested config from nested plain data (missing settings keep their defaults)."""
+    hints, known = get_type_hints(cls), {f.name for f in fields(cls)}
+    extra = set(data) - known
+    if extra:
+        raise ValueError(f"{where}: {unknown('setting', sorted(extra)[0], sorted(known))}")
+    values = {}
+    for name, value in data.items():
+        kind = hints[name]
+        if is_dataclass(kind):
+            values[name] = _build(kind, value, f"{where}.{name}")
+        else:
+            values[name] = tuple(value) if isinstance(value, list) else value
+    return cls(**values)
 
 
 PRESETS: Presets[NerfConfig] = Presets(
     "engine preset",
     {
         "paper": NerfConfig(
-            encoding="hash",
-            sampler="proposal",
-            background_mode="fixed",
-            batch_size=4096,
-            # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
-            proposal_update_every=5,
-            proposal_warmup_steps=5000,
+            field=FieldConfig(encoding="hash"),
+            sampler=SamplerConfig(
+                kind="proposal",
+                # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
+                proposal=ProposalConfig(update_every=5, warmup_steps=5000),
+            ),
+            optimiser=OptimiserConfig(batch_size=4096),
+            renderer=RendererConfig(background_mode="fixed"),
         ),
         "cpu": NerfConfig(
-            encoding="kplanes",
-            plane_resolutions=(64, 128),
-            plane_features=8,
-            color_layers=1,
-            average_init_density=1.0,
-            sampler="occupancy",
-            num_samples=64,
-            occupancy_warmup_steps=64,
-            batch_size=1024,
-            lr_final=1e-3,
-            lr_decay_steps=5000,
+            field=FieldConfig(
+                encoding="kplanes",
+                planes=PlanesConfig(resolutions=(64, 128), features=8),
+                color_layers=1,
+                average_init_density=1.0,
+            ),
+            sampler=SamplerConfig(kind="occupancy", num_samples=64, occupancy=OccupancyConfig(warmup_steps=64)),
+            optimiser=OptimiserConfig(batch_size=1024, lr_final=1e-3, lr_decay_steps=5000),
         ),
         "nerfacto-cpu": NerfConfig(
-            encoding="hash",
-            hash_levels=6,
-            hash_log2_table_size=14,
-            hash_max_resolution=256,
-            hidden_dim=32,
-            color_hidden_dim=32,
-            density_activation="trunc_exp",
-            average_init_density=0.01,
-            sampler="proposal",
-            num_samples=16,
-            proposal_samples=(32, 16),
-            proposal_hash_levels=3,
-            proposal_max_resolutions=(64, 128),
-            proposal_log2_table_size=12,
-            batch_size=512,
-            background_mode="fixed",
+            field=FieldConfig(
+                encoding="hash",
+                hash=HashGridConfig(levels=6, log2_table_size=14, max_resolution=256),
+                hidden_dim=32,
+                color_hidden_dim=32,
+                density_activation="trunc_exp",
+                average_init_density=0.01,
+            ),
+            sampler=SamplerConfig(
+                kind="proposal",
+                num_samples=16,
+                proposal=ProposalConfig(samples=(32, 16), hash_levels=3, max_resolutions=(64, 128), log2_table_size=12),
+            ),
+            optimiser=OptimiserConfig(batch_size=512),
+            renderer=RendererConfig(background_mode="fixed"),
         ),
         "test": NerfConfig(
-            encoding="kplanes",
-            plane_resolutions=(16, 32),
-            plane_features=4,
-            hidden_dim=16,
-            geo_feat_dim=7,
-            color_hidden_dim=16,
-            color_layers=1,
-            sampler="occupancy",
-            num_samples=16,
-            occupancy_resolution=16,
-            occupancy_update_every=4,
-            occupancy_warmup_steps=8,
-            batch_size=128,
-            render_chunk=4096,
+            field=FieldConfig(
+                encoding="kplanes",
+                planes=PlanesConfig(resolutions=(16, 32), features=4),
+                hidden_dim=16,
+                geo_feat_dim=7,
+                color_hidden_dim=16,
+                color_layers=1,
+            ),
+            sampler=SamplerConfig(
+                kind="occupancy",
+                num_samples=16,
+                occupancy=OccupancyConfig(resolution=16, update_every=4, warmup_steps=8),
+            ),
+            optimiser=OptimiserConfig(batch_size=128),
+            renderer=RendererConfig(render_chunk=4096),
         ),
     },
 )
@@ -263,7 +445,7 @@ PRESETS: Presets[NerfConfig] = Presets(
 
 # A named variant is a preset with some settings changed. Each is pinned by digest like the
 # presets (tests/nerf/test_presets.py); the study compares a variant with its base cell by cell.
-PRESETS["nerfacto-cpu-last-sample"] = replace(PRESETS["nerfacto-cpu"], background_mode="last_sample")
+PRESETS["nerfacto-cpu-last-sample"] = PRESETS["nerfacto-cpu"].with_settings(background_mode="last_sample")
 
 VARIANT_SEPARATOR = "+"
 
@@ -275,18 +457,15 @@ mixed in one cell of a study."""
 
 
 def batch_support(config: NerfConfig) -> str | None:
-    """Why engine `config` cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
-    if config.sampler != "proposal":
-        return f"trial batches need the proposal sampler; this engine uses {config.sampler!r}: run it with batch 1"
-    return None
+    """Why engine `config` cannot train in trial batches, or None when it can (`NerfConfig.batch_support`)."""
+    return config.batch_support()
 
 
 def _setting(base: NerfConfig, name: str, text: str, where: str):
-    """`text` as a value of the field `name`, typed like the base preset's value."""
-    known = {f.name for f in fields(NerfConfig)}
-    if name not in known:
-        raise ValueError(f"{where}: {unknown('setting', name, sorted(known))}")
-    current = getattr(base, name)
+    """`text` as a value of the setting `name` (a flat name), typed like the base preset's value."""
+    if name not in FLAT_NAMES:
+        raise ValueError(f"{where}: {unknown('setting', name, sorted(FLAT_NAMES))}")
+    current = _get(base, FLAT_NAMES[name])
     try:
         if isinstance(current, bool):
             if text.lower() not in ("true", "false"):
@@ -318,9 +497,83 @@ def parse_variant(name: str) -> tuple[str, dict]:
             raise ValueError(f"engine {name!r}: {part!r} is not FIELD=VALUE")
         changes[field_name] = _setting(preset, field_name, text, f"engine {name!r}")
     if changes:
-        replace(preset, **changes)  # NerfConfig's own checks (e.g. background_mode's values)
+        try:
+            preset.with_settings(**changes)  # the components' own checks (e.g. background_mode's values)
+        except ValueError as error:
+            raise ValueError(f"engine {name!r}: {error}") from None
     return base, changes
+
+
+def _variant_text(value: Any) -> str:
+    """A setting's value as a variant name writes it (`_setting` reads it back)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, tuple):
+        return ",".join(str(v) for v in value)
+    return str(value)
+
+
+def variant_name(engine: str, settings: dict[str, Any]) -> str:
+    """The engine `engine` (a preset or a variant) with `settings` (flat name -> value) changed, as
+    one name: variant_name("paper", {"hidden_dim": 32}) == "paper+hidden_dim=32". Settings equal
+    to the engine's own are left out, so an engine named with its own values keeps its name."""
+    base, changes = parse_variant(engine)
+    changes |= {flat: tuple(value) if isinstance(value, list) else value for flat, value in settings.items()}
+    preset = PRESETS[base].with_settings()  # an unknown name in `settings`: refused here, by name
+    preset.with_settings(**changes)
+    changes = {flat: value for flat, value in changes.items() if _get(preset, FLAT_NAMES[flat]) != value}
+    name = VARIANT_SEPARATOR.join([base, *(f"{k}={_variant_text(v)}" for k, v in changes.items())])
+    parse_variant(name)  # the components' checks, before any run is named by it
+    return name
 
 
 EnginePreset = PRESETS.name_type()
 """The preset names as a type, for a CLI (tyro) to offer and check."""
+
+
+def _given_form(cls: type, path: tuple[str, ...] = ()) -> type:
+    """A frozen dataclass with `cls`'s fields, each leaf None unless given, for tyro to read.
+
+    Hand-written because tyro's own ways to override a preset's fields (subcommands per preset,
+    `tyro.extras.overridable_config_cli`) choose the preset by a positional subcommand, and every
+    command here takes it as `--engine NAME`: the form below lets `--engine.field.hidden-dim 32`
+    sit beside `--engine NAME` in any order and on any command, tyro parsing and checking each value.
+    """
+    from tyro._docstrings import get_field_docstring  # the settings' docstrings as their help
+
+    hints, form = get_type_hints(cls), []
+    for f in fields(cls):
+        kind = hints[f.name]
+        if is_dataclass(kind):
+            sub = _given_form(kind, (*path, f.name))
+            form.append((f.name, sub, field(default_factory=sub)))
+            continue
+        help_text = " ".join((get_field_docstring(cls, f.name, ()) or "").split())
+        marks = tyro.conf.arg(help=help_text, metavar=_metavar(kind), help_behavior_hint="(default: the engine's)")
+        form.append((f.name, Annotated[kind | None, marks], None))  # type: ignore[valid-type]
+    namespace = {"__doc__": cls.__doc__}
+    if not path:
+        namespace["given"] = _given_settings
+    return dataclasses.make_dataclass(f"Given{cls.__name__}", form, frozen=True, namespace=namespace)
+
+
+def _metavar(kind: Any) -> str:
+    """How `--help` writes a value of type `kind`: INT, FLOAT, STR, {a,b}, INT [INT ...]."""
+    if kind is bool:
+        return "{True,False}"
+    if get_origin(kind) is Literal:
+        return "{" + ",".join(get_args(kind)) + "}"
+    if get_origin(kind) is tuple:
+        one = _metavar(get_args(kind)[0])
+        return f"{one} [{one} ...]"
+    return {int: "INT", float: "FLOAT"}.get(kind, "STR")
+
+
+def _given_settings(form: Any) -> dict[str, Any]:
+    """flat name -> value of every setting given in `form` (an `EngineSettings`)."""
+    return {flat: value for flat, path in FLAT_NAMES.items() if (value := _get(form, path)) is not None}
+
+
+EngineSettings = _given_form(NerfConfig)
+"""The engine's settings as options of a command (`--engine.field.hidden-dim 32`), each None unless
+given; `EngineSettings().given()` are those given, by flat name, for `variant_name`."""

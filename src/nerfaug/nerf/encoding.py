@@ -185,11 +185,11 @@ class HashEncoding(nn.Module):
     def from_config(cls, config) -> HashEncoding:
         """The field's hash grid as a `NerfConfig`'s hash_* fields describe it."""
         return cls(
-            config.hash_levels,
-            config.hash_features_per_level,
-            config.hash_log2_table_size,
-            config.hash_base_resolution,
-            config.hash_max_resolution,
+            config.field.hash.levels,
+            config.field.hash.features_per_level,
+            config.field.hash.log2_table_size,
+            config.field.hash.base_resolution,
+            config.field.hash.max_resolution,
         )
 
     @property
@@ -273,7 +273,7 @@ class KPlanesEncoding(nn.Module):
     @classmethod
     def from_config(cls, config) -> KPlanesEncoding:
         """The field's tri-planes as a `NerfConfig`'s plane_* fields describe them."""
-        return cls(config.plane_resolutions, config.plane_features)
+        return cls(config.field.planes.resolutions, config.field.planes.features)
 
     @property
     def output_dim(self) -> int:

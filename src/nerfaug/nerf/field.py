@@ -81,11 +81,12 @@ class NerfField(nn.Module):
 
     def __init__(self, config: NerfConfig, encoding: nn.Module):
         super().__init__()
-        self.density_kind, self.average_init_density = config.density_activation, config.average_init_density
-        self.sh_levels, self.geo_feat_dim = config.sh_levels, config.geo_feat_dim
+        field = config.field
+        self.density_kind, self.average_init_density = field.density_activation, field.average_init_density
+        self.sh_levels, self.geo_feat_dim = field.sh_levels, field.geo_feat_dim
         self.encoding = encoding
-        self.density_mlp = mlp(self.encoding.output_dim, config.hidden_dim, 1 + config.geo_feat_dim, 1)
-        self.color_mlp = mlp(config.sh_levels**2 + config.geo_feat_dim, config.color_hidden_dim, 3, config.color_layers)
+        self.density_mlp = mlp(self.encoding.output_dim, field.hidden_dim, 1 + field.geo_feat_dim, 1)
+        self.color_mlp = mlp(field.sh_levels**2 + field.geo_feat_dim, field.color_hidden_dim, 3, field.color_layers)
         # Zero bias on the density output: a fresh field then has about the configured density.
         with torch.no_grad():
             self.density_mlp[-1].bias.zero_()
@@ -114,15 +115,16 @@ class DensityField(nn.Module):
 
     def __init__(self, config: NerfConfig, max_resolution: int):
         super().__init__()
-        self.density_kind, self.average_init_density = config.density_activation, config.average_init_density
+        field = config.field
+        self.density_kind, self.average_init_density = field.density_activation, field.average_init_density
         self.encoding = HashEncoding(
-            config.proposal_hash_levels,
+            config.sampler.proposal.hash_levels,
             2,
-            config.proposal_log2_table_size,
+            config.sampler.proposal.log2_table_size,
             16,
             max_resolution,
         )
-        self.mlp = mlp(self.encoding.output_dim, config.proposal_hidden_dim, 1, 1)
+        self.mlp = mlp(self.encoding.output_dim, config.sampler.proposal.hidden_dim, 1, 1)
         with torch.no_grad():
             self.mlp[-1].bias.zero_()
 

@@ -1,7 +1,7 @@
 """`NerfModel`: a field, a sampler and volume rendering, from rays to colours.
 
 Rays are in world space (unit directions). The scene is the box [-h, h]^3 with h =
-`config.box_half_size`, seen between `near` and `far` along each ray; nothing outside it has
+`config.scene.box_half_size`, seen between `near` and `far` along each ray; nothing outside it has
 density. In training mode the samples are jittered (from the generator passed in); in eval mode
 rendering is deterministic and still differentiable with respect to every field parameter.
 """
@@ -38,7 +38,7 @@ class NerfModel(nn.Module):
     Args:
         config: the hyperparameters.
         background: the colour behind the scene when none is passed (with
-            `config.background_mode == "fixed"`).
+            `config.renderer.background_mode == "fixed"`).
         field: the radiance field (`density(x) -> (density, geometry)`,
             `color(geometry, directions) -> rgb`, points in [0, 1]^3); None builds the registry's
             default from `config` (`nerfaug.nerf.registry.build_field`).
@@ -46,7 +46,7 @@ class NerfModel(nn.Module):
     Attributes:
         config: the hyperparameters.
         field: the field (density and colour).
-        sampler: the `Sampler` named by `config.sampler` (occupancy grid or proposal networks).
+        sampler: the `Sampler` named by `config.sampler.kind` (occupancy grid or proposal networks).
         background: buffer with shape (3,).
     """
 
@@ -69,11 +69,11 @@ class NerfModel(nn.Module):
 
     def _unit(self, points: Tensor) -> Tensor:
         """World points (n, 3) -> the field's unit cube [0, 1]^3."""
-        return unit_cube(points, self.config.box_half_size)
+        return unit_cube(points, self.config.scene.box_half_size)
 
     def density(self, points: Tensor) -> Tensor:
         """Density of the field at world points (n, 3) -> (n,); 0 outside the box."""
-        h = self.config.box_half_size
+        h = self.config.scene.box_half_size
         inside = (points.abs() <= h).all(dim=-1)
         return self.field.density(self._unit(points))[0] * inside
 
@@ -95,20 +95,20 @@ class NerfModel(nn.Module):
             origins, directions: Tensors with shape (n_rays, 3), world space, unit directions.
             background: Tensor with shape (3,) or (n_rays, 3); None for the configured
                 background (`self.background`, or the field's colour at the box exit with
-                `config.background_mode == "last_sample"`, or the last composited sample's
+                `config.renderer.background_mode == "last_sample"`, or the last composited sample's
                 colour with "last_composited").
             generator: source of the sample jitter in training mode (None: global RNG).
 
         Returns:
-            RenderOutput with n_samples = config.num_samples; in `extras` what the sampler's
+            RenderOutput with n_samples = config.sampler.num_samples; in `extras` what the sampler's
             `auxiliary_losses` needs (the proposal histograms).
         """
         edges, extras = self._sample(origins, directions, generator)
         t_starts, t_ends = edges[:, :-1], edges[:, 1:]
         weights, rgbs = self._shade(origins, directions, t_starts, t_ends)
-        if background is None and self.config.background_mode == "last_sample":
+        if background is None and self.config.renderer.background_mode == "last_sample":
             background = self._last_sample_colour(origins, directions, t_ends[:, -1])
-        elif background is None and self.config.background_mode == "last_composited":
+        elif background is None and self.config.renderer.background_mode == "last_composited":
             # nerfacto's "last_sample": the last sample's colour (0 where it lies behind opaque
             # matter, `_shade`, where the background's weight is below transmittance_eps anyway).
             background = rgbs[:, -1]
@@ -119,7 +119,9 @@ class NerfModel(nn.Module):
     def _sample(self, origins: Tensor, directions: Tensor, generator: torch.Generator | None) -> tuple[Tensor, dict]:
         """Edges (n_rays, num_samples + 1) of the final samples, and the sampler's extras."""
         config = self.config
-        t_min, t_max = ray_box_span(origins, directions, config.box_half_size, config.near, config.far)
+        t_min, t_max = ray_box_span(
+            origins, directions, config.scene.box_half_size, config.scene.near, config.scene.far
+        )
         return self.sampler.sample(origins, directions, t_min, t_max, generator)
 
     def _last_sample_colour(self, origins: Tensor, directions: Tensor, t_far: Tensor) -> Tensor:
@@ -157,10 +159,10 @@ class NerfModel(nn.Module):
 
     def _shade(self, origins: Tensor, directions: Tensor, t_starts: Tensor, t_ends: Tensor) -> tuple[Tensor, Tensor]:
         """Weights (n_rays, n) and colours (n_rays, n, 3) of the final samples. Colour is only
-        evaluated where the transmittance exceeds `config.transmittance_eps` (0 elsewhere)."""
+        evaluated where the transmittance exceeds `config.sampler.transmittance_eps` (0 elsewhere)."""
         n_rays, n = t_starts.shape
         weights, transmittance, index, geometry = self._densities(origins, directions, t_starts, t_ends)
-        visible = transmittance.detach().reshape(-1)[index] > self.config.transmittance_eps
+        visible = transmittance.detach().reshape(-1)[index] > self.config.sampler.transmittance_eps
         colour_index = index[visible]
         colours = self.field.color(geometry[visible], directions[colour_index // n])
         rgbs = colours.new_zeros(n_rays * n, 3).index_put((colour_index,), colours).reshape(n_rays, n, 3)
@@ -187,7 +189,7 @@ class NerfModel(nn.Module):
         eval mode without gradients (the mode is restored after). On the CPU a chunk holds at
         most `CPU_PASS_SAMPLES` samples per network pass."""
         device = self.background.device
-        chunk = chunk or self.config.render_chunk
+        chunk = chunk or self.config.renderer.render_chunk
         per_ray = self.sampler.samples_per_ray
         if device.type == "cpu" and per_ray:
             chunk = min(chunk, max(1, CPU_PASS_SAMPLES // per_ray))
@@ -219,7 +221,7 @@ class NerfModel(nn.Module):
         Args:
             origins, directions: Tensors with shape (n_rays, 3).
             background: Tensor with shape (3,) or (n_rays, 3); None for the configured one.
-            chunk: rays per forward pass (None: `config.render_chunk`); bounds peak memory. On
+            chunk: rays per forward pass (None: `config.renderer.render_chunk`); bounds peak memory. On
                 the CPU, smaller chunks may be used (`CPU_PASS_SAMPLES`).
 
         Returns:

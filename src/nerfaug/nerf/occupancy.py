@@ -134,15 +134,15 @@ class OccupancySampler(Sampler):
     @classmethod
     def from_config(cls, config: NerfConfig) -> OccupancySampler:
         grid = OccupancyGrid(
-            config.box_half_size,
-            config.occupancy_resolution,
-            config.occupancy_update_every,
-            config.occupancy_warmup_steps,
-            config.occupancy_ema_decay,
-            config.occupancy_threshold,
-            config.occupancy_update_fraction,
+            config.scene.box_half_size,
+            config.sampler.occupancy.resolution,
+            config.sampler.occupancy.update_every,
+            config.sampler.occupancy.warmup_steps,
+            config.sampler.occupancy.ema_decay,
+            config.sampler.occupancy.threshold,
+            config.sampler.occupancy.update_fraction,
         )
-        return cls(grid, config.num_samples)
+        return cls(grid, config.sampler.num_samples)
 
     @property
     def samples_per_ray(self) -> int:

@@ -218,15 +218,15 @@ class ProposalSampler(Sampler):
     @classmethod
     def from_config(cls, config: NerfConfig) -> ProposalSampler:
         return cls(
-            [DensityField(config, r) for r in config.proposal_max_resolutions],
-            config.proposal_samples,
-            config.num_samples,
-            config.box_half_size,
-            ProposalSchedule(config.proposal_update_every, config.proposal_warmup_steps),
-            config.proposal_anneal_steps,
-            config.proposal_anneal_slope,
-            config.interlevel_loss_mult,
-            config.distortion_loss_mult,
+            [DensityField(config, r) for r in config.sampler.proposal.max_resolutions],
+            config.sampler.proposal.samples,
+            config.sampler.num_samples,
+            config.scene.box_half_size,
+            ProposalSchedule(config.sampler.proposal.update_every, config.sampler.proposal.warmup_steps),
+            config.sampler.proposal.anneal_steps,
+            config.sampler.proposal.anneal_slope,
+            config.sampler.proposal.interlevel_loss_mult,
+            config.sampler.proposal.distortion_loss_mult,
         )
 
     @property

@@ -44,19 +44,19 @@ def check_names(config: NerfConfig) -> NerfConfig:
     the value and the valid choices otherwise (before any part is built or any run starts).
 
     Example:
-        >>> check_names(NerfConfig(encoding="nope"))
+        >>> check_names(NerfConfig().with_settings(encoding="nope"))
         Traceback (most recent call last):
         ...
         ValueError: unknown encoding 'nope'; choose one of: hash, kplanes
     """
-    lookup(ENCODINGS, "encoding", config.encoding)
-    lookup(SAMPLERS, "sampler", config.sampler)
+    lookup(ENCODINGS, "encoding", config.field.encoding)
+    lookup(SAMPLERS, "sampler", config.sampler.kind)
     return config
 
 
 def build_encoding(config: NerfConfig, name: str | None = None) -> nn.Module:
-    """The position encoding `name` (default: `config.encoding`), sized by `config`."""
-    return lookup(ENCODINGS, "encoding", config.encoding if name is None else name)(config)
+    """The position encoding `name` (default: `config.field.encoding`), sized by `config`."""
+    return lookup(ENCODINGS, "encoding", config.field.encoding if name is None else name)(config)
 
 
 def build_field(config: NerfConfig, name: str = DEFAULT_FIELD, encoding: nn.Module | None = None) -> nn.Module:
@@ -66,5 +66,5 @@ def build_field(config: NerfConfig, name: str = DEFAULT_FIELD, encoding: nn.Modu
 
 
 def build_sampler(config: NerfConfig) -> Sampler:
-    """The sampler `config.sampler`, sized by `config`."""
-    return lookup(SAMPLERS, "sampler", config.sampler)(config)
+    """The sampler `config.sampler.kind`, sized by `config`."""
+    return lookup(SAMPLERS, "sampler", config.sampler.kind)(config)

@@ -83,7 +83,7 @@ def sample_training_rays(
     background: Tensor,
     generator: torch.Generator,
 ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
-    """`config.batch_size` rays drawn uniformly over all pixels of all training views.
+    """`config.optimiser.batch_size` rays drawn uniformly over all pixels of all training views.
 
     Args:
         cameras: the training views' cameras, on the training device.
@@ -97,13 +97,13 @@ def sample_training_rays(
         over: (3,), (B, 3) (random backgrounds) or None (the model's last-sample colour).
     """
     per_view = cameras.width * cameras.height
-    index = torch.randint(pixels.shape[0], (config.batch_size,), generator=generator, device=generator.device)
+    index = torch.randint(pixels.shape[0], (config.optimiser.batch_size,), generator=generator, device=generator.device)
     view, pixel = index // per_view, index % per_view
     origins, directions = generate_rays(cameras, view, pixel % cameras.width, pixel // cameras.width)
     index = index.to(pixels.device)
     target = pixels[index]
-    ray_background = None if config.background_mode != "fixed" else background
-    if config.random_background and alphas is not None:
+    ray_background = None if config.renderer.background_mode != "fixed" else background
+    if config.renderer.random_background and alphas is not None:
         # Swap the stored background behind each pixel for a random colour the model must
         # learn to see through, so empty space cannot hide in the background colour.
         ray_background = torch.rand((index.shape[0], 3), generator=generator, device=generator.device).to(pixels.device)
@@ -169,10 +169,14 @@ class Trainer:
         groups = self.model.param_groups()
         self.optimizer = torch.optim.Adam(
             [
-                {"params": params, "lr": config.field_lr if name == "field" else config.lr, "name": name}
+                {
+                    "params": params,
+                    "lr": config.optimiser.field_lr if name == "field" else config.optimiser.lr,
+                    "name": name,
+                }
                 for name, params in groups.items()
             ],
-            eps=config.adam_eps,
+            eps=config.optimiser.adam_eps,
             fused=True,  # one kernel per step: much faster on a CPU too
         )
         self._initial_lrs = [group["lr"] for group in self.optimizer.param_groups]
@@ -225,7 +229,9 @@ class Trainer:
 
     def _set_learning_rates(self) -> None:
         for group, initial in zip(self.optimizer.param_groups, self._initial_lrs):
-            group["lr"] = exponential_lr(initial, self.config.lr_final, self.step, self.config.lr_decay_steps)
+            group["lr"] = exponential_lr(
+                initial, self.config.optimiser.lr_final, self.step, self.config.optimiser.lr_decay_steps
+            )
 
     def train_step(self) -> dict:
         """Run one step. Returns its history entry. Raises TrainingDiverged on a NaN/inf loss
