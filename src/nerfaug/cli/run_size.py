@@ -1,47 +1,71 @@
 """How big an experiment or a study is and about how long it takes on this device, printed by
-`nerfaug run` and `nerfaug study` before they start: a rough model from the costs measured in
-BENCHMARKS.md (seconds per training step, per evaluated view, per selection; one torch thread per
-run), not a promise: a busy machine takes longer, a faster one less.
+`nerfaug run` and `nerfaug study` before they start: a rough model from the per-run costs measured
+in BENCHMARKS.md ("Per-run costs the time estimate reads"; one torch thread per run), not a
+promise: a busy machine takes longer, a faster one less.
+
+It imports no torch: the callers name each run's scoring (the method's estimator in
+`nerfaug.selection.methods.METHODS`), so this module needs no method registry.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from nerfaug.experiment.config import ExperimentConfig
 
 
 @dataclass(frozen=True)
 class Costs:
-    """Seconds of one run's parts, one torch thread (BENCHMARKS.md).
+    """Seconds of one run's parts, one torch thread.
 
     Attributes:
-        step: one training step.
-        view: evaluating one test view of 100x100 pixels (the cost grows with the pixels).
-        select: choosing one run's views (scoring the candidates).
+        step: one training step (the mean over a run's steps, the early slow ones included).
+        view: evaluating one test view of 100x100 pixels: its render, PSNR, SSIM and LPIPS (the
+            cost grows with the pixels).
+        figures: the first test view's uncertainty figures (`view_uncertainty`), FisherRF's
+            estimate of what the training views know most of it.
+        finish: setting the run up, the health check (renders of its training views) and
+            writing its folder.
+        scoring: estimator -> scoring 100 candidate views (the cost grows with the pool); the
+            estimators absent ("none", "distance") read camera poses only and cost nothing here.
     """
 
     step: float
     view: float
-    select: float
+    figures: float
+    finish: float
+    scoring: Mapping[str, float]
 
 
-# The project's CPU machine, one thread per run: cpu engine ("NeRF engine: one CPU trial": ~28 ms per
-# step at 2000 steps, 5.5 s for 50 views; "Main job": selection 5-13 s), nerfacto-cpu ("nerfacto-CPU
-# preset": 70 s of CPU for 2000 steps, evaluation and selection 2.4x and 6x the cpu engine's), paper
-# (5.9 s of CPU per step), test (the test suite's tiny engine).
+# The project's 2-core CPU VM, one thread per run ("Per-run costs the time estimate reads"). cpu
+# engine: the 20 runs of the idle demo (70 ms a step over 800 steps, 4 s for 20 views, 9.7 s of
+# figures; selection from 100 candidates 2.4 s for ours and entropy, 27 s for FisherRF).
+# nerfacto-cpu: "Trial batches on the CPU" (130 s for 2000 steps, 31.6 s for 50 views) and single
+# runs on the shared machine (selection, figures). Setup, health check and files: a single run's
+# wall less its recorded phases, 1.1-1.9 s. The paper engine: 5.9 s a step ("nerfacto-CPU
+# preset"), the rest guesses from that step, not measured. test: the test suite's tiny engine.
+NERFACTO_CPU = Costs(0.065, 0.60, 8.0, 1.5, {"combined": 7.4, "entropy": 7.4, "fisher": 28.0})
 CPU_COSTS = {
-    "cpu": Costs(step=0.028, view=0.11, select=10.0),
-    "nerfacto-cpu": Costs(step=0.035, view=0.26, select=30.0),
-    "nerfacto-cpu-last-sample": Costs(step=0.035, view=0.26, select=30.0),
-    "paper": Costs(step=5.9, view=3.0, select=600.0),
-    "test": Costs(step=0.005, view=0.01, select=1.0),
+    "cpu": Costs(0.070, 0.20, 9.7, 1.5, {"combined": 2.4, "entropy": 2.4, "fisher": 27.0}),
+    "nerfacto-cpu": NERFACTO_CPU,
+    "nerfacto-cpu-last-sample": NERFACTO_CPU,
+    "paper": Costs(5.9, 3.0, 60.0, 10.0, {"combined": 80.0, "entropy": 80.0, "fisher": 600.0}),
+    "test": Costs(0.005, 0.01, 0.5, 0.2, {"combined": 1.0, "entropy": 1.0, "fisher": 1.0}),
 }
-# One H100 ("GPU: the paper preset on an H100": 0.026 s per step, 0.35 s per 400x400 view, 2.3 s
-# of selection). Other engines were not measured on a GPU: taken as the paper preset's.
-GPU_COSTS = {"paper": Costs(step=0.026, view=0.022, select=2.3)}
-# One Cycles frame of a built-in scene at 100x100 pixels, 16 samples ("Built-in scenes": 0.15 s
-# idle to 0.5 s under load), and Blender's start.
-RENDER_VIEW_S = 0.3
+# One H100 ("GPU: the paper preset on an H100": 0.026 s a step, 0.35 s a 400x400 view, 17.7 s of
+# figures, 4.2 s besides the phases, ours' selection from 500 candidates 2.3 s; FisherRF's not
+# measured there, taken as 11x ours' as on the CPU). Other engines were not measured on a GPU:
+# taken as the paper preset's.
+GPU_COSTS = {"paper": Costs(0.026, 0.022, 17.7, 4.2, {"combined": 0.46, "entropy": 0.46, "fisher": 5.0})}
+# Runs sharing one GPU: 4 at once did 1.7x the work of one alone ("GPU: the paper preset on an H100").
+GPU_SHARED_THROUGHPUT = 1.7
+# One Cycles frame of a built-in scene at 100x100 pixels, 16 samples (the idle demo rendered 126
+# in 28 s, "The demo's time estimate against its time"), and Blender's start.
+RENDER_VIEW_S = 0.2
 RENDER_START_S = 2.0
 
 
@@ -53,11 +77,27 @@ def costs(engine: str, device: str) -> Costs:
     return CPU_COSTS.get(base, CPU_COSTS["cpu"])
 
 
-def run_seconds(engine: str, device: str, steps: int, n_test: int, resolution: int) -> float:
-    """About how long one run takes: `steps` training steps, one selection, `n_test` test views of
-    `resolution` pixels across evaluated."""
-    c = costs(engine, device)
-    return steps * c.step + n_test * c.view * (resolution / 100) ** 2 + c.select
+def run_seconds(engine: str, scoring: str, config: ExperimentConfig) -> float:
+    """About how long one run of `config` takes with `engine`, its method scoring the candidates
+    with the estimator `scoring` ("none" for uniform): training, selection, evaluation, the
+    uncertainty figures when `config.view_uncertainty`, and the rest."""
+    c = costs(engine, config.device)
+    seconds = (
+        config.steps * c.step
+        + c.scoring.get(scoring, 0.0) * config.pool / 100
+        + config.n_test * c.view * (config.resolution / 100) ** 2
+        + c.finish
+    )
+    return seconds + (c.figures if config.view_uncertainty else 0.0)
+
+
+def runs_in_parallel(at_once: int, device: str) -> float:
+    """How many runs' work `at_once` runs do together. On a CPU, one run per core: two one-thread
+    runs side by side on the 2-core VM each cost what one alone does ("Per-run costs the time
+    estimate reads"), and runs beyond the cores wait for one."""
+    if device == "cuda":
+        return min(at_once, GPU_SHARED_THROUGHPUT)
+    return min(at_once, os.cpu_count() or 1)
 
 
 def render_seconds(views: int, resolution: int) -> float:
@@ -84,28 +124,24 @@ def device_words(device: str, workers: int) -> str:
     return f"cpu, {workers} run{'s' if workers > 1 else ''} at a time on {cores} core{'s' if cores > 1 else ''}"
 
 
-def estimate(
-    runs: dict[str, int], device: str, steps: int, n_test: int, resolution: int, workers: int
-) -> tuple[float, str]:
-    """(seconds, one sentence) for `runs` (engine -> runs still to do) at `workers` runs at a time."""
-    total = sum(n * run_seconds(engine, device, steps, n_test, resolution) for engine, n in runs.items())
+def estimate(runs: Mapping[tuple[str, str], int], config: ExperimentConfig, workers: int) -> tuple[float, str]:
+    """(seconds, one sentence) for `runs` ((engine, scoring estimator) -> runs still to do) of
+    `config`, `workers` runs at a time."""
+    each = {kind: run_seconds(*kind, config) for kind, n in runs.items() if n}
     count = sum(runs.values())
     at_once = max(1, min(workers, count))
-    # Runs spread over the workers: the work divided among them, but never less than one run.
-    longest = max((run_seconds(e, device, steps, n_test, resolution) for e, n in runs.items() if n), default=0.0)
-    seconds = max(total / at_once, longest) if count else 0.0
-    return seconds, f"about {duration(seconds)} on this device ({device_words(device, at_once)})"
+    total = sum(n * each[kind] for kind, n in runs.items() if n)
+    # The work spread over the runs in parallel, but never less than the longest run.
+    seconds = max(total / runs_in_parallel(at_once, config.device), max(each.values())) if count else 0.0
+    return seconds, f"about {duration(seconds)} on this device ({device_words(config.device, at_once)})"
 
 
 def size_line(
     what: str,
-    runs: dict[str, int],
+    runs: Mapping[tuple[str, str], int],
     finished: int,
     shape: str,
-    resolution: int,
-    steps: int,
-    n_test: int,
-    device: str,
+    config: ExperimentConfig,
     workers: int,
     render: tuple[int, int] | None = None,
 ) -> str:
@@ -113,23 +149,24 @@ def size_line(
 
     Args:
         what: the command, e.g. "nerfaug run".
-        runs: engine -> runs to do (those already finished excluded).
+        runs: (engine, the method's scoring estimator) -> runs to do (those already finished excluded).
         finished: runs already finished (skipped).
         shape: what multiplies to the run count, e.g. "1 scene x 4 methods x 5 trials".
-        resolution, steps, n_test: each run's image size, training steps and test views.
-        device, workers: where the runs go and how many at a time.
+        config: the protocol every run follows (its image size, steps, test views, pool, device).
+        workers: how many runs at a time.
         render: (scenes, views per scene) of built-in scenes rendered first, if not yet cached.
     """
-    seconds, when = estimate(runs, device, steps, n_test, resolution, workers)
+    seconds, when = estimate(runs, config, workers)
     to_do = sum(runs.values())
     done = f", {finished} already finished" if finished else ""
+    side = config.resolution
     line = (
-        f"{what}: {to_do + finished} runs ({shape}{done}), {resolution}x{resolution} pixels, {steps} steps each; "
+        f"{what}: {to_do + finished} runs ({shape}{done}), {side}x{side} pixels, {config.steps} steps each; "
         f"{to_do} to run: {when}"
     )
     if render is not None and render[0]:
         line += (
-            f", plus about {duration(render[0] * render_seconds(render[1], resolution))} to render "
+            f", plus about {duration(render[0] * render_seconds(render[1], side))} to render "
             f"{render[0]} built-in scene{'s' if render[0] > 1 else ''} the first time"
         )
     return line + ". An estimate from the costs measured in BENCHMARKS.md: a busy machine takes longer."

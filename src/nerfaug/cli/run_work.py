@@ -18,7 +18,7 @@ from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig
 from nerfaug.experiment.store import finished_runs
 from nerfaug.report import PaperTables, ReportError, write_report
 from nerfaug.scenes.builtin import BUILTIN_SCENES
-from nerfaug.selection import METHODS, TABLE_I_ROWS, TABLE_II_ROWS
+from nerfaug.selection import METHODS, TABLE_I_ROWS, TABLE_II_ROWS, get_method
 
 
 def run(
@@ -76,8 +76,7 @@ def run_config(protocol: ExperimentConfig, data: Path | None) -> ExperimentConfi
 
 def run_size_line(config: ExperimentConfig, out: Path, workers: int) -> str:
     """How many runs `config` makes, how big, and about how long on this device (`nerfaug.cli.run_size`)."""
-    total = len(config.scenes) * len(config.methods) * config.trials
-    finished = sweep.finished_in_plan(config, Path(out))
+    runs, finished = runs_to_do(config, Path(out))
     shape = " x ".join(
         (
             per_cell(len(config.scenes), "scene"),
@@ -87,18 +86,21 @@ def run_size_line(config: ExperimentConfig, out: Path, workers: int) -> str:
     )
     builtin = sum(scene in BUILTIN_SCENES for scene in config.scenes)
     views = config.pool + config.n_test + config.n_initial
-    return size_line(
-        "nerfaug run",
-        {config.engine: total - finished},
-        finished,
-        shape,
-        config.resolution,
-        config.steps,
-        config.n_test,
-        config.device,
-        workers,
-        render=(builtin, views),
-    )
+    return size_line("nerfaug run", runs, finished, shape, config, workers, render=(builtin, views))
+
+
+def runs_to_do(config: ExperimentConfig, root: Path, recorded=None) -> tuple[dict[tuple[str, str], int], int]:
+    """The runs of `config` a resume into `root` would make, as `nerfaug.cli.run_size` costs them
+    ((engine, the method's scoring estimator) -> runs), and how many it skips as finished (in
+    `root`, or `recorded` elsewhere: `sweep.finished_in_plan`)."""
+    runs: dict[tuple[str, str], int] = {}
+    finished = 0
+    for method in config.methods:
+        done = sweep.finished_in_plan(config.replace(methods=(method,)), root, recorded)
+        kind = (config.engine, get_method(method).estimator)
+        runs[kind] = runs.get(kind, 0) + len(config.scenes) * config.trials - done
+        finished += done
+    return runs, finished
 
 
 def paper_tables() -> PaperTables:

@@ -13,11 +13,12 @@ import sys
 from pathlib import Path
 
 from nerfaug.cli.run_size import per_cell, size_line
+from nerfaug.cli.run_work import runs_to_do
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.study import table_keys
 from nerfaug.experiment.study_spec import StudySpec
-from nerfaug.experiment.sweep import default_workers, finished_in_plan
+from nerfaug.experiment.sweep import default_workers
 from nerfaug.report import study_page, study_table
 from nerfaug.selection import METHODS
 from nerfaug.selection.config import SelectionConfig
@@ -84,12 +85,13 @@ def study_size_line(plan, workers: int, table: dict | None = None) -> str:
     """How many runs the study makes, how big, and about how long on this device (`nerfaug.cli.run_size`);
     runs already finished are those of this plan in OUT or in `table` (the study's table)."""
     config = plan.config
-    each = len(plan.scenes) * len(config.methods) * config.trials
     study = StudyFolder(Path(plan.out))
-    done = {
-        engine: finished_in_plan(plan.engine_config(engine), study.engine(engine).root, table_keys(table, engine))
-        for engine in plan.engines
-    }
+    runs: dict[tuple[str, str], int] = {}
+    finished = 0
+    for engine in plan.engines:
+        to_do, done = runs_to_do(plan.engine_config(engine), study.engine(engine).root, table_keys(table, engine))
+        runs |= to_do
+        finished += done
     shape = " x ".join(
         (
             per_cell(len(plan.engines), "engine"),
@@ -98,18 +100,7 @@ def study_size_line(plan, workers: int, table: dict | None = None) -> str:
             per_cell(config.trials, "trial"),
         )
     )
-    runs = {engine: each - done[engine] for engine in plan.engines}
-    return size_line(
-        "nerfaug study",
-        runs,
-        sum(done.values()),
-        shape,
-        config.resolution,
-        config.steps,
-        config.n_test,
-        config.device,
-        workers,
-    )
+    return size_line("nerfaug study", runs, finished, shape, config, workers)
 
 
 def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:

@@ -206,8 +206,8 @@ PROTOCOL_PRESETS: Presets[ExperimentConfig] = Presets(
 quick: the default (`make demo`); the built-in lego at 100x100 with the CPU engine, the four
     methods of the main comparison, five trials each (the fewest with which Mann-Whitney with a
     Bonferroni factor of 3 can reach p < 0.05), 800 steps (views added at 200, as in the paper),
-    100 candidates and 20 test views: about 10 minutes on two cores from a fresh clone
-    (BENCHMARKS.md, "Demo").
+    100 candidates and 20 test views: about 14 minutes on an idle two-core machine, rendering
+    included (BENCHMARKS.md, "The demo's time estimate against its time").
 paper: lego/chair/materials at 800x800 (or the data's resolution), 10k steps, 10 trials, the
     paper's learning rates and its main comparison.
 ablation: the paper's Tables I and II (terms; NBV vs sampling) on lego.
