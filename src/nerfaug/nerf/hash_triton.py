@@ -51,12 +51,14 @@ def vertex(sx, sy, sz, res, fx, fy, fz, dense, mask, offset, corner: tl.constexp
 
 @triton.jit
 def level_setup(
-    x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS: tl.constexpr, BLOCK: tl.constexpr
-):
-    """This program's level, points (indices, validity), the points scaled to the level's
-    grid, and the level's constants (resolution, factors per axis, dense or not), and each
-    point's offset in the table: its run's tables (a trial batch's run k holds points
-    k * per_run to (k + 1) * per_run - 1 and the k-th block of LEVELS tables), then the level's."""
+    x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run,
+    LEVELS: tl.constexpr, F: tl.constexpr, F_BLOCK: tl.constexpr, BLOCK: tl.constexpr,
+):  # fmt: skip
+    """This program's points scaled to its level's grid, the level's constants (resolution,
+    factors per axis, dense or not), each point's offset in the table: its run's tables (a trial
+    batch's run k holds points k * per_run to (k + 1) * per_run - 1 and the k-th block of LEVELS
+    tables), then the level's; the feature indices, which (point, feature) pairs are valid, and
+    where each pair's value stands in the (n, LEVELS * F) output (and its gradient)."""
     level = tl.program_id(1)
     points = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     valid = points < n
@@ -67,7 +69,10 @@ def level_setup(
     sz = scale * tl.load(x_ptr + points * 3 + 2, mask=valid, other=0.0)
     fx, fy, fz = tl.load(fac_ptr + level * 3), tl.load(fac_ptr + level * 3 + 1), tl.load(fac_ptr + level * 3 + 2)
     offset = ((points // per_run) * LEVELS + level) * table_size
-    return level, points, valid, res, sx, sy, sz, fx, fy, fz, level < dense_levels, offset
+    features = tl.arange(0, F_BLOCK)
+    where = valid[:, None] & (features < F)[None, :]
+    outputs = points[:, None] * (LEVELS * F) + level * F + features[None, :]
+    return res, sx, sy, sz, fx, fy, fz, level < dense_levels, offset, features, where, outputs
 
 
 @triton.jit
@@ -75,17 +80,15 @@ def forward_kernel(
     x_ptr, table_ptr, res_ptr, fac_ptr, out_ptr, n, dense_levels, table_size, mask, per_run,
     LEVELS: tl.constexpr, F: tl.constexpr, F_BLOCK: tl.constexpr, BLOCK: tl.constexpr,
 ):  # fmt: skip
-    level, points, valid, res, sx, sy, sz, fx, fy, fz, dense, offset = level_setup(
-        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS, BLOCK
+    res, sx, sy, sz, fx, fy, fz, dense, offset, features, where, outputs = level_setup(
+        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS, F, F_BLOCK, BLOCK
     )
-    features = tl.arange(0, F_BLOCK)
-    where = valid[:, None] & (features < F)[None, :]
     total = tl.zeros((BLOCK, F_BLOCK), dtype=tl.float32)
     for corner in tl.static_range(8):
         row, weight = vertex(sx, sy, sz, res, fx, fy, fz, dense, mask, offset, corner)
         value = tl.load(table_ptr + row[:, None] * F + features[None, :], mask=where, other=0.0)
         total += value * weight[:, None]
-    tl.store(out_ptr + points[:, None] * (LEVELS * F) + level * F + features[None, :], total, mask=where)
+    tl.store(out_ptr + outputs, total, mask=where)
 
 
 @triton.jit
@@ -93,12 +96,10 @@ def backward_kernel(
     x_ptr, grad_ptr, res_ptr, fac_ptr, grad_table_ptr, n, dense_levels, table_size, mask, per_run,
     LEVELS: tl.constexpr, F: tl.constexpr, F_BLOCK: tl.constexpr, BLOCK: tl.constexpr,
 ):  # fmt: skip
-    level, points, valid, res, sx, sy, sz, fx, fy, fz, dense, offset = level_setup(
-        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS, BLOCK
+    res, sx, sy, sz, fx, fy, fz, dense, offset, features, where, outputs = level_setup(
+        x_ptr, res_ptr, fac_ptr, n, dense_levels, table_size, per_run, LEVELS, F, F_BLOCK, BLOCK
     )
-    features = tl.arange(0, F_BLOCK)
-    where = valid[:, None] & (features < F)[None, :]
-    grad = tl.load(grad_ptr + points[:, None] * (LEVELS * F) + level * F + features[None, :], mask=where)
+    grad = tl.load(grad_ptr + outputs, mask=where)
     for corner in tl.static_range(8):
         row, weight = vertex(sx, sy, sz, res, fx, fy, fz, dense, mask, offset, corner)
         tl.atomic_add(grad_table_ptr + row[:, None] * F + features[None, :], grad * weight[:, None], mask=where)
