@@ -27,7 +27,7 @@ from nerfaug.nerf.proposal import (
     ProposalSchedule,
     distortion_per_ray,
     interlevel_loss_per_ray,
-    place_samples,
+    place_samples_of,
     proposal_anneal,
 )
 from nerfaug.nerf.sampling import RunGenerators, ray_box_span, unit_cube
@@ -327,17 +327,7 @@ class BatchModel(nn.Module):
             sigma = self.networks[level](self._unit_points(o, d, mids, runs)).reshape(mids.shape)
             return render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
 
-        edges, extras = place_samples(
-            weights_of,
-            t_min,
-            t_max,
-            self.samples,
-            self.num_samples,
-            self.anneal,
-            self.training,
-            generator,
-            with_graph=torch.is_grad_enabled() and self.training and self.update_networks,
-        )
+        edges, extras = place_samples_of(self, weights_of, t_min, t_max, generator)
         t_starts, t_ends = edges[:, :-1], edges[:, 1:]
         weights, rgbs = self._shade(o, d, t_starts, t_ends, runs)
         if background is None and config.renderer.background_mode == "last_sample":

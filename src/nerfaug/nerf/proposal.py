@@ -8,6 +8,8 @@ Histograms are (edges (n_rays, n + 1), weights (n_rays, n)) along the same rays.
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import torch
 from torch import Tensor, nn
 
@@ -151,6 +153,46 @@ def place_samples(
     return edges, {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
 
 
+class ProposalState(Protocol):
+    """What `place_samples_of` reads of a proposal sampler (`ProposalSampler`, or a trial batch's
+    `nerfaug.nerf.batch.BatchModel`)."""
+
+    samples: tuple[int, ...]
+    num_samples: int
+    anneal: Tensor
+    training: bool
+    update_networks: bool
+
+
+def place_samples_of(
+    sampler: ProposalState, weights_of, t_min: Tensor, t_max: Tensor, generator
+) -> tuple[Tensor, dict]:
+    """`place_samples` with `sampler`'s levels, annealing exponent and mode: jittered in training.
+
+    Samples are placed without gradient, so outside training (e.g. a Fisher information pass in
+    eval mode) and on steps that do not update them the networks need no graph.
+
+    Args:
+        sampler: the sampler whose cascade it is (its `samples`, `num_samples`, `anneal`,
+            `training` and `update_networks`).
+        weights_of, t_min, t_max, generator: as for `place_samples`.
+
+    Returns:
+        As `place_samples`: the final edges (n_rays, num_samples + 1) and the histograms.
+    """
+    return place_samples(
+        weights_of,
+        t_min,
+        t_max,
+        sampler.samples,
+        sampler.num_samples,
+        sampler.anneal,
+        sampler.training,
+        generator,
+        with_graph=torch.is_grad_enabled() and sampler.training and sampler.update_networks,
+    )
+
+
 class ProposalSchedule:
     """Which training steps update the proposal networks (nerfstudio's ProposalNetworkSampler
     rule): every step below 10, then a step once more than `proposal_update_interval` steps have
@@ -236,18 +278,12 @@ class ProposalSampler(Sampler):
     def sample(self, origins, directions, t_min, t_max, generator=None) -> tuple[Tensor, dict]:
         """See `Sampler.sample`; `extras` holds each network's histogram ("proposal_edges",
         "proposal_weights") for the interlevel loss."""
-        # Samples are placed without gradient, so outside training (e.g. a Fisher information
-        # pass in eval mode) and on steps that do not update them the networks need no graph.
-        return place_samples(
+        return place_samples_of(
+            self,
             lambda level, edges: self._weights(self.networks[level], origins, directions, edges),
             t_min,
             t_max,
-            self.samples,
-            self.num_samples,
-            self.anneal,
-            self.training,
             generator,
-            with_graph=torch.is_grad_enabled() and self.training and self.update_networks,
         )
 
     def _weights(self, network: DensityField, origins: Tensor, directions: Tensor, edges: Tensor) -> Tensor:
