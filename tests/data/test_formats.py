@@ -150,11 +150,14 @@ def test_missing_image_names_the_path(tmp_path):
         load_blender_split(tmp_path, "train")
 
 
-def test_images_of_different_sizes(tmp_path):
+@pytest.mark.parametrize("lazy", [False, True])
+def test_images_of_different_sizes(tmp_path, lazy):
+    """Refused as the image is read: when loading, or for a lazy Views when the image is used; the
+    error names the frame, both sizes and the file."""
     valid_meta(tmp_path, n=2, size=8)
     iio.imwrite(tmp_path / "train" / "r_1.png", np.zeros((10, 8, 4), np.uint8))
-    with pytest.raises(DatasetError, match=r"frames\[1\].file_path.*differs from frames\[0\]'s 8x8.*8x10"):
-        load_blender_split(tmp_path, "train")
+    with pytest.raises(DatasetError, match=r"frames\[1\].file_path.*differs from frames\[0\]'s 8x8.*8x10.*r_1.png"):
+        load_blender_split(tmp_path, "train", lazy=lazy).image(1)
 
 
 def test_image_that_is_not_rgb(tmp_path):

@@ -14,7 +14,7 @@ import torch
 from nerfaug.camera_schema import check_field_of_view
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.frames import load_frames, require, write_image
+from nerfaug.data.frames import load_frames, require, require_frames, write_image
 from nerfaug.data.interface import Format
 from nerfaug.data.views import Views
 from nerfaug.jsonio import atomic_write_json, read_json
@@ -44,14 +44,7 @@ def load_blender_split(
     json_path = root / f"transforms_{split}.json"
     meta = read_json(json_path)
     angle = check_field_of_view(require(meta, "camera_angle_x", json_path), json_path, "camera_angle_x")
-    frames = require(meta, "frames", json_path)
-    if not isinstance(frames, list) or not frames:
-        raise DatasetError(
-            json_path,
-            "frames must be a non-empty list",
-            field="frames",
-            value=frames if not isinstance(frames, list) else [],
-        )
+    frames = require_frames(meta, json_path)
     return load_frames(
         root,
         json_path,

@@ -6,6 +6,7 @@ JSON reading and atomic writes live in `nerfaug.jsonio` (torch-free).
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from collections.abc import Callable, Sequence
@@ -32,6 +33,28 @@ def require(data: dict, key: str, path: Path, where: str = ""):
     if key not in data:
         raise DatasetError(path, f"missing required field{where}", field=key)
     return data[key]
+
+
+def require_frames(meta: dict, json_path: Path) -> list:
+    """A transforms JSON's `frames`: a non-empty list (its entries are checked where read)."""
+    frames = require(meta, "frames", json_path)
+    if not isinstance(frames, list) or not frames:
+        raise DatasetError(
+            json_path,
+            "frames must be a non-empty list",
+            field="frames",
+            value=frames if not isinstance(frames, list) else [],
+        )
+    return frames
+
+
+def atomic_write_numpy(path: Path, save: Callable, *args, **kwargs) -> Path:
+    """Write to `path`, atomically, what numpy's `save` (`np.save`, `np.savez`) writes for `args`
+    and `kwargs`; returns `path`."""
+    buffer = io.BytesIO()
+    save(buffer, *args, **kwargs)
+    atomic_write_bytes(path, buffer.getvalue())
+    return path
 
 
 def is_number(value) -> bool:
@@ -320,10 +343,8 @@ def load_frames(
         warp = None if warp_of is None else warp_of(i)
         return read_image(paths[i], background, downscale, json_path, f"frames[{i}].file_path", mask, warp)
 
-    first, first_alpha = load(0)
-    height, width = first.shape[:2]
-    loaded = [(first, first_alpha)] + ([] if lazy else [load(i) for i in range(1, len(frames))])
-    for i, (image, _) in enumerate(loaded):
+    def check_size(i: int, image: Tensor) -> None:
+        """Every image has the first one's size (for a lazy Views, checked as each is read)."""
         if image.shape[:2] != (height, width):
             raise DatasetError(
                 json_path,
@@ -331,6 +352,12 @@ def load_frames(
                 field=f"frames[{i}].file_path",
                 value=f"{image.shape[1]}x{image.shape[0]} ({paths[i]})",
             )
+
+    first, first_alpha = load(0)
+    height, width = first.shape[:2]
+    loaded = [(first, first_alpha)] + ([] if lazy else [load(i) for i in range(1, len(frames))])
+    for i, (image, _) in enumerate(loaded):
+        check_size(i, image)
     full_w, full_h = width * downscale, height * downscale
     c2w = torch.stack(poses)
     per_frame = [intrinsics_of(full_w, full_h, i) for i in range(len(frames))]
@@ -349,13 +376,7 @@ def load_frames(
 
         def checked_load(i: int):
             image, alpha = load(i)
-            if image.shape[:2] != (height, width):
-                raise DatasetError(
-                    json_path,
-                    f"image size differs from frames[0]'s {width}x{height}",
-                    field=f"frames[{i}].file_path",
-                    value=f"{image.shape[1]}x{image.shape[0]}",
-                )
+            check_size(i, image)
             return image, alpha
 
         return Views(cameras, None, names, None, loader=checked_load)

@@ -13,7 +13,6 @@ One listing for the whole folder (no splits), like the nerfstudio and LLFF forma
 
 from __future__ import annotations
 
-import io
 import zipfile
 from pathlib import Path
 
@@ -22,11 +21,10 @@ import numpy as np
 from nerfaug.camera_schema import check_projection, check_scene_distance, check_similarity
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.frames import check_pose, load_frames
+from nerfaug.data.frames import atomic_write_numpy, check_pose, load_frames
 from nerfaug.data.interface import CapturedSetFormat
 from nerfaug.data.llff import image_files
 from nerfaug.data.views import Views
-from nerfaug.jsonio import atomic_write_bytes
 
 LISTING = "cameras_sphere.npz"
 IMAGE_FOLDERS = ("image", "images")  # IDR writes image/, several DTU copies images/
@@ -135,11 +133,7 @@ class IdrFormat(CapturedSetFormat):
                 intrinsics, np.asarray(frame["transform_matrix"], dtype=np.float64)
             )
             arrays[f"scale_mat_{i}"] = np.eye(4)
-        path = self.listing(root, split)
-        buffer = io.BytesIO()
-        np.savez(buffer, **arrays)
-        atomic_write_bytes(path, buffer.getvalue())
-        return path
+        return atomic_write_numpy(self.listing(root, split), np.savez, **arrays)
 
     def load(self, root, split="train", background=(1.0, 1.0, 1.0), downscale=1, lazy=False) -> Views:
         root = Path(root)

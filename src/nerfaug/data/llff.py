@@ -18,7 +18,6 @@ experiments (`nerfaug.experiment.protocol`).
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
@@ -27,10 +26,9 @@ from nerfaug.camera_schema import check_pinhole
 from nerfaug.cameras import Cameras
 from nerfaug.containment import inside
 from nerfaug.data.errors import DatasetError
-from nerfaug.data.frames import check_pose, load_frames
+from nerfaug.data.frames import atomic_write_numpy, check_pose, load_frames
 from nerfaug.data.interface import CapturedSetFormat
 from nerfaug.data.views import Views
-from nerfaug.jsonio import atomic_write_bytes
 
 LISTING = "poses_bounds.npy"
 IMAGES = "images"
@@ -167,11 +165,7 @@ class LlffFormat(CapturedSetFormat):
             )
             matrix = np.concatenate([llff_from_gl(pose[None])[0], np.array(frame["hwf"], dtype=np.float64)[:, None]], 1)
             rows.append(np.concatenate([matrix.reshape(-1), np.asarray(bounds, dtype=np.float64)]))
-        path = self.listing(root, split)
-        buffer = io.BytesIO()
-        np.save(buffer, np.stack(rows))
-        atomic_write_bytes(path, buffer.getvalue())
-        return path
+        return atomic_write_numpy(self.listing(root, split), np.save, np.stack(rows))
 
     def load(self, root, split="train", background=(1.0, 1.0, 1.0), downscale=1, lazy=False) -> Views:
         root = Path(root)

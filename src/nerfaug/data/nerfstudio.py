@@ -15,7 +15,7 @@ from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import (
     check_number,
     load_frames,
-    require,
+    require_frames,
     write_image,
 )
 from nerfaug.data.interface import Format
@@ -55,14 +55,7 @@ def load_nerfstudio(root: str | Path, background=(1.0, 1.0, 1.0), downscale: int
     root = Path(root)
     json_path = root / "transforms.json"
     meta = read_json(json_path)
-    frames = require(meta, "frames", json_path)
-    if not isinstance(frames, list) or not frames:
-        raise DatasetError(
-            json_path,
-            "frames must be a non-empty list",
-            field="frames",
-            value=frames if not isinstance(frames, list) else [],
-        )
+    frames = require_frames(meta, json_path)
 
     def get_of(i: int):
         frame = frames[i] if isinstance(frames[i], dict) else {}
