@@ -404,9 +404,7 @@ def render_scene_dataset(
     with exclusive_lock(out.parent):
         if is_complete(out, manifest):
             return out
-        return _render_dataset(
-            scene, out, manifest, resolution, pool, test, initial, val, samples, seed, threads, progress
-        )
+        return _render_dataset(scene, out, manifest, threads, progress)
 
 
 @contextlib.contextmanager
@@ -421,28 +419,18 @@ def exclusive_lock(folder: Path):
         os.close(handle)  # releases the lock
 
 
-def _render_dataset(
-    scene,
-    out: Path,
-    manifest: dict,
-    resolution: int,
-    pool: int,
-    test: int,
-    initial: int,
-    val: int,
-    samples: int,
-    seed: int,
-    threads: int,
-    progress: bool,
-) -> Path:
-    """The body of `render_scene_dataset`, run while holding its lock."""
+def _render_dataset(scene, out: Path, manifest: dict, threads: int, progress: bool) -> Path:
+    """The body of `render_scene_dataset`, run while holding its lock: the dataset `manifest`
+    (`dataset_manifest`) describes, its counts, resolution and seed read from it."""
+    resolution, samples, seed = manifest["resolution"], manifest["samples"], manifest["seed"]
+    test, val = manifest["test"], manifest["val"]
     staging = out.with_name(f".{out.name}.partial")
     renders = staging / "renders"
     if not (staging / "manifest.json").is_file() or read_json(staging / "manifest.json") != manifest:
         shutil.rmtree(staging, ignore_errors=True)
         atomic_write_json(staging / "manifest.json", manifest)
 
-    poses = dataset_poses(pool, test, initial, val, seed)
+    poses = dataset_poses(manifest["pool"], test, manifest["initial"], val, seed)
     # val repeats test views: render train, initial and test only, in one child process.
     rendered = ("train", "initial", "test")
     paths = {split: [renders / split / f"r_{i}.png" for i in range(len(poses[split]))] for split in rendered}
