@@ -84,21 +84,38 @@ def contract_layers(pyproject: Path = PYPROJECT) -> list[tuple[list[str], bool]]
     return [([room.strip() for room in re.split(r"[|:]", layer)], "|" in layer) for layer in layers["layers"]]
 
 
-def table_layers(text: str) -> list[tuple[list[str], bool]]:
-    """The room table's rows, top first, read as `contract_layers` reads the contract: its first
-    column's entries (`x/` a package, `x.py` a module) and "(independent)" after them."""
+def table_rows(text: str) -> list[str]:
+    """The room table's rows (below its header), top first."""
     if TABLE_HEADING not in text:
         raise AssertionError(f"{ARCHITECTURE.name}: no heading {TABLE_HEADING!r}")
     lines = text.split(TABLE_HEADING, 1)[1].splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("|"))
     end = next((i for i, line in enumerate(lines[start:], start) if not line.startswith("|")), len(lines))
-    rows = lines[start + 2 : end]
-    found = []
-    for row in rows:
-        first = row.strip().strip("|").split("|")[0]
-        entries = re.findall(r"`([\w/]+(?:\.py|/))`", first)
-        found.append(([entry.removesuffix("/").removesuffix(".py") for entry in entries], "(independent)" in first))
-    return found
+    return lines[start + 2 : end]
+
+
+def row_rooms(row: str) -> list[str]:
+    """A row's rooms: its first column's entries (`x/` a package, `x.py` a module), as module names."""
+    first = row.strip().strip("|").split("|")[0]
+    return [entry.removesuffix("/").removesuffix(".py") for entry in re.findall(r"`([\w/]+(?:\.py|/))`", first)]
+
+
+def table_layers(text: str) -> list[tuple[list[str], bool]]:
+    """The room table's rows, top first, read as `contract_layers` reads the contract: its first
+    column's entries and "(independent)" after them."""
+    return [(row_rooms(row), "(independent)" in row.strip().strip("|").split("|")[0]) for row in table_rows(text)]
+
+
+def missing_table_paths(text: str, package: Path = PACKAGE) -> list[str]:
+    """The paths the room table names (`x.py` a file, `x/` a folder, in either column) that lie
+    neither in the package nor in one of their row's rooms (`registry.py` in the selection row is
+    `selection/registry.py`)."""
+    missing = []
+    for row in table_rows(text):
+        for path in re.findall(r"`([\w/]+(?:\.py|/))`", row):
+            if not any((package / room / path).exists() for room in ["", *row_rooms(row)]):
+                missing.append(path)
+    return missing
 
 
 def test_the_room_table_lists_the_contracts_layers_in_order():
@@ -109,6 +126,18 @@ def test_a_room_table_that_differs_from_the_contract_is_found():
     text = ARCHITECTURE.read_text()
     assert table_layers(text.replace("| `cli/` |", "| `clis/` |", 1)) != contract_layers()
     assert table_layers(text.replace(" (independent)", "", 1)) != contract_layers()
+
+
+def test_every_file_and_folder_the_room_table_names_exists():
+    """A module renamed, moved or removed without the table is found."""
+    assert missing_table_paths(ARCHITECTURE.read_text()) == []
+
+
+def test_a_path_the_room_table_names_that_does_not_exist_is_found():
+    text = ARCHITECTURE.read_text()
+    assert "`sampler.py`" in text and "`assets/cow/`" in text
+    renamed = text.replace("`sampler.py`", "`samplers.py`", 1).replace("`assets/cow/`", "`assets/cows/`", 1)
+    assert missing_table_paths(renamed) == ["assets/cows/", "samplers.py"]
 
 
 # --- cycles, sizes, light modules ----------------------------------------------------------------
