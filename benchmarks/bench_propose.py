@@ -49,7 +49,7 @@ def main() -> None:
     config = SelectionConfig(entropy_resolution=args.entropy_resolution)
     with tempfile.TemporaryDirectory(prefix="nerfaug-bench-propose-") as run:
         start = time.perf_counter()
-        settings = SessionSettings(preset=args.preset, downscale=args.downscale)
+        settings = SessionSettings(engine=args.preset, downscale=args.downscale)
         session = CaptureSession.create(args.data, Path(run) / "run", settings, split=args.split, device=args.device)
         create_s = time.perf_counter() - start
         start = time.perf_counter()
