@@ -46,7 +46,7 @@ def main() -> None:
     args = parser.parse_args()
     configure_process(threads=args.threads)
 
-    config = SelectionConfig(entropy_resolution=args.entropy_resolution)
+    config = SelectionConfig(entropy_resolution=args.entropy_resolution).checked()
     with tempfile.TemporaryDirectory(prefix="nerfaug-bench-propose-") as run:
         start = time.perf_counter()
         settings = SessionSettings(engine=args.preset, downscale=args.downscale)

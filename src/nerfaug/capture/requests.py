@@ -8,11 +8,12 @@ request and the view constraints (`nerfaug.capture.proposal_request`) build on, 
 training steps, the save period, thread counts and uncertainty images' widths (`check_steps`,
 `check_checkpoint_every`, `check_threads`, `check_image_widths`).
 
-The classes tyro reads are dataclasses with one validator each, `checked()` (pydantic, from their
-annotations): tyro builds them from the options without checking, so that a refused value ends
-as one line naming its option (a check raised while tyro builds them would be drawn as tyro's own
-box). A field's docstring is its help on the command line and its description in the service's
-API page. `RequestError` names the first refused field, its value and the problem.
+The classes tyro reads are `nerfaug.schema.Schema` dataclasses with one validator each,
+`checked()` (pydantic, from their annotations): tyro builds them from the options without
+checking, so that a refused value ends as one line naming its option (a check raised while tyro
+builds them would be drawn as tyro's own box). A field's docstring is its help on the command line
+and its description in the service's API page. `RequestError` names the first refused field, its
+value and the problem.
 
 Nothing here imports torch: `nerfaug train --help` reads these classes.
 """
