@@ -25,8 +25,8 @@ from nerfaug.capture.requests import (
     Poses,
     SessionId,
     SessionSettings,
-    Steps,
     Split,
+    Steps,
 )
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST
 
