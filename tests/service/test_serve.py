@@ -210,6 +210,9 @@ def test_held_out_views_are_scored_as_the_library_scores_them(server, root):
     assert create(server, "scored").status_code == 201
     assert server.client.post("/sessions/scored/train", json={"steps": 10}).status_code == 202
     server.poll("scored")
+    # 0 is a step count over HTTP as on the command line: a training job that ends at once.
+    assert server.client.post("/sessions/scored/train", json={"steps": 0}).status_code == 202
+    assert server.poll("scored")["step"] == 10
     answer = server.client.post("/sessions/scored/evaluate", json={"dataset": "held-out", "max_views": 2})
     assert answer.status_code == 200, answer.text
     scored = answer.json()
