@@ -41,7 +41,7 @@ SMALL = {
 # (literal in the README's Python block, its small replacement). Its render is the walk-through's
 # `scene render` at the walk-through's small size, so it finds that dataset rendered already.
 PYTHON_SMALL = [
-    ('preset="nerfacto-cpu"', 'preset="test"'),
+    ('engine="nerfacto-cpu"', 'engine="test"'),
     (
         'render_scene_dataset("lego", "data/lego-100", resolution=100)',
         'render_scene_dataset("lego", "data/lego-100", resolution=32, pool=12, test=4, samples=4)',
