@@ -33,7 +33,7 @@ def one_run(data: Path, engine: str, seed: int, views: str, steps: int) -> dict:
     with tempfile.TemporaryDirectory(prefix="nerfaug-empty-") as tmp:
         began = time.perf_counter()
         base, changes = parse_variant(engine)  # a preset, or a variant: "cpu+average_init_density=0.01"
-        settings = SessionSettings(preset=base, seed=seed)
+        settings = SessionSettings(engine=base, seed=seed)
         config = NerfConfig.preset(base, **changes) if changes else None
         session = CaptureSession.create(data, Path(tmp) / "run", settings, config=config, start=start)
         last = session.train(steps)

@@ -46,10 +46,10 @@ def main() -> None:
     args = parser.parse_args()
     configure_process(threads=args.threads)
 
-    config = SelectionConfig(entropy_resolution=args.entropy_resolution)
+    config = SelectionConfig(entropy_resolution=args.entropy_resolution).checked()
     with tempfile.TemporaryDirectory(prefix="nerfaug-bench-propose-") as run:
         start = time.perf_counter()
-        settings = SessionSettings(preset=args.preset, downscale=args.downscale)
+        settings = SessionSettings(engine=args.preset, downscale=args.downscale)
         session = CaptureSession.create(args.data, Path(run) / "run", settings, split=args.split, device=args.device)
         create_s = time.perf_counter() - start
         start = time.perf_counter()

@@ -120,7 +120,7 @@ def main() -> None:
         fisher_resolution=args.fisher_resolution,
         fisher_train_pixels=args.fisher_pixels,
         fisher_method=args.fisher_method,
-    )
+    ).checked()
     rays = len(candidates) * args.entropy_resolution**2
     rows: dict[str, float] = {}
     rows["entropy (view_entropy)"], _ = timed(

@@ -68,7 +68,7 @@ def bench_propose(args, work: Path, data: Path) -> dict:
     process, url = start_service(root, "cpu")
     try:
         with httpx.Client(base_url=url, timeout=600.0) as client:
-            body = {"id": SESSION, "dataset": f"data/{data.name}", "split": "initial", "preset": args.preset}
+            body = {"id": SESSION, "dataset": f"data/{data.name}", "split": "initial", "engine": args.preset}
             answer(client.post("/sessions/from-dataset", json=body))
             state = train(client, SESSION, args.steps, timeout=1800.0)
             # The same session in this process: a copy of the folder the service saved after training.

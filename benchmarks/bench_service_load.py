@@ -178,7 +178,7 @@ def main(argv=None) -> dict:
             with httpx.Client(base_url=url, timeout=300.0) as client:
                 ids = [f"load{i}" for i in range(args.sessions)]
                 for session in ids:
-                    body = {"id": session, "dataset": "data", "preset": args.preset, "seed": 1}
+                    body = {"id": session, "dataset": "data", "engine": args.preset, "seed": 1}
                     answer(client.post("/sessions/from-dataset", json=body))
                 for session in ids:  # training runs through the whole test
                     answer(client.post(f"/sessions/{session}/train", json={"steps": 1_000_000}))

@@ -6,13 +6,13 @@ fast and needs no Blender after the dataset exists).
     python examples/active_capture.py                        # lego at 100x100, 2 rounds of 6 views
     python examples/active_capture.py --data path/to/blender_dataset --split train --capture pool \
         --run results/my-capture --export results/my-capture-export
-    python examples/active_capture.py --preset test --steps-per-round 20 --n-candidates 20 \
+    python examples/active_capture.py --engine test --steps-per-round 20 --n-candidates 20 \
         --run results/quick-capture --export results/quick-capture-export                # seconds
 
 Every step is one call on a `CaptureSession`; the run folder can be reopened at any point with
 `CaptureSession.open(run)` or driven from the shell (`nerfaug propose RUN`, `nerfaug add RUN`).
 Run again with the same options, it goes on with the session in `--run`; with other settings
-(dataset, split, preset, seed) it refuses, naming them: each setting has its own run folder.
+(dataset, split, engine, seed) it refuses, naming them: each setting has its own run folder.
 """
 
 from __future__ import annotations
@@ -44,15 +44,15 @@ def dataset(data: Path | None, scene: str, resolution: int, pool: int) -> Path:
     return render_scene_dataset(scene, data, resolution=resolution, pool=pool)
 
 
-def open_or_create(run: Path, data: Path, preset: str, seed: int, split: str) -> CaptureSession:
+def open_or_create(run: Path, data: Path, engine: str, seed: int, split: str) -> CaptureSession:
     """A new session in `run`, or the one already there when it was made with these settings;
     refused, naming what differs, when it was not."""
     if not (run / SESSION_FILE).exists():
-        return CaptureSession.create(data, run, SessionSettings(preset=preset, seed=seed), split=split, progress=True)
+        return CaptureSession.create(data, run, SessionSettings(engine=engine, seed=seed), split=split, progress=True)
     state = SessionState.read(run)
-    wanted = {"--data": str(data.resolve()), "--split": split, "--preset": preset, "--seed": seed}
+    wanted = {"--data": str(data.resolve()), "--split": split, "--engine": engine, "--seed": seed}
     source = state.source
-    found = {"--data": source.data_dir, "--split": source.split, "--preset": state.preset, "--seed": state.seed}
+    found = {"--data": source.data_dir, "--split": source.split, "--engine": state.engine, "--seed": state.seed}
     differ = [f"{name} {found[name]} (asked: {wanted[name]})" for name in wanted if found[name] != wanted[name]]
     if differ:
         raise SystemExit(
@@ -75,7 +75,7 @@ def main(
     views_per_round: int = 6,
     steps_per_round: int = 500,
     n_candidates: int = 500,
-    preset: Literal["nerfacto-cpu", "cpu", "paper", "test"] = "nerfacto-cpu",
+    engine: Literal["nerfacto-cpu", "cpu", "paper", "test"] = "nerfacto-cpu",
     seed: int = 0,
     resolution: int = 100,
     pool: int = 300,
@@ -96,13 +96,13 @@ def main(
         views_per_round: views proposed per round.
         steps_per_round: training steps before each proposal (and after the last).
         n_candidates: hemisphere candidates scored per proposal (with `--capture blender`).
-        preset: NeRF engine preset.
+        engine: the NeRF engine.
         seed: seeds the model, its training and every proposal.
         resolution, pool: image size and candidate pool of the dataset when it is rendered here.
         allow_empty: propose even from a NeRF that learned nothing yet (a run of a few steps).
     """
     data = dataset(data, scene, resolution, pool)
-    session = open_or_create(run, data, preset, seed, split)
+    session = open_or_create(run, data, engine, seed, split)
     print(f"{len(session.trainer.train_views)} views; hemisphere {session.hemisphere}")
 
     if capture == "pool":

@@ -5,14 +5,14 @@ on held-out views. The robot's camera is simulated: Blender renders a built-in s
 proposed poses (`BlenderOracle`), as a real robot's camera would take them.
 
     python examples/robot_capture_loop.py                      # lego at 100x100, 2 rounds of 6 views
-    python examples/robot_capture_loop.py --preset test --steps-per-round 10 --views-per-round 2 \\
+    python examples/robot_capture_loop.py --engine test --steps-per-round 10 --views-per-round 2 \\
         --n-candidates 20                                      # a minute
     python examples/robot_capture_loop.py --url http://127.0.0.1:8000 --root sessions   # a running service
 
 Without `--url` it starts `nerfaug serve --root ROOT` on a free port of 127.0.0.1 and stops it at
 the end. The held-out views are copied into ROOT (the service scores datasets inside its root
 only), so with `--url`, ROOT must be that service's root on this machine. Run again, it goes on
-with the session SESSION in ROOT when that was made with the same --preset and --seed, and
+with the session SESSION in ROOT when that was made with the same --engine and --seed, and
 refuses, naming them, when it was not.
 """
 
@@ -146,8 +146,8 @@ class Options:
     """the workspace's elevation band, degrees above the equator (low, high)."""
     keep_out: tuple[float, float, float, float] = (1.0, 0.0, 0.3, 35.0)
     """a cone the camera must not enter: direction x y z from the centre, half-angle in degrees."""
-    preset: Literal["nerfacto-cpu", "cpu", "paper", "test"] = "nerfacto-cpu"
-    """the NeRF engine preset of the session."""
+    engine: Literal["nerfacto-cpu", "cpu", "paper", "test"] = "nerfacto-cpu"
+    """the NeRF engine of the session."""
     seed: int = 0
     """seeds the session; the proposal of round k uses seed + k."""
     samples: int = 16
@@ -181,7 +181,7 @@ def dataset(o: Options) -> Path:
 
 
 def check_existing_session(o: Options) -> None:
-    """Refuse to go on with a session in ROOT made with another preset or seed (naming them)."""
+    """Refuse to go on with a session in ROOT made with another engine or seed (naming them)."""
     from nerfaug.capture import SESSION_FILE, SessionState
 
     folder = o.root / o.session
@@ -190,7 +190,7 @@ def check_existing_session(o: Options) -> None:
     state = SessionState.read(folder)
     differ = [
         f"--{name} {found} (asked: {wanted})"
-        for name, found, wanted in (("preset", state.preset, o.preset), ("seed", state.seed, o.seed))
+        for name, found, wanted in (("engine", state.engine, o.engine), ("seed", state.seed, o.seed))
         if found != wanted
     ]
     if differ:
@@ -198,7 +198,7 @@ def check_existing_session(o: Options) -> None:
             f"session {o.session!r} in {o.root} was made with {', '.join(differ)}; give another --session "
             "(or --root) for these settings, or the session's own"
         )
-    print(f"going on with session {o.session!r} in {o.root} (same preset and seed): step {state.step}")
+    print(f"going on with session {o.session!r} in {o.root} (same engine and seed): step {state.step}")
 
 
 def main(o: Options) -> list[dict]:
@@ -240,7 +240,7 @@ def create_session(client: httpx.Client, o: Options) -> None:
     fx = 0.5 * width / math.tan(0.5 * float(initial["camera_angle_x"]))
     settings = {
         "id": o.session,
-        "preset": o.preset,
+        "engine": o.engine,
         "seed": o.seed,
         "intrinsics": {"width": width, "height": height, "fx": fx},
         "poses": [frame["transform_matrix"] for frame in frames],

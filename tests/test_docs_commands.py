@@ -9,7 +9,7 @@ They run at a small size. How each is made small, so that what runs is still wha
 - Python: a few literals are replaced (`PYTHON_SMALL`: engine preset, size of the render, steps,
   views, candidates); each replacement must apply, so a changed block fails here until this list
   follows it.
-- examples: their own small-size options (`--preset test`, fewer steps, views and candidates).
+- examples: their own small-size options (`--engine test`, fewer steps, views and candidates).
 """
 
 import json
@@ -41,7 +41,7 @@ SMALL = {
 # (literal in the README's Python block, its small replacement). Its render is the walk-through's
 # `scene render` at the walk-through's small size, so it finds that dataset rendered already.
 PYTHON_SMALL = [
-    ('preset="nerfacto-cpu"', 'preset="test"'),
+    ('engine="nerfacto-cpu"', 'engine="test"'),
     (
         'render_scene_dataset("lego", "data/lego-100", resolution=100)',
         'render_scene_dataset("lego", "data/lego-100", resolution=32, pool=12, test=4, samples=4)',
@@ -51,7 +51,7 @@ PYTHON_SMALL = [
     ('ProposalRequest(n=6, method="ours")', 'ProposalRequest(n=2, method="ours", n_candidates=20, allow_empty=True)'),
 ]
 EXAMPLE_SMALL = [
-    *["--preset", "test", "--steps-per-round", "10", "--views-per-round", "2", "--n-candidates", "20"],
+    *["--engine", "test", "--steps-per-round", "10", "--views-per-round", "2", "--n-candidates", "20"],
     "--allow-empty",
 ]
 
@@ -200,15 +200,15 @@ def test_the_readme_and_the_examples_run_in_order_in_one_folder(tmp_path):
     assert done.returncode == 1 and "--data path/to/blender_dataset: no such folder" in done.stderr
     assert not (tmp_path / "path").exists()
     robot = ROOT / "examples" / "robot_capture_loop.py"
-    done = run([sys.executable, str(robot), *EXAMPLE_SMALL[2:], "--preset", "cpu"], tmp_path)
-    assert done.returncode == 1 and "was made with --preset test (asked: cpu)" in done.stderr
+    done = run([sys.executable, str(robot), *EXAMPLE_SMALL[2:], "--engine", "cpu"], tmp_path)
+    assert done.returncode == 1 and "was made with --engine test (asked: cpu)" in done.stderr
     assert_untouched(written, tmp_path, "the refused examples")
 
 
 def test_the_example_with_pool_capture_runs(tmp_path):
     rendered = nerfaug(["scene", "render", "lego", "--out", "data/lego", *SMALL["scene"]], tmp_path)
     assert rendered.returncode == 0, rendered.stderr
-    argv = ["--data", "data/lego", "--capture", "pool", "--preset", "test"]
+    argv = ["--data", "data/lego", "--capture", "pool", "--engine", "test"]
     small = ["--steps-per-round", "10", "--views-per-round", "2", "--allow-empty"]
     done = run([sys.executable, str(ROOT / "examples" / "active_capture.py"), *argv, *small], tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]

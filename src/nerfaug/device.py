@@ -1,6 +1,6 @@
 """Which torch device computes, and in which precision: one place that turns `--device
-auto|cpu|cuda` into a `torch.device`, describes it for the records, and says when mixed precision
-applies.
+auto|cpu|cuda` (`nerfaug.device_choice.Device`) into a `torch.device`, describes it for the
+records, and says when mixed precision applies.
 
     >>> resolve_device("cpu")
     device(type='cpu')
@@ -14,8 +14,6 @@ from typing import Literal
 
 import torch
 
-DeviceName = Literal["auto", "cpu", "cuda"]
-"""What the CLI accepts: auto (cuda when a GPU is visible, else cpu), cpu, cuda."""
 Precision = Literal["auto", "fp32", "fp16", "bf16"]
 """Training precision: auto (float32 everywhere: half precision does not train this engine, see
 `autocast_dtype`), or forced."""

@@ -16,7 +16,7 @@ from nerfaug.data import load_dataset
 from nerfaug.hemisphere import half_hemisphere_poses
 
 H, W = 12, 16
-SETTINGS = SessionSettings(preset="test", estimate_up=True)
+SETTINGS = SessionSettings(engine="test", estimate_up=True)
 
 
 def mask_of(i: int) -> np.ndarray:

@@ -158,7 +158,7 @@ def tiny_dataset(root: Path) -> Path:
 def session_dir(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("constrained")
     data = tiny_dataset(tmp / "data")
-    settings = SessionSettings(preset="test", seed=1, centre=(0, 0, 0), radius=4.03)
+    settings = SessionSettings(engine="test", seed=1, centre=(0, 0, 0), radius=4.03)
     session = CaptureSession.create(data, tmp / "run", settings)
     session.train(2)
     session.save()

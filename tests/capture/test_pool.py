@@ -42,7 +42,7 @@ def root(tmp_path) -> Path:
 
 def new_session(pool: SessionPool, session_id: str):
     data = pool.dataset_path("data", "train")
-    return pool.create(session_id, lambda folder: CaptureSession.create(data, folder, SessionSettings(preset="test")))
+    return pool.create(session_id, lambda folder: CaptureSession.create(data, folder, SessionSettings(engine="test")))
 
 
 def ended(pool: SessionPool, session_id: str, timeout: float = 120.0):
@@ -209,7 +209,7 @@ def test_a_session_folder_linked_outside_the_root_is_neither_listed_nor_served_n
     request naming it (state, a request, training, a new session there) refused in one line before
     anything there is read or written. A link to a folder inside the root is a session as any."""
     outside = tmp_path / "outside"
-    CaptureSession.create(root / "data", outside / "s", SessionSettings(preset="test"))
+    CaptureSession.create(root / "data", outside / "s", SessionSettings(engine="test"))
     before = sorted((p.relative_to(outside).as_posix(), p.stat().st_mtime_ns) for p in outside.rglob("*"))
     (root / "linked").symlink_to(outside / "s", target_is_directory=True)
     (root / "dangling").symlink_to(outside / "new", target_is_directory=True)

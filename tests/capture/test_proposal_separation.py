@@ -22,7 +22,7 @@ FAST = SelectionConfig(entropy_resolution=4)
 @pytest.fixture(scope="module")
 def session_dir(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("separated")
-    settings = SessionSettings(preset="test", seed=1, radius=4.03)
+    settings = SessionSettings(engine="test", seed=1, radius=4.03)
     session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", settings)
     session.train(2)
     session.save()

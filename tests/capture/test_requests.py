@@ -48,7 +48,7 @@ def refusal(make) -> RequestError:
         ({"radius": 1e7}, "radius 10000000.0: must be <= 1e+06"),
         ({"up": (0, 0, 0)}, "up (0, 0, 0): must be a non-zero direction"),
         ({"centre": (float("nan"), 0, 0)}, "centre[0] nan: Input should be a finite number"),
-        ({"preset": "fastest"}, "preset 'fastest': Input should be"),
+        ({"engine": "fastest"}, "engine 'fastest': Input should be"),
     ],
 )
 def test_session_settings_out_of_range_name_the_field_and_value(fields, says):
@@ -58,7 +58,7 @@ def test_session_settings_out_of_range_name_the_field_and_value(fields, says):
 def test_session_settings_defaults_and_conversions():
     settings = SessionSettings(centre=[1, 2, 3], radius=2).checked()
     assert settings == SessionSettings(centre=(1.0, 2.0, 3.0), radius=2.0)
-    assert (settings.preset, settings.seed, settings.downscale, settings.up) == ("nerfacto-cpu", 0, 1, (0.0, 0.0, 1.0))
+    assert (settings.engine, settings.seed, settings.downscale, settings.up) == ("nerfacto-cpu", 0, 1, (0.0, 0.0, 1.0))
 
 
 @pytest.mark.parametrize(
@@ -71,8 +71,9 @@ def test_session_settings_defaults_and_conversions():
         ({"min_separation": 180}, "min_separation 180: must be < 180"),
         ({"method": "best"}, "method 'best': unknown selection method 'best'; choose one of: ours,"),
         ({"seed": -2}, "seed -2: must be >= 0"),
-        ({"selection": {"bogus": 1}}, "selection {'bogus': 1}: unknown SelectionConfig fields ['bogus']"),
-        ({"selection": SelectionConfig(entropy_resolution=300)}, "selection SelectionConfig("),
+        ({"selection": {"bogus": 1}}, "selection.bogus 1: unknown field"),
+        ({"selection": {"sharpness": 2}}, "selection.sharpness 2: must be <= 1"),
+        ({"selection": SelectionConfig(entropy_resolution=300)}, "selection.entropy_resolution 300: must be <= 256"),
         ({"constraints": {"elevation": [60, 10]}}, "constraints.elevation [60, 10]: low must be <= high"),
         ({"candidates": "reach.json"}, "candidates 'reach.json': Input should be a valid list"),
         ({"candidates": [EYE] * (MAX_REACHABLE_POSES + 1)}, "candidates ["),
@@ -86,7 +87,14 @@ def test_proposal_requests_out_of_range_name_the_field_and_value(fields, says):
 
 def test_a_selection_setting_beyond_what_one_proposal_may_ask_is_named():
     error = refusal(lambda: ProposalRequest(selection=SelectionConfig(entropy_resolution=300)).checked())
-    assert error.problem == "entropy_resolution 300: at most 256 in one proposal"
+    assert (error.argument, error.value, error.problem) == ("selection.entropy_resolution", 300, "must be <= 256")
+
+
+def test_a_request_checked_once_passes_the_layers_below_unchecked_again():
+    request = ProposalRequest(selection=SelectionConfig(sharpness=0.5)).checked()
+    assert request.checked() is request
+    request.selection.sharpness = 3.0  # a change inside clears the mark
+    assert str(refusal(request.checked)) == "selection.sharpness 3.0: must be <= 1"
 
 
 def test_reachable_poses_are_a_file_only_from_python_never_from_json(tmp_path):
@@ -160,12 +168,24 @@ def test_constraints_are_one_class_for_the_library_the_cli_and_the_service():
 # ---- session.json ------------------------------------------------------------------------------
 
 
-def test_a_session_json_the_earlier_writer_made_reads_and_writes_back_unchanged():
+def as_format_2(old: dict) -> dict:
+    """A format-1 session.json as format 2 writes it: the engine's name under "engine" (was
+    "preset"), its settings under "engine_config" (was "engine"), in the same places."""
+    renamed = {"preset": "engine", "engine": "engine_config"}
+    return {renamed.get(k, k): v for k, v in old.items()} | {"format": 2}
+
+
+def test_a_session_json_the_earlier_writer_made_reads_and_writes_back_with_the_engine_renamed():
     written = json.loads(OLD_SESSION.read_text())
+    assert written["format"] == 1 and written["preset"] == "test"
     state = SessionState.from_dict(copy.deepcopy(written), OLD_SESSION)
-    assert state.to_dict() == written
-    assert json.loads(json.dumps(state.to_dict())) == written
-    assert list(state.to_dict()) == list(written)  # the historic key order
+    assert state.engine == "test" and state.engine_config == written["engine"]
+    assert state.settings().engine == "test"
+    assert state.to_dict() == as_format_2(written)
+    assert json.loads(json.dumps(state.to_dict())) == as_format_2(written)
+    assert list(state.to_dict()) == list(as_format_2(written))  # the historic key order
+    again = SessionState.from_dict(state.to_dict(), OLD_SESSION)  # format 2 reads back unchanged
+    assert again.to_dict() == state.to_dict()
     # Its records keep the keys they hold beyond the typed ones.
     assert state.proposals[0].model_extra["min_separation"] == 5.0
     assert state.additions[1].warnings and "again" in state.additions[1].warnings[0]
@@ -178,16 +198,16 @@ def test_a_session_json_saved_before_digests_still_loads():
         del older[key]
     state = SessionState.from_dict(copy.deepcopy(older), OLD_SESSION)
     assert state.integrity.checkpoint is None and not state.integrity.captures
-    assert state.to_dict() == older  # no integrity section until there is something in it
+    assert state.to_dict() == as_format_2(older)  # no integrity section until there is something in it
 
 
 def test_the_settings_a_session_was_made_with():
     state = SessionState.from_dict(json.loads(OLD_SESSION.read_text()), OLD_SESSION)
     ours = state.settings()
-    assert ours == SessionSettings(preset="test", seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0))
-    asked = SessionSettings(preset="cpu", seed=7, centre=(0, 0, 0), radius=None, estimate_up=True)
-    assert asked.differences(ours, {"preset", "seed", "centre", "radius", "up", "estimate_up"}) == [
-        ("preset", "cpu", "test"),
+    assert ours == SessionSettings(engine="test", seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0))
+    asked = SessionSettings(engine="cpu", seed=7, centre=(0, 0, 0), radius=None, estimate_up=True)
+    assert asked.differences(ours, {"engine", "seed", "centre", "radius", "up", "estimate_up"}) == [
+        ("engine", "cpu", "test"),
         ("centre", "0 0 0", "estimated"),
         ("radius", "not given, so estimated", "4.03"),
         ("estimate_up", "on", "off"),
@@ -198,7 +218,8 @@ def test_the_settings_a_session_was_made_with():
 @pytest.mark.parametrize(
     ("change", "field"),
     [
-        (lambda d: d.update(format=2), "field 'format': unsupported session format"),
+        (lambda d: d.update(format=3), "field 'format': unsupported session format"),
+        (lambda d: d.update(downscale=300), "field 'downscale': must be <= 256"),  # SessionSettings' bounds
         (lambda d: d.update(step="many"), "field 'step'"),
         (lambda d: d["intrinsics"].update(width=0), "field 'intrinsics.width': must be >= 1"),
         (lambda d: d["dataset"].update(json="../x.json"), "field 'dataset.json': must be a path inside the run"),

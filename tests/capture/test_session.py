@@ -67,7 +67,7 @@ def files_of(folder: Path) -> dict[str, bytes]:
 
 
 def new_session(dataset: Path, run: Path, seed: int = 3) -> CaptureSession:
-    return CaptureSession.create(dataset, run, SessionSettings(preset="test", seed=seed))
+    return CaptureSession.create(dataset, run, SessionSettings(engine="test", seed=seed))
 
 
 # ---- the hemisphere ----------------------------------------------------------------------------
@@ -112,10 +112,10 @@ def test_a_capture_whose_world_is_not_z_up_is_warned_about_at_creation(dataset, 
     with warnings.catch_warnings():
         warnings.simplefilter("error", TiltedPole)  # the pole taken from the cameras, or a z-up world: silent
         CaptureSession.create(
-            tmp_path / "tilted", tmp_path / "estimated", SessionSettings(preset="test", estimate_up=True)
+            tmp_path / "tilted", tmp_path / "estimated", SessionSettings(engine="test", estimate_up=True)
         )
         CaptureSession.create(
-            tmp_path / "tilted", tmp_path / "given", SessionSettings(preset="test", up=(0.0, -1.0, 0.0))
+            tmp_path / "tilted", tmp_path / "given", SessionSettings(engine="test", up=(0.0, -1.0, 0.0))
         )
         new_session(dataset, tmp_path / "upright")
 

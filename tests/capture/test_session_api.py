@@ -23,7 +23,7 @@ from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 
 from .test_constraints import SIZE, tiny_dataset
 
-SETTINGS = SessionSettings(preset="test", seed=3, radius=4.03)
+SETTINGS = SessionSettings(engine="test", seed=3, radius=4.03)
 
 
 @pytest.fixture
@@ -139,8 +139,8 @@ def test_a_session_names_what_asks_for_another_session(session, tmp_path):
     state, data = session.state, tmp_path / "data"
     assert state.differences(state.settings()) == []  # every setting: its own
     assert state.differences(state.settings(), split=state.source.split, data=data) == []
-    other = SessionSettings(preset="cpu", seed=4, radius=4.03)
-    assert state.differences(other, {"preset"}) == [("preset", "cpu", "test")]
+    other = SessionSettings(engine="cpu", seed=4, radius=4.03)
+    assert state.differences(other, {"engine"}) == [("engine", "cpu", "test")]
     elsewhere = tiny_dataset(tmp_path / "elsewhere")
     found = state.differences(other, {"seed"}, split="initial", data=elsewhere)
     assert found == [("data", str(elsewhere), state.source.data_dir), ("seed", "4", "3"), ("split", "initial", "train")]

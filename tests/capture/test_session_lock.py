@@ -35,7 +35,7 @@ def tiny_dataset(root: Path, n: int = 4, size: int = 8) -> Path:
 
 @pytest.fixture
 def run(tmp_path) -> Path:
-    CaptureSession.create(tiny_dataset(tmp_path / "data"), tmp_path / "run", SessionSettings(preset="test", seed=2))
+    CaptureSession.create(tiny_dataset(tmp_path / "data"), tmp_path / "run", SessionSettings(engine="test", seed=2))
     return tmp_path / "run"
 
 

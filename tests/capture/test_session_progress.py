@@ -12,7 +12,7 @@ from .test_constraints import tiny_dataset
 @pytest.fixture(scope="module")
 def session_dir(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("progress")
-    settings = SessionSettings(preset="test", seed=3, radius=4.03)
+    settings = SessionSettings(engine="test", seed=3, radius=4.03)
     session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", settings)
     session.save()
     return tmp / "run"

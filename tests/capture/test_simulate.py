@@ -30,7 +30,7 @@ def session(tmp_path) -> Path:
     cameras = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, SIZE, SIZE)
     images = torch.rand(4, SIZE, SIZE, 3, generator=generator)
     write_blender_split(tmp_path / "data", "train", Views(cameras, images, [f"./train/r_{i}" for i in range(4)]))
-    CaptureSession.create(tmp_path / "data", tmp_path / "run", SessionSettings(preset="test")).save()
+    CaptureSession.create(tmp_path / "data", tmp_path / "run", SessionSettings(engine="test")).save()
     return tmp_path / "run"
 
 

@@ -75,7 +75,7 @@ def session_request(**fields):
 
 def test_layouts_turn_the_half_and_refusals_name_the_option(tmp_path, capsys):
     data = all_round_dataset(tmp_path / "data")
-    settings = SessionSettings(preset="test", centre=(0.0, 0.0, 0.0))
+    settings = SessionSettings(engine="test", centre=(0.0, 0.0, 0.0))
     first = CaptureSession.create(data, tmp_path / "a", settings, start=SparseStart(initial=3, layout=0))
     other = CaptureSession.create(data, tmp_path / "b", settings, start=SparseStart(initial=3, layout=1))
     assert set(first.state.start["names"]) != set(other.state.start["names"])
@@ -95,7 +95,7 @@ def test_layouts_turn_the_half_and_refusals_name_the_option(tmp_path, capsys):
 def test_a_captured_set_starts_sparse_too(tmp_path):
     data = llff_fixture(tmp_path / "llff", n=12, masks=False)
     session = CaptureSession.create(
-        data, tmp_path / "run", SessionSettings(preset="test", estimate_up=True), start=SparseStart(initial=3)
+        data, tmp_path / "run", SessionSettings(engine="test", estimate_up=True), start=SparseStart(initial=3)
     )
     assert len(session.cameras) == 3
     pool = json.loads((tmp_path / "run" / "pool.json").read_text())["frames"]
@@ -103,4 +103,4 @@ def test_a_captured_set_starts_sparse_too(tmp_path):
     with pytest.raises(
         RequestError, match=r"initial 12: only 6 views lie in the half .*\(azimuths [\d.]+ to [\d.]+ degrees\)"
     ):
-        CaptureSession.create(data, tmp_path / "all", SessionSettings(preset="test"), start=SparseStart(initial=12))
+        CaptureSession.create(data, tmp_path / "all", SessionSettings(engine="test"), start=SparseStart(initial=12))

@@ -20,7 +20,7 @@ from .test_constraints import tiny_dataset
 def run(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("uncertainty")
     # Twice NeRF-synthetic's scale: depths in world units are twice the engine's.
-    settings = SessionSettings(preset="test", seed=2, radius=8.06)
+    settings = SessionSettings(engine="test", seed=2, radius=8.06)
     session = CaptureSession.create(tiny_dataset(tmp / "data"), tmp / "run", settings)
     session.train(3)
     session.save()

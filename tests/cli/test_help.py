@@ -235,7 +235,7 @@ def test_trains_old_preset_option_names_its_new_spelling(capsys):
         main(["train", "data", "--out", "run", "--preset=test"])
     assert refused.value.code == 2
     error = capsys.readouterr().err.strip()
-    assert error.startswith("nerfaug: --preset: `nerfaug train` takes the NeRF engine preset as --engine")
+    assert error.startswith("nerfaug: --preset: `nerfaug train` takes the NeRF engine as --engine")
 
 
 def help_in_a_fresh_process(argv: list[str], loaded: str):

@@ -10,6 +10,7 @@ from torch import nn
 from nerfaug.cameras import Cameras
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, angles_from_pose, half_hemisphere_poses
 from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
+from nerfaug.schema import RequestError
 from nerfaug.selection import (
     METHODS,
     Selection,
@@ -149,8 +150,8 @@ def test_too_many_views_and_bad_config_are_refused(scene):
     model, train, candidates = scene
     with pytest.raises(ValueError, match="cannot choose"):
         select_views("uniform", model, train, candidates, len(candidates) + 1, torch.Generator())
-    with pytest.raises(ValueError, match="entropy_mode"):
-        SelectionConfig(entropy_mode="nats")
+    with pytest.raises(ValueError, match="^entropy_mode 'nats': Input should be 'escape'"):
+        SelectionConfig(entropy_mode="nats").checked()
 
 
 @pytest.mark.parametrize(
@@ -168,8 +169,34 @@ def test_too_many_views_and_bad_config_are_refused(scene):
     ],
 )
 def test_counts_and_scales_out_of_range_are_refused_by_name(name, value):
-    with pytest.raises(ValueError, match=f"SelectionConfig.{name}="):
-        SelectionConfig(**{name: value})
+    with pytest.raises(RequestError, match=f"^{name} {value}: must be "):
+        SelectionConfig(**{name: value}).checked()
+
+
+@pytest.mark.parametrize(
+    "name, value, says",
+    [
+        ("entropy_resolution", 300, "must be <= 256"),
+        ("fisher_resolution", 257, "must be <= 256"),
+        ("chunk", 65_537, "must be <= 65536"),
+        ("sharpness", 1.5, "must be <= 1"),
+        ("sharpness", float("inf"), "Input should be a finite number"),
+        ("entropy_resolution", True, "Input should be a valid integer"),
+        ("entropy_weight", "heavy", "Input should be a valid number"),
+    ],
+)
+def test_each_setting_has_its_bounds_next_to_its_type(name, value, says):
+    with pytest.raises(RequestError) as error:
+        SelectionConfig(**{name: value}).checked()
+    assert (error.value.argument, error.value.problem.split(",")[0]) == (name, says)
+
+
+def test_a_checked_config_is_not_checked_again_until_it_changes():
+    config = SelectionConfig(sharpness=0.5).checked()
+    assert config.checked() is config
+    config.sharpness = 2.0
+    with pytest.raises(RequestError, match="^sharpness 2.0: must be <= 1$"):
+        config.checked()
 
 
 @pytest.mark.parametrize(
@@ -185,13 +212,13 @@ def test_counts_and_scales_out_of_range_are_refused_by_name(name, value):
     ],
 )
 def test_a_metric_that_is_not_spd_3x3_is_refused_by_name(metric, problem):
-    with pytest.raises(ValueError, match=f"SelectionConfig.metric=.*{problem}"):
-        SelectionConfig(metric=metric)
+    with pytest.raises(RequestError, match=f"^metric.*{problem}"):
+        SelectionConfig(metric=metric).checked()
 
 
 def test_an_spd_metric_is_accepted():
     metric = [[2.0, 0.5, 0.0], [0.5, 1.0, 0.0], [0.0, 0.0, 3.0]]
-    assert SelectionConfig(metric=metric).metric == metric
+    assert SelectionConfig(metric=metric).checked().metric == metric
 
 
 def test_selection_round_trips_through_json(scene):
@@ -390,8 +417,8 @@ def test_method_specs_are_checked():
     with pytest.raises(ValueError, match="unknown SelectionConfig settings"):
         MethodSpec("x", "combined", "top-k", "", settings={"entropy_resolutoin": 3})
     with pytest.raises(ValueError, match="sharpness"):
-        SelectionConfig(sharpness=1.5)
-    with pytest.raises(ValueError, match="unknown SelectionConfig fields"):
+        SelectionConfig(sharpness=1.5).checked()
+    with pytest.raises(ValueError, match="^entropy_resolutoin 3: unknown field"):
         SelectionConfig.from_dict({"entropy_resolutoin": 3})
     assert SelectionConfig.from_dict(json.loads(json.dumps(FAST.authors_variant().to_dict()))) == FAST.authors_variant()
 

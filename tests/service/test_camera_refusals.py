@@ -48,7 +48,7 @@ def client(tmp_path):
 @pytest.mark.parametrize("lens", [{"k1": -999}, {"p1": 500}])
 def test_a_dataset_with_a_lens_no_camera_has_is_refused(tmp_path, client, lens):
     distorted_dataset(tmp_path / "root" / "bent", **lens)
-    answer = client.post("/sessions/from-dataset", json={"id": "s", "dataset": "bent", "preset": "test"})
+    answer = client.post("/sessions/from-dataset", json={"id": "s", "dataset": "bent", "engine": "test"})
     assert answer.status_code == 422, answer.text
     detail = answer.json()["detail"]
     assert "transforms.json" in detail and "frames[0]" in detail and "photo pixels per pixel" in detail
@@ -64,7 +64,7 @@ def test_a_dataset_with_a_lens_no_camera_has_is_refused(tmp_path, client, lens):
     ],
 )
 def test_uploaded_images_with_intrinsics_no_lens_makes_are_refused(tmp_path, client, intrinsics, says):
-    settings = {"id": "u", "preset": "test", "intrinsics": intrinsics, "poses": half_hemisphere_poses(2).tolist()}
+    settings = {"id": "u", "engine": "test", "intrinsics": intrinsics, "poses": half_hemisphere_poses(2).tolist()}
     files = [("images", (f"{i}.png", png(i), "image/png")) for i in range(2)]
     answer = client.post("/sessions/from-uploads", data={"settings": json.dumps(settings)}, files=files)
     assert answer.status_code == 422, answer.text

@@ -242,7 +242,7 @@ def test_a_session_from_a_dataset_with_a_truncated_image_leaves_no_folder(server
     broken = tiny_dataset(root / "broken", seed=3)
     image = sorted((broken / "train").glob("*.png"))[2]
     image.write_bytes(image.read_bytes()[:40])
-    answer = server.client.post("/sessions/from-dataset", json={"id": "half", "dataset": "broken", "preset": "test"})
+    answer = server.client.post("/sessions/from-dataset", json={"id": "half", "dataset": "broken", "engine": "test"})
     assert answer.status_code == 422, answer.text
     assert image.name in answer.json()["detail"]
     assert not (root / "half").exists()
@@ -294,7 +294,7 @@ def test_a_session_the_service_holds_is_refused_to_a_command(server, root):
 def test_state_of_a_session_not_opened_yet_is_read_from_its_files(server, root):
     from nerfaug.capture import CaptureSession, SessionSettings
 
-    CaptureSession.create(root / "data", root / "made_here", SessionSettings(preset="test"))
+    CaptureSession.create(root / "data", root / "made_here", SessionSettings(engine="test"))
     answer = server.client.get("/sessions/made_here")
     assert answer.status_code == 200, answer.text
     assert answer.json()["views"] == 4 and answer.json()["step"] == 0 and not answer.json()["running"]

@@ -55,7 +55,7 @@ def test_every_request_is_logged_in_one_line_with_its_status_and_time(client, ca
 def test_the_evaluate_answer_names_no_path_of_the_server(client, tmp_path, monkeypatch):
     missing = tmp_path / "elsewhere" / "alexnet.pth"  # LPIPS unavailable: its reason names where it looked
     monkeypatch.setenv("NERFAUG_ALEXNET_WEIGHTS", str(missing))
-    body = {"id": "s", "dataset": "data", "preset": "test", "seed": 1}
+    body = {"id": "s", "dataset": "data", "engine": "test", "seed": 1}
     assert client.post("/sessions/from-dataset", json=body).status_code == 201
     answer = client.post("/sessions/s/evaluate", json={"dataset": "held-out", "lpips": False})
     assert answer.status_code == 200, answer.text

@@ -22,7 +22,7 @@ from nerfaug.data.world_frame import ENGINE_RADIUS
 from nerfaug.health import EmptyModel, Health
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.progress import progress_bar
-from nerfaug.selection import get_method, hemisphere_candidates, matching_poses, select_views
+from nerfaug.selection import hemisphere_candidates, matching_poses, select_views
 from nerfaug.selection.candidates import with_poses
 
 
@@ -91,6 +91,8 @@ def propose(
     """Choose `request.n` views to capture next, and write them (with every candidate's score)
     to `folder/proposal_NNN.json` (and the map beside it).
 
+    `request` is checked already (`CaptureSession.propose` checks it, once).
+
     Args:
         model: the session's NeRF that scores the candidates.
         number: this proposal's number in the session (0 for the first).
@@ -110,9 +112,7 @@ def propose(
     Raises:
         EmptyModel: `health` finds the NeRF empty and the request does not say `allow_empty`.
     """
-    request = request.checked()
     n, method, hemisphere = request.n, request.method, model.hemisphere
-    used_config = get_method(method).effective_config(request.selection)
     used_seed = None
     if generator is None:
         used_seed = proposal_seed(model.seed, number) if request.seed is None else int(request.seed)
@@ -204,7 +204,7 @@ def propose(
         polar=polar.tolist(),
         file=f"{folder.name}/{record_path.name}",
         created=now(),
-        selection=used_config.to_dict(),
+        selection=selection.config.to_dict(),
         **constraints_record(request.constraints),
         **separation_record(request.min_separation),
         **({"uniform_fill": selection.uniform_fill} if selection.uniform_fill else {}),

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Annotated
 
 import tyro
-from pydantic import AfterValidator, BeforeValidator, Field, PlainValidator, WithJsonSchema, WrapValidator
+from pydantic import AfterValidator, BeforeValidator, Field, WrapValidator
 from tyro.constructors import PrimitiveConstructorSpec
 
 from nerfaug.capture.requests import (
@@ -108,18 +108,6 @@ DEFAULT_MIN_SEPARATION = 15.0
 MAX_VIEWS = 1000
 MAX_CANDIDATES = 20_000
 MAX_REACHABLE_POSES = 10_000
-# The selection settings whose value sets the work of a proposal, and their largest values.
-SELECTION_BOUNDS = {
-    "entropy_resolution": 256,
-    "fisher_resolution": 256,
-    "fisher_train_pixels": 65_536,
-    "fisher_train_chunk": 4096,
-    "fisher_train_probes": 64,
-    "fisher_probes": 64,
-    "fisher_cache_floats": 2**28,
-    "chunk": 65_536,
-    "max_draws": 10_000_000,
-}
 
 
 def _known_method(method: str) -> str:
@@ -133,18 +121,6 @@ def _reachable(value, handler):
     """A transforms JSON of poses (a `Path`: from Python or the command line, never from JSON),
     or the poses themselves, checked."""
     return value if isinstance(value, Path) else handler(value)
-
-
-def _selection(value) -> SelectionConfig:
-    """A `SelectionConfig` (or the dict of its fields), within `SELECTION_BOUNDS`."""
-    config = SelectionConfig.from_dict(value) if isinstance(value, dict) else value
-    if not isinstance(config, SelectionConfig):
-        raise ValueError("must be an object of selection settings (`SelectionConfig` fields)")
-    for name, most in SELECTION_BOUNDS.items():
-        given = getattr(config, name)
-        if isinstance(given, (int, float)) and not isinstance(given, bool) and given > most:
-            raise ValueError(f"{name} {given}: at most {most} in one proposal")
-    return config
 
 
 # `--candidates PATH` on the command line: a transforms JSON of reachable poses.
@@ -161,11 +137,6 @@ Reachable = Annotated[
     Field(min_length=1, max_length=MAX_REACHABLE_POSES),
     WrapValidator(_reachable),
 ]
-_SELECTION_SCHEMA = {
-    "type": "object",
-    "description": "SelectionConfig fields (`--selection.*`), each of its type; the ones that set the work are "
-    "bounded: " + ", ".join(f"{k} <= {v}" for k, v in SELECTION_BOUNDS.items()),
-}
 
 
 @dataclass(kw_only=True)
@@ -188,9 +159,7 @@ class ProposalRequest(Schema):
     """hemisphere candidates to score."""
     seed: Annotated[Seed | None, replaced_by("the session's, per proposal", "INT")] = None
     """seed this proposal (0 to 2^53-1); by default the session's seed and proposal number seed it."""
-    selection: Annotated[SelectionConfig, PlainValidator(_selection), WithJsonSchema(_SELECTION_SCHEMA)] = field(
-        default_factory=SelectionConfig
-    )
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
     """options of the selection method (recorded with the proposal); a method's own settings apply over them."""
     constraints: Annotated[ViewConstraints, tyro.conf.arg(name="")] = field(default_factory=ViewConstraints)
     """where views may lie, applied to the hemisphere's candidates or to the reachable poses."""

@@ -8,11 +8,12 @@ request and the view constraints (`nerfaug.capture.proposal_request`) build on, 
 training steps, the save period, thread counts and uncertainty images' widths (`check_steps`,
 `check_checkpoint_every`, `check_threads`, `check_image_widths`).
 
-The classes tyro reads are dataclasses with one validator each, `checked()` (pydantic, from their
-annotations): tyro builds them from the options without checking, so that a refused value ends
-as one line naming its option (a check raised while tyro builds them would be drawn as tyro's own
-box). A field's docstring is its help on the command line and its description in the service's
-API page. `RequestError` names the first refused field, its value and the problem.
+The classes tyro reads are `nerfaug.schema.Schema` dataclasses with one validator each,
+`checked()` (pydantic, from their annotations): tyro builds them from the options without
+checking, so that a refused value ends as one line naming its option (a check raised while tyro
+builds them would be drawn as tyro's own box). A field's docstring is its help on the command line
+and its description in the service's API page. `RequestError` names the first refused field, its
+value and the problem.
 
 Nothing here imports torch: `nerfaug train --help` reads these classes.
 """
@@ -25,7 +26,6 @@ import math
 import re
 import textwrap
 from dataclasses import dataclass, fields, make_dataclass
-from functools import cache
 from typing import Annotated, Literal, get_args, get_origin, get_type_hints
 
 import tyro
@@ -36,7 +36,6 @@ from pydantic import (
     ConfigDict,
     Field,
     PlainValidator,
-    TypeAdapter,
     ValidationError,
     WithJsonSchema,
     model_validator,
@@ -48,92 +47,7 @@ from nerfaug.camera_schema import MAX_IMAGE_SIDE
 from nerfaug.errors import DatasetError
 from nerfaug.nerf.config import EnginePreset
 from nerfaug.registry import check_name
-
-
-class RequestError(ValueError):
-    """A value of a request is refused: names the field (dotted, items as [i]), its value and why.
-
-    Attributes:
-        argument: the field as the library spells it ("n_candidates", "constraints.elevation",
-            "candidates[3]"); empty for the request as a whole.
-        value: the value given.
-        problem: what is wrong with it.
-    """
-
-    def __init__(self, argument: str, value, problem: str):
-        self.argument, self.value, self.problem = argument, value, problem
-        shown = repr(value) if isinstance(value, str) else value
-        super().__init__(f"{argument} {shown}: {problem}")
-
-    @classmethod
-    def of(cls, error: ValidationError | dict) -> RequestError:
-        """The first error pydantic found, as a `RequestError`."""
-        first = error.errors()[0] if isinstance(error, ValidationError) else error
-        value = None if first.get("type") == "missing" else first.get("input")
-        return cls(field_path(first.get("loc", ())), value, problem_text(first))
-
-
-# Where a service's framework puts a field (FastAPI's "body", "query", ...): not part of its name.
-_TRANSPORT = ("body", "query", "path", "form")
-# What a field no schema has is refused with (pydantic's "Extra inputs are not permitted",
-# "Unexpected keyword argument").
-UNKNOWN_FIELD = "unknown field: not one of this request's"
-# Pydantic's words for a bound, shorter: "must be >= 1", as the commands have always said it.
-_BOUNDS = {"greater_than_equal": ">=", "greater_than": ">", "less_than_equal": "<=", "less_than": "<"}
-
-
-def field_path(loc) -> str:
-    """A pydantic error's location as a field name: ("candidates", 3) -> "candidates[3]"."""
-    text = ""
-    for part in loc:
-        if part in _TRANSPORT:
-            continue
-        text += f"[{part}]" if isinstance(part, int) else f".{part}" if text else str(part)
-    return text
-
-
-def problem_text(error: dict) -> str:
-    """A pydantic error's message, without its "Value error, " prefix and with bounds as ">= 1"."""
-    kind, context = error.get("type", ""), error.get("ctx") or {}
-    if kind in ("extra_forbidden", "unexpected_keyword_argument"):  # a model's, a dataclass's
-        return UNKNOWN_FIELD
-    if kind in _BOUNDS and context:
-        bound = next(iter(context.values()))
-        return f"must be {_BOUNDS[kind]} {bound:g}" if isinstance(bound, float) else f"must be {_BOUNDS[kind]} {bound}"
-    return str(error.get("msg", "invalid")).removeprefix("Value error, ")
-
-
-@cache
-def _adapter(kind) -> TypeAdapter:
-    return TypeAdapter(kind)
-
-
-def validated(kind, value, field: str = ""):
-    """`value` validated as `kind` (a schema class or type); RequestError naming the first
-    refused field (prefixed with `field`) otherwise."""
-    try:
-        return _adapter(kind).validate_python(value)
-    except ValidationError as error:
-        first = error.errors()[0]
-        loc = (field, *first.get("loc", ())) if field else first.get("loc", ())
-        raise RequestError.of({**first, "loc": loc}) from None
-
-
-# A dataclass tyro reads: unknown fields and non-finite numbers refused, validated again whenever
-# `checked` is called, each field's docstring its description.
-SCHEMA = ConfigDict(extra="forbid", allow_inf_nan=False, revalidate_instances="always", use_attribute_docstrings=True)
-
-
-class Schema:
-    """Base of the dataclasses tyro reads: `checked()` is their one validator."""
-
-    def checked(self):
-        """This request validated: numbers in range, names known, defaults filled in.
-
-        Raises:
-            RequestError: naming the first refused field and its value.
-        """
-        return validated(type(self), self)
+from nerfaug.schema import SCHEMA, RequestError, Schema, adapter, problem_text, validated
 
 
 def replaced_by(default: str, metavar: str):
@@ -151,7 +65,7 @@ def given_form(schema: type) -> type:
     Example:
         >>> Given = given_form(SessionSettings)
         >>> Given(seed=0)
-        GivenSessionSettings(preset=None, seed=0, downscale=None, centre=None, radius=None, up=None, estimate_up=None)
+        GivenSessionSettings(engine=None, seed=0, downscale=None, centre=None, radius=None, up=None, estimate_up=None)
         >>> Given(seed=0).given_names(), Given(seed=0).filled().seed
         ({'seed'}, 0)
     """
@@ -219,10 +133,15 @@ SPLIT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 Split = Annotated[
     str, Field(pattern=f"^{SPLIT_NAME.pattern}$", description="a split's name: letters, digits, '.', '_', '-'")
 ]
+# The integer factor a session's images are shrunk by.
+Downscale = Annotated[int, Field(ge=1, le=256)]
 # A hemisphere radius, world units: beyond these a float32 engine frame loses the scene.
 RADIUS_RANGE = (1e-6, 1e6)
 Radius = Annotated[float, Field(ge=RADIUS_RANGE[0], le=RADIUS_RANGE[1])]
-# Training steps one request may run.
+# Training steps one request may run: the same bounds on the command line and over HTTP. 0 is a
+# step count too: `nerfaug add --steps 0` adds without training, `nerfaug train DATA --out RUN
+# --steps 0` makes the session without training it, and a service's training job of 0 steps ends
+# at once.
 MAX_STEPS = 10_000_000
 Steps = Annotated[int, Field(ge=0, le=MAX_STEPS)]
 # A session's training saves this often (seconds of training; a killed process loses at most this
@@ -241,6 +160,8 @@ MAX_IMAGE_WIDTH = 1024
 MAX_FISHER_WIDTH = 256
 ImageWidth = Annotated[int, Field(ge=1, le=MAX_IMAGE_WIDTH)]
 FisherWidth = Annotated[int, Field(ge=1, le=MAX_FISHER_WIDTH)]
+# FisherRF's image unless told: three backward passes a pixel, so fewer pixels than the render.
+FISHER_WIDTH = 16
 
 # A session's id names its folder directly under the service root.
 SESSION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
@@ -262,7 +183,7 @@ SessionId = Annotated[
 def check_session_id(session_id) -> str:
     """`session_id` if it is a `SessionId`; RequestError ("session id 'a.b': ...") otherwise."""
     try:
-        return _adapter(SessionId).validate_python(session_id)
+        return adapter(SessionId).validate_python(session_id)
     except ValidationError as error:
         raise RequestError("session id", str(session_id)[:80], problem_text(error.errors()[0])) from None
 
@@ -418,11 +339,11 @@ class SessionSettings(Schema):
 
     __pydantic_config__ = SCHEMA
 
-    preset: Annotated[EnginePreset, tyro.conf.arg(name="engine")] = DEFAULT_SESSION_ENGINE
-    """the NeRF engine preset: nerfacto-cpu (nerfacto shrunk), cpu (K-planes), paper (a GPU's), test."""
+    engine: EnginePreset = DEFAULT_SESSION_ENGINE
+    """the NeRF engine: nerfacto-cpu (nerfacto shrunk), cpu (K-planes), paper (a GPU's), test."""
     seed: Seed = 0
     """seeds the model, its training and every proposal (0 to 2^53-1, exact in any JSON client)."""
-    downscale: Annotated[int, Field(ge=1, le=256)] = 1
+    downscale: Downscale = 1
     """train on images shrunk by this integer factor."""
     centre: Annotated[Vector | None, replaced_by("the point the cameras look at", "X Y Z")] = None
     """the hemisphere's centre, world space."""

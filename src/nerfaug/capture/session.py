@@ -45,6 +45,7 @@ from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
 from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
+    FISHER_WIDTH,
     Intrinsics,
     SessionSettings,
     SparseStart,
@@ -106,7 +107,7 @@ class CaptureSession(SessionFolder):
     re-reads views the checkpoint has not seen yet, so nothing captured is ever lost.
 
     Example:
-        >>> settings = SessionSettings(preset="cpu")
+        >>> settings = SessionSettings(engine="cpu")
         >>> session = CaptureSession.create("data/lego", "runs/lego", settings, split="initial")  # doctest: +SKIP
         >>> session.train(1000)                                      # doctest: +SKIP
         >>> proposal = session.propose(ProposalRequest(n=6))         # doctest: +SKIP
@@ -145,11 +146,11 @@ class CaptureSession(SessionFolder):
             data_dir: a dataset folder in a registered format (`nerfaug.data.FORMATS`: Blender's
                 `transforms_{split}.json`, nerfstudio's `transforms.json`): the views captured so far.
             run_dir: the run folder to create (must not hold a session already).
-            settings: the engine preset, seed, downscale factor and hemisphere (`SessionSettings`;
+            settings: the engine, seed, downscale factor and hemisphere (`SessionSettings`;
                 its centre, radius or pole estimated from the cameras where not given).
             split: the split holding the captured views; None: `default_split` ("initial" for a
                 dataset `nerfaug scene render` wrote, else "train").
-            config: a `NerfConfig` to use instead of the settings' preset.
+            config: a `NerfConfig` to use instead of the settings' engine.
             background: colour behind transparent pixels, RGB in [0, 1].
             device: torch device for the NeRF.
             progress: show training progress bars.
@@ -206,7 +207,8 @@ class CaptureSession(SessionFolder):
             start = validated(SparseStart, start, "start")
             source, cameras, pool, record = sparse_start(source, views, hemisphere, start)
         origin = SourceInfo(data_dir=str(data_dir), split=split, format=source.format.name)
-        state = _new_state(origin, cameras, plainest_format(source, cameras), settings, config, background, hemisphere)
+        engine, config = (settings.engine, NerfConfig.preset(settings.engine)) if config is None else ("custom", config)
+        state = _new_state(origin, source, cameras, settings, engine, config, background, hemisphere)
         if pool is not None:
             state.start, state.pool = record, POOL_FILE
         # Everything is checked: from here on the run folder is written, and marked as nerfaug's first;
@@ -216,7 +218,7 @@ class CaptureSession(SessionFolder):
         try:
             if pool is not None:
                 atomic_write_json(run_dir / POOL_FILE, pool)
-            return cls._build(run_dir, source, state, config or NerfConfig.preset(settings.preset), device, progress)
+            return cls._build(run_dir, source, state, config, device, progress)
         except BaseException:
             _remove_unfinished(run_dir, existed)
             raise
@@ -308,7 +310,7 @@ class CaptureSession(SessionFolder):
         self._saved = (trainer.step, in_model)
         frames = self.frames()
         if state.integrity.checkpoint is None:
-            integrity.check_unrecorded_checkpoint(checkpoint, trainer, state.seed, state.engine, frames)
+            integrity.check_unrecorded_checkpoint(checkpoint, trainer, state.seed, state.engine_config, frames)
             # Accepted as found: its digest goes into session.json at the next save, even one that
             # has no new model to write (else every open would warn again).
             state.integrity.checkpoint = integrity.sha256_file(checkpoint)
@@ -457,7 +459,7 @@ class CaptureSession(SessionFolder):
         """
         folder = self.run_dir / PROPOSALS_DIR
         number, shown = len(self.state.proposals), bool(self.trainer.progress)  # as the session was opened
-        request = request or ProposalRequest()
+        request = (request or ProposalRequest()).checked()  # once: a request the command or the service checked passes
         health = functools.cache(self.health)  # measured once, by `choose.propose` when it gets that far
         proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown, map, health)
         if record.model_dump().get("empty_model"):
@@ -539,13 +541,7 @@ class CaptureSession(SessionFolder):
         return self.session_model().render(poses, width)
 
     def uncertainty_maps(
-        self,
-        poses,
-        width: int | None = None,
-        fisher: bool = True,
-        fisher_width: int = 16,
-        progress: bool = False,
-        names: Sequence[str] | None = None,
+        self, poses, width: int | None = None, fisher=True, fisher_width=FISHER_WIDTH, progress=False, names=None
     ) -> list[ViewMaps]:
         """The render, depth, ray entropy and FisherRF images of world-frame `poses` (n, 4, 4);
         see `nerfaug.capture.uncertainty_images.view_maps` (`progress` shows each view's images
@@ -558,14 +554,14 @@ class CaptureSession(SessionFolder):
         return evaluate_model(self.session_model(), views, lpips, progress)
 
 
-def _new_state(source: SourceInfo, cameras, store, settings: SessionSettings, config, background, hemisphere):
-    """The `SessionState` of a new session on `source`, whose cameras are `cameras`, its dataset
-    stored in the format `store`."""
+def _new_state(origin: SourceInfo, source, cameras, settings: SessionSettings, engine, config, background, hemisphere):
+    """The `SessionState` of a new session on `source` (read from `origin`), whose cameras are
+    `cameras`, its engine `config` (named `engine`: the one place the name is resolved is `create`)."""
     return SessionState(
-        source=source,
-        dataset=DatasetInfo.of(store),
-        preset=settings.preset if config is None else "custom",
-        engine=(config or NerfConfig.preset(settings.preset)).to_dict(),
+        source=origin,
+        dataset=DatasetInfo.of(plainest_format(source, cameras)),
+        engine=engine,
+        engine_config=config.to_dict(),
         seed=settings.seed,
         downscale=settings.downscale,
         background=tuple(float(c) for c in background),

@@ -2,10 +2,12 @@
 validates and writes the file, every path in it checked to stay inside the run folder; and what a
 session reports of itself (`SessionSummary`).
 
-The file's layout (format 1) is unchanged from before the typed state: the same 17 keys, so files
-written by earlier versions load, and earlier versions can read the files written now. One optional
-key was added since, `integrity` (`Integrity`): earlier versions ignore it, and a file without it
-is checked from its next save on. A record's keys that a later version adds are kept
+The file's layout is format 2: format 1's keys, with the engine's name under "engine" (format 1:
+"preset") and its complete settings under "engine_config" (format 1: "engine"), so that the engine
+has one name on the command line, over HTTP and here. A format-1 file still loads: its two keys are
+renamed when it is read (`SessionState._format_1`, the one place that knows the old names), and it
+is written as format 2 at its next save. One optional key, `integrity` (`Integrity`): a file
+without it is checked from its next save on. A record's keys that a later version adds are kept
 (`model_extra`).
 """
 
@@ -30,14 +32,14 @@ from pydantic import (
 
 import nerfaug
 from nerfaug.capture.dataset import default_split
-from nerfaug.capture.requests import Intrinsics, RequestError, Seed, SessionSettings
+from nerfaug.capture.requests import Downscale, Intrinsics, RequestError, Seed, SessionSettings
 from nerfaug.capture.runfolder import DATASET_SPLIT, SESSION_FILE
 from nerfaug.data.formats import FORMATS
 from nerfaug.data.interface import Format
 from nerfaug.data.world_frame import Hemisphere
 from nerfaug.errors import NerfaugError
 
-SESSION_FORMAT = 1
+SESSION_FORMAT = 2
 
 
 class SessionError(NerfaugError, RuntimeError):
@@ -198,10 +200,12 @@ class SessionState(Stored):
     created: str = Field(default_factory=now)
     source: SourceInfo
     dataset: DatasetInfo
-    preset: str
-    engine: dict
+    engine: str
+    """the engine's name (`SessionSettings.engine`), or "custom" for a `NerfConfig` given as is."""
+    engine_config: dict
+    """the engine's complete settings (`NerfConfig.to_dict()`)."""
     seed: Seed
-    downscale: int = Field(ge=1)
+    downscale: Downscale
     background: tuple[Unit, Unit, Unit]
     intrinsics: Intrinsics
     hemisphere: StoredHemisphere
@@ -216,6 +220,17 @@ class SessionState(Stored):
     """a sparse start: {"initial", "layout", "of"} views the session started from, of the source's."""
     pool: InsideRun | None = None
     """a sparse start's candidate pool (`POOL_FILE`), where `propose` chooses by default."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _format_1(cls, data):
+        """A format-1 file's keys as format 2 names them: "preset" -> "engine" (the name), "engine"
+        -> "engine_config" (the settings)."""
+        if isinstance(data, dict) and data.get("format") == 1:
+            data = {**data, "format": SESSION_FORMAT}
+            data["engine_config"] = data.pop("engine", None)
+            data["engine"] = data.pop("preset", None)
+        return data
 
     @field_validator("format")
     @classmethod
@@ -241,7 +256,7 @@ class SessionState(Stored):
         or `estimate_up`)."""
         h, estimated = self.hemisphere, self.hemisphere_estimated
         return SessionSettings(
-            preset=self.preset,
+            engine=self.engine,
             seed=self.seed,
             downscale=self.downscale,
             centre=None if estimated.get("centre", False) else h.centre,

@@ -19,7 +19,7 @@ import torch
 from torch import Tensor
 
 from nerfaug.capture.model import SessionModel
-from nerfaug.capture.requests import check_image_widths
+from nerfaug.capture.requests import FISHER_WIDTH, check_image_widths
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.metrics import PIXEL_LABELS
 from nerfaug.plotting import colour_bar, draw_log_image, figure_png, log_range, new_figure, save_figure
@@ -79,7 +79,7 @@ def view_maps(
     poses,
     width: int | None = None,
     fisher: bool = True,
-    fisher_width: int = 16,
+    fisher_width: int = FISHER_WIDTH,
     progress: bool = False,
     names: Sequence[str] | None = None,
 ) -> list[ViewMaps]:

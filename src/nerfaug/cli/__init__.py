@@ -169,7 +169,7 @@ def _check_renamed(argv: list[str]) -> None:
         new = RENAMED.get((argv[0], word.partition("=")[0]))
         if new is not None:
             raise SystemExit(
-                f"{word.partition('=')[0]}: `nerfaug {argv[0]}` takes the NeRF engine preset as {new} "
+                f"{word.partition('=')[0]}: `nerfaug {argv[0]}` takes the NeRF engine as {new} "
                 "(--preset is an experiment's protocol, in `nerfaug run` and `nerfaug study`)"
             )
 

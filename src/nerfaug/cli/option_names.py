@@ -10,13 +10,10 @@ import dataclasses
 
 from nerfaug.capture.requests import RequestError, words
 
-# A field of a schema named otherwise on the command line.
-OPTION_NAMES = {"preset": "engine"}
-
 
 def option(field: str) -> str:
     """A schema's field as the option that sets it: "estimate_up" -> "--estimate-up"."""
-    return "--" + OPTION_NAMES.get(field, field).replace("_", "-")
+    return "--" + field.replace("_", "-")
 
 
 @contextlib.contextmanager

@@ -13,7 +13,7 @@ import ipaddress
 import os
 import sys
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
@@ -22,6 +22,7 @@ from nerfaug.capture.requests import (
     replaced_by,
 )
 from nerfaug.cli.option_names import as_options
+from nerfaug.device_choice import Device
 
 TOKEN_ENV = "NERFAUG_TOKEN"
 
@@ -41,7 +42,7 @@ def serve(
     host: str = "127.0.0.1",
     port: int = 8000,
     token: Annotated[str | None, replaced_by(f"the {TOKEN_ENV} environment variable, if set", "TOKEN")] = None,
-    device: Literal["auto", "cpu", "cuda"] = "auto",
+    device: Device = "auto",
     checkpoint_every: float = CHECKPOINT_EVERY_S,
     threads: int = 1,
     max_upload_mb: float = 25.0,
@@ -59,7 +60,7 @@ def serve(
         port: the port to listen on.
         token: a secret every request must send as `Authorization: Bearer TOKEN`; needed to
             listen beyond this machine.
-        device: where the NeRFs train: auto (cuda when available, else cpu), cpu, cuda.
+        device: where the NeRFs train.
         checkpoint_every: save a training session after this many seconds (and when a job ends).
         threads: torch threads for training.
         max_upload_mb: the largest image file accepted, in MB.

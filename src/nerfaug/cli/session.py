@@ -22,7 +22,8 @@ import tyro
 
 from nerfaug.capture.proposal_request import ProposalRequest
 from nerfaug.capture.requests import replaced_by
-from nerfaug.cli.train import THREADS, Device, RunFolder
+from nerfaug.cli.train import THREADS, RunFolder
+from nerfaug.device_choice import Device
 
 # The registered dataset formats' names (`nerfaug.data.formats.FORMATS`, which loads torch:
 # tests/cli/test_help.py checks that the two agree) and the one an export writes by default.
@@ -51,7 +52,7 @@ def propose(
     Args:
         run: the session's run folder.
         out: the poses JSON to write.
-        device: where candidates are scored: auto (cuda when available, else cpu), cpu, cuda.
+        device: where candidates are scored.
         force: overwrite --out (and its .png) even when nerfaug did not write it, or it was edited
             (never inside a capture session's folder: its proposals are its own record).
         threads: torch threads for scoring the candidates.
@@ -101,7 +102,7 @@ def evaluate(
         split: the split to score ("test": a dataset `nerfaug scene render` wrote has 200 held-out views).
         out: write the metrics, mean and per view, to this JSON file.
         lpips: compute LPIPS (when its weights are installed; otherwise reported as n/a).
-        device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
+        device: where the NeRF renders.
         threads: torch threads for rendering and scoring.
     """
     from nerfaug.cli import session_work  # torch: here, so that `nerfaug eval --help` loads none

@@ -12,7 +12,7 @@ runs, so that `nerfaug train --help` answers at once.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 import tyro
 
@@ -27,9 +27,9 @@ from nerfaug.capture.requests import (
     replaced_by,
 )
 from nerfaug.cli.option_names import as_options
+from nerfaug.device_choice import Device
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
-Device = Literal["auto", "cpu", "cuda"]
 # The session settings the command line gives, each None unless given (at its default value
 # too): `nerfaug train RUN` compares those alone with the session's.
 GivenSettings = given_form(SessionSettings)
@@ -77,7 +77,7 @@ def train(
         steps: train until the session's step count reaches this.
         split: the Blender split holding the captured views (a dataset `nerfaug scene render`
             wrote keeps its candidate pool in "train").
-        device: where the NeRF trains: auto (cuda when this machine has a GPU, else cpu), cpu, cuda.
+        device: where the NeRF trains.
         checkpoint_every: save the session after this many seconds of training (and at the end).
         threads: torch threads for training (one by default, as each run of a sweep).
         initial: a sparse start: train on this many of the split's views, on one half of the
@@ -121,7 +121,7 @@ def add(
         poses: the poses JSON (as `nerfaug propose` writes it, or your robot's actual poses in
             the same format).
         steps: training steps to run after adding, counted from the session's step (0: add only).
-        device: where the NeRF trains: auto (cuda when available, else cpu), cpu, cuda.
+        device: where the NeRF trains.
         checkpoint_every: save the session after this many seconds of training (and at the end).
         threads: torch threads for training (one by default, as each run of a sweep).
     """

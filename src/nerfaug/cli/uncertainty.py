@@ -9,13 +9,14 @@ command runs, so that `--help` answers at once.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 import tyro
 
 from nerfaug import owned
-from nerfaug.capture.requests import check_image_widths, check_threads, replaced_by
+from nerfaug.capture.requests import FISHER_WIDTH, check_image_widths, check_threads, replaced_by
 from nerfaug.cli.option_names import as_options
+from nerfaug.device_choice import Device
 from nerfaug.errors import FolderRefused
 
 UNCERTAINTY_KIND = "uncertainty-images"  # the marker of a folder `nerfaug uncertainty` wrote
@@ -27,9 +28,9 @@ def uncertainty(
     out: Path,
     width: Annotated[int | None, replaced_by("the training resolution", "INT")] = None,
     fisher: bool = True,
-    fisher_width: int = 16,
+    fisher_width: int = FISHER_WIDTH,
     shared_scale: bool = True,
-    device: Literal["auto", "cpu", "cuda"] = "auto",
+    device: Device = "auto",
     threads: int = 1,
 ) -> None:
     """Uncertainty images of any views of a session: for each pose of a poses JSON, what the NeRF
@@ -48,7 +49,7 @@ def uncertainty(
         fisher_width: pixels across of the FisherRF image.
         shared_scale: draw every view's figure on the same colour scales, so views compare by
             eye (--no-shared-scale: each figure spans its own values).
-        device: where the NeRF renders: auto (cuda when available, else cpu), cpu, cuda.
+        device: where the NeRF renders.
         threads: torch threads (one is the fastest on a machine that runs other work).
     """
     _check_uncertainty(run, out, width, fisher_width, threads)

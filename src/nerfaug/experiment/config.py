@@ -10,10 +10,11 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 import tyro
 
+from nerfaug.device_choice import Device
 from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
 from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
 from nerfaug.registry import Presets
@@ -95,8 +96,8 @@ class ExperimentConfig:
     """save the first test view's uncertainty images (the report's figure and AUSE; no metric needs them)."""
     # Only the kind (cpu / cuda) is fingerprinted: the two give different numbers (other kernels and
     # reduction orders), so a results folder never mixes them.
-    device: Literal["auto", "cpu", "cuda"] = "auto"
-    """where runs train, select and evaluate: auto (cuda when there is a GPU, else cpu), cpu or cuda."""
+    device: Device = "auto"
+    """where runs train, select and evaluate."""
 
     # Trial batches train K runs in lockstep, one kernel serving all (`nerfaug.nerf.batch`): on a
     # GPU many times the runs a second; on a CPU about 1.1x (BENCHMARKS.md, "Trial batches"). Their

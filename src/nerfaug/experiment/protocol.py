@@ -402,13 +402,13 @@ def finish_run(
     )
     write_metrics(folder, evaluation.to_dict())
     write_history(folder, trained.history)
-    spec = get_method(key.method)  # the settings the method ran with: the sweep's, with the method's own over them
+    spec = get_method(key.method)
     write_config(
         folder,
         asdict(config),
         asdict(run.engine),
         device=describe_device(trained.device),
-        selection=spec.effective_config(config.selection).to_dict(),
+        selection=selection.config.to_dict(),  # the sweep's settings, with the method's own over them
         method=spec.definition(),
     )
     result = {

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 import tyro
 
+from nerfaug.device_choice import Device
 from nerfaug.experiment.config import STUDY_PRESETS
 from nerfaug.experiment.layout import StudyFolder
 
@@ -68,7 +69,7 @@ class StudySpec:
         layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
             views come from turned by 1/LAYOUTS of the way round each time.
         steps: training steps per run (the preset's unless given).
-        device: auto (cuda when there is a GPU), cpu or cuda.
+        device: where the runs train, select and evaluate.
         preset: the study's protocol, which --steps and --selection.* change: study (the paper's
             at 100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
         table: the per-run table to record runs in and summarise; runs it records with their
@@ -85,7 +86,7 @@ class StudySpec:
     resolution: int = 100
     layouts: int = 1
     steps: int = STUDY_PRESETS[DEFAULT_PRESET].steps
-    device: Literal["auto", "cpu", "cuda"] = "auto"
+    device: Device = "auto"
     preset: StudyPreset = DEFAULT_PRESET
     table: Table = None
     batch: int = 0

@@ -46,6 +46,7 @@ from nerfaug.nerf.config import NerfConfig, batch_support
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
 from nerfaug.registry import did_you_mean
+from nerfaug.schema import RequestError
 from nerfaug.selection import METHODS, get_method
 
 Backend = Literal["local", "ray"]
@@ -126,6 +127,11 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
             f"unknown selection method; {did_you_mean(method, METHODS)}see `nerfaug methods`: {', '.join(METHODS)}",
         )
     _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
+    try:
+        config.selection.checked()  # the selection settings' one check
+    except RequestError as error:
+        option = "--selection." + error.argument.replace("_", "-")
+        raise ValueError(f"{option} {error.value!r}: {error.problem}") from None
     try:
         check_names(NerfConfig.preset(config.engine))
     except ValueError as error:

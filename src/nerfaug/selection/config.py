@@ -6,24 +6,26 @@ The names a choice field may take are listed here, next to the field: `REJECTION
 `nerfaug.nerf.SAMPLERS`) and `DISTANCE_ROTATIONS` (`distance_rotations`); the uncertainty measures'
 modes are `nerfaug.uncertainty.choices`'.
 
+Each field's bounds are in its annotation, checked by pydantic in one place, `checked()` (a
+`nerfaug.schema.Schema`): a proposal's request checks its settings with it (`ProposalRequest`), an
+experiment before its sweep (`experiment.sweep.check_config`). tyro builds the options without
+checking them, so a refused value is one line naming its option.
+
 Nothing here imports torch, nor numpy until a metric is checked: `nerfaug run`, `study` and
 `propose` offer these options, and their `--help` loads neither.
 """
 
 from __future__ import annotations
 
-import functools
-import math
-import numbers
-import types
-import typing
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from types import MappingProxyType
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
+from pydantic import AfterValidator, Field
 from tyro.constructors import PrimitiveConstructorSpec
 
+from nerfaug.schema import SCHEMA, Schema, validated
 from nerfaug.uncertainty.choices import (
     CACHE_FLOATS,
     DEFAULT_METHOD,
@@ -80,70 +82,37 @@ AUTHORS_SETTINGS = MappingProxyType(
 )
 
 
-def _fits(value, hint, finite: bool = True) -> bool:
-    """Whether `value` has the type `hint` names (int, float, str, None, their unions, lists and
-    tuples of them); a bool is not a number, and a float must be `finite` (inside a list or tuple
-    the field's own check says what is wrong with its numbers)."""
-    origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if origin in (typing.Union, types.UnionType):
-        return any(_fits(value, arg, finite) for arg in args)
-    if hint is type(None):
-        return value is None
-    if isinstance(value, bool) and hint is not bool:
-        return False
-    if hint is float:
-        return isinstance(value, numbers.Real) and (not finite or math.isfinite(value))
-    if hint is int:
-        return isinstance(value, numbers.Integral)
-    if hint in (str, bool):
-        return isinstance(value, hint)
-    if origin in (list, tuple) and not isinstance(value, (list, tuple)):
-        return False
-    if origin is list or (origin is tuple and len(args) == 2 and args[1] is Ellipsis):
-        return all(_fits(v, args[0], finite=False) for v in value)
-    if origin is tuple:
-        return len(value) == len(args) and all(_fits(v, a, finite=False) for v, a in zip(value, args))
-    return True
-
-
-@functools.cache
-def _field_types(cls) -> dict:
-    return typing.get_type_hints(cls)
-
-
-def _type_problem(config) -> str | None:
-    """The first field of `config` whose value is not of its declared type, as one line, or None."""
-    hints = _field_types(type(config))
-    for f in fields(config):
-        value = getattr(config, f.name)
-        if not _fits(value, hints[f.name]):
-            hint = hints[f.name]
-            words = {float: "a finite number", int: "a whole number", str: "a string", bool: "true or false"}
-            wanted = words.get(hint) or "of type " + str(hint).replace("typing.", "").replace("NoneType", "None")
-            return f"SelectionConfig.{f.name}={value!r} must be {wanted}"
-    return None
-
-
-def _metric_problem(metric) -> str | None:
-    """What keeps `metric` from being the coverage term's M (a symmetric positive-definite 3x3
-    matrix of finite numbers), or None."""
+def _metric(metric: list[list[float]]) -> list[list[float]]:
+    """`metric` if it can be the coverage term's M: a symmetric positive-definite 3x3 matrix of
+    finite numbers (pydantic checked that it holds numbers, and that they are finite)."""
     import numpy as np  # here: `--help` reads this module (above)
 
-    try:
-        matrix = np.array(metric, dtype=float)
-    except (TypeError, ValueError):
-        return "a 3x3 matrix of numbers"
-    if matrix.shape != (3, 3) or not np.isfinite(matrix).all():
-        return "a 3x3 matrix of finite numbers"
+    if len(metric) != 3 or any(len(row) != 3 for row in metric):
+        raise ValueError("must be a 3x3 matrix of numbers")
+    matrix = np.array(metric, dtype=float)
     if not np.allclose(matrix, matrix.T):
-        return "symmetric"
+        raise ValueError("must be symmetric")
     if np.linalg.eigvalsh(matrix).min() <= 0:
-        return "positive definite"
-    return None
+        raise ValueError("must be positive definite")
+    return metric
+
+
+# The settings whose value sets the work of a selection, and their largest values: a proposal's
+# request (over HTTP too) is refused beyond these before any work starts.
+MAX_RESOLUTION = 256
+MAX_RAYS_PER_CHUNK = 65_536
+# Strict numbers: true/false, or a number written as a string, is no setting's value.
+Weight = Annotated[float, Field(strict=True, ge=0)]
+Positive = Annotated[float, Field(strict=True, gt=0)]
+Angle = Annotated[float, Field(strict=True)]
+# Whole numbers >= 1: pixels across, rays, random probes.
+Resolution = Annotated[int, Field(strict=True, ge=1, le=MAX_RESOLUTION)]
+Rays = Annotated[int, Field(strict=True, ge=1, le=MAX_RAYS_PER_CHUNK)]
+Probes = Annotated[int, Field(strict=True, ge=1, le=64)]
 
 
 @dataclass
-class SelectionConfig:
+class SelectionConfig(Schema):
     """Options of the estimators and selectors. Defaults follow the paper; `authors_variant()`
     switches to what the authors' code does (`AUTHORS_SETTINGS`; the method "ours-authors").
 
@@ -221,81 +190,45 @@ class SelectionConfig:
             of candidates near it is lowered, within about this angle (radians; docs/methods.md).
     """
 
-    entropy_resolution: int = 40
-    entropy_mode: str = "escape"
-    normalisation: str = "minmax"
-    entropy_weight: float = 1.0
-    distance_weight: float = 1.0
+    __pydantic_config__ = SCHEMA
+
+    entropy_resolution: Resolution = 40
+    entropy_mode: Literal[ENTROPY_MODES] = "escape"
+    normalisation: Literal[NORMALISATIONS] = "minmax"
+    entropy_weight: Weight = 1.0
+    distance_weight: Weight = 1.0
     metric: Annotated[
-        list[list[float]] | None,
+        Annotated[list[list[float]], AfterValidator(_metric)] | None,
         METRIC_ON_THE_COMMAND_LINE,
         _unset_means("the identity", "M11 M12 M13 M21 M22 M23 M31 M32 M33"),
     ] = None
-    scale_m: Annotated[float | None, _unset_means("the largest score", "FLOAT")] = None
-    sampler: str = "paper"
-    authors_threshold: float = AUTHORS_THRESHOLD
-    max_draws: int = MAX_DRAWS
-    fisher_method: str = DEFAULT_METHOD
-    fisher_train_pixels: int = 4096
-    fisher_train_chunk: int = 128
-    fisher_train_probes: int = 4
-    fisher_resolution: int = 45
-    fisher_probes: int = 1
-    fisher_lambda: float = FISHER_LAMBDA
-    fisher_cache_floats: int = CACHE_FLOATS
-    chunk: int = 4096
+    scale_m: Annotated[Positive | None, _unset_means("the largest score", "FLOAT")] = None
+    sampler: Literal[REJECTION_SAMPLERS] = "paper"
+    authors_threshold: Weight = AUTHORS_THRESHOLD
+    max_draws: Annotated[int, Field(strict=True, ge=1, le=10 * MAX_DRAWS)] = MAX_DRAWS
+    fisher_method: Literal[FISHER_METHODS] = DEFAULT_METHOD
+    fisher_train_pixels: Rays = 4096
+    fisher_train_chunk: Annotated[int, Field(strict=True, ge=1, le=4096)] = 128
+    fisher_train_probes: Probes = 4
+    fisher_resolution: Resolution = 45
+    fisher_probes: Probes = 1
+    fisher_lambda: Positive = FISHER_LAMBDA
+    fisher_cache_floats: Annotated[int, Field(strict=True, ge=1, le=CACHE_FLOATS)] = CACHE_FLOATS
+    chunk: Rays = 4096
     background: Annotated[tuple[float, float, float] | None, _unset_means("the model's", "R G B")] = None
-    scoring_fov: Annotated[float | None, _unset_means("the candidates' own", "DEGREES")] = None
-    scoring_crop: float = 1.0
-    min_polar: Annotated[float | None, _unset_means("no limit", "RADIANS")] = None
-    entropy_max_polar: Annotated[float | None, _unset_means("no limit", "RADIANS")] = None
-    distance_rotations: str = "pose"
-    temperature: float = 1.0
-    sharpness: Annotated[float | None, _unset_means("unset: --selection.temperature applies", "FLOAT")] = None
-    batch_entropy_sigma: Annotated[float | None, _unset_means("no discount", "RADIANS")] = None
-
-    def __post_init__(self) -> None:
-        if problem := _type_problem(self):  # before any comparison: "abc" >= 0 would be a TypeError
-            raise ValueError(problem)
-        for name, value, valid in [
-            ("entropy_mode", self.entropy_mode, ENTROPY_MODES),
-            ("normalisation", self.normalisation, NORMALISATIONS),
-            ("sampler", self.sampler, REJECTION_SAMPLERS),
-            ("fisher_method", self.fisher_method, FISHER_METHODS),
-            ("distance_rotations", self.distance_rotations, DISTANCE_ROTATIONS),
-        ]:
-            if value not in valid:
-                raise ValueError(f"SelectionConfig.{name}={value!r} is not one of {', '.join(valid)}")
-        for name, ok, rule in [
-            ("entropy_resolution", self.entropy_resolution >= 1, ">= 1"),
-            ("scoring_crop", 0 < self.scoring_crop <= 1, "in (0, 1]"),
-            ("scoring_fov", self.scoring_fov is None or 0 < self.scoring_fov < 180, "in (0, 180) degrees"),
-            ("temperature", self.temperature > 0, "> 0"),
-            ("sharpness", self.sharpness is None or 0 <= self.sharpness <= 1, "in [0, 1]"),
-            ("batch_entropy_sigma", self.batch_entropy_sigma is None or self.batch_entropy_sigma > 0, "> 0"),
-            ("entropy_weight", self.entropy_weight >= 0, ">= 0"),
-            ("distance_weight", self.distance_weight >= 0, ">= 0"),
-            ("authors_threshold", self.authors_threshold >= 0, ">= 0"),
-            ("scale_m", self.scale_m is None or self.scale_m > 0, "> 0"),
-            *[
-                (name, getattr(self, name) >= 1, ">= 1")
-                for name in (
-                    "max_draws",
-                    "chunk",
-                    "fisher_train_pixels",
-                    "fisher_train_chunk",
-                    "fisher_train_probes",
-                    "fisher_resolution",
-                    "fisher_probes",
-                    "fisher_cache_floats",
-                )
-            ],
-            ("fisher_lambda", self.fisher_lambda > 0, "> 0"),
-        ]:
-            if not ok:
-                raise ValueError(f"SelectionConfig.{name}={getattr(self, name)!r} must be {rule}")
-        if self.metric is not None and (problem := _metric_problem(self.metric)):
-            raise ValueError(f"SelectionConfig.metric={self.metric!r} must be {problem}")
+    scoring_fov: Annotated[
+        Annotated[float, Field(strict=True, gt=0, lt=180)] | None, _unset_means("the candidates' own", "DEGREES")
+    ] = None
+    scoring_crop: Annotated[float, Field(strict=True, gt=0, le=1)] = 1.0
+    min_polar: Annotated[Angle | None, _unset_means("no limit", "RADIANS")] = None
+    entropy_max_polar: Annotated[Angle | None, _unset_means("no limit", "RADIANS")] = None
+    distance_rotations: Literal[DISTANCE_ROTATIONS] = "pose"
+    temperature: Positive = 1.0
+    sharpness: Annotated[
+        Annotated[float, Field(strict=True, ge=0, le=1)] | None,
+        _unset_means("unset: --selection.temperature applies", "FLOAT"),
+    ] = None
+    batch_entropy_sigma: Annotated[Positive | None, _unset_means("no discount", "RADIANS")] = None
 
     def authors_variant(self) -> SelectionConfig:
         """This config with the authors' code's settings (`AUTHORS_SETTINGS`): entropy,
@@ -322,12 +255,9 @@ class SelectionConfig:
 
     @classmethod
     def from_dict(cls, data: dict) -> SelectionConfig:
-        """The inverse of `to_dict`; unknown keys are refused with their names."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f"unknown SelectionConfig fields {unknown}; valid: {', '.join(sorted(known))}")
-        values = dict(data)
-        if values.get("background") is not None:
-            values["background"] = tuple(values["background"])
-        return cls(**values)
+        """The inverse of `to_dict`, checked (`checked()`).
+
+        Raises:
+            RequestError: naming the first unknown or refused field and its value.
+        """
+        return validated(cls, data)

@@ -30,6 +30,8 @@ class Selection:
         method: the method's name.
         uniform_fill: how many of the chosen views were drawn uniformly because fewer candidates
             than asked for had a positive score (0: all chosen by the method's scores).
+        config: the settings it chose with: the caller's, with the method's own applied over
+            them (what a run or a proposal records; not part of `to_dict`).
     """
 
     indices: Tensor
@@ -37,6 +39,7 @@ class Selection:
     components: dict[str, Tensor] = field(default_factory=dict)
     method: str = ""
     uniform_fill: int = 0
+    config: SelectionConfig | None = None
 
     def to_dict(self) -> dict:
         """Plain lists and numbers (JSON-serialisable)."""
@@ -113,8 +116,9 @@ def select_views(
         n: how many to choose.
         generator: random source for sampling, probes and pixel subsamples; the same seed gives
             the same selection.
-        config: estimator and selector options; None for the defaults. The method's own
-            settings (`MethodSpec.settings`) are applied over it.
+        config: estimator and selector options, checked (`SelectionConfig.checked()`); None for
+            the defaults. The method's own settings (`MethodSpec.settings`) are applied over it,
+            here and nowhere else on the way to the selector.
         min_separation: radians; > 0 keeps every two chosen views at least this far apart about
             the origin (`selection.separation`); 0, the default, chooses as the method does.
         progress: called with the number of candidates scored so far, after each batch the
@@ -135,4 +139,5 @@ def select_views(
     else:
         indices, estimate = selector(request, estimate)
     components = {k: v.detach().cpu() for k, v in estimate.components().items()}
-    return Selection(indices.cpu(), estimate.scores.detach().cpu(), components, spec.name, estimate.uniform_fill)
+    scores = estimate.scores.detach().cpu()
+    return Selection(indices.cpu(), scores, components, spec.name, estimate.uniform_fill, config)

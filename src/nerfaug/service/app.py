@@ -41,10 +41,11 @@ import nerfaug
 from nerfaug.capture.evaluate import trained_on_count
 from nerfaug.capture.pool import Job, SessionStatus
 from nerfaug.capture.proposal_request import ProposalRequest
-from nerfaug.capture.requests import UNKNOWN_FIELD, Poses, RequestError
+from nerfaug.capture.requests import Poses
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 from nerfaug.errors import NerfaugError
+from nerfaug.schema import UNKNOWN_FIELD, RequestError
 from nerfaug.service import models
 from nerfaug.service.errors import ServiceError, bad_input, field_line, headers_of, public_text, status_of
 from nerfaug.service.hub import SessionHub
@@ -152,7 +153,7 @@ async def create_from_dataset(request: models.FromDataset, hub: Hub):
 async def create_from_uploads(
     hub: Hub,
     limit: UploadLimit,
-    settings: str = Form(description="JSON of FromUploads: id, intrinsics, poses, preset, seed, ..."),
+    settings: str = Form(description="JSON of FromUploads: id, intrinsics, poses, engine, seed, ..."),
     images: list[UploadFile] = File(
         description=f"the images, in the order of the poses (at most {MAX_CAPTURES_PER_REQUEST})"
     ),

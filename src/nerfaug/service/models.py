@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from nerfaug.capture.pool import SessionStatus
 from nerfaug.capture.requests import (
-    MAX_STEPS,
+    FISHER_WIDTH,
     SCHEMA,
     FisherWidth,
     ImageWidth,
@@ -26,6 +26,7 @@ from nerfaug.capture.requests import (
     SessionId,
     SessionSettings,
     Split,
+    Steps,
 )
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST
 
@@ -66,7 +67,7 @@ class FromUploads(SessionSettings):
 class TrainRequest(BaseModel):
     model_config = REQUEST
 
-    steps: int = Field(ge=1, le=MAX_STEPS, description="training steps to run in the background")
+    steps: Steps = Field(description="training steps to run in the background (as `nerfaug add --steps`; 0: none)")
 
 
 class UncertaintyRequest(BaseModel):
@@ -75,7 +76,7 @@ class UncertaintyRequest(BaseModel):
     pose: Pose = Field(description="the view's 4x4 camera-to-world pose")
     width: ImageWidth | None = Field(None, description="pixels across; default: the training resolution")
     fisher: bool = Field(True, description="also FisherRF's per-pixel score (slower)")
-    fisher_width: FisherWidth = Field(16, description="pixels across of the FisherRF image")
+    fisher_width: FisherWidth = Field(FISHER_WIDTH, description="pixels across of the FisherRF image")
     format: Literal["png", "npz"] = Field("png", description="png: the figure; npz: the arrays")
 
 
