@@ -37,19 +37,29 @@ def scalars(entry: Mapping) -> dict[str, float]:
     return tags
 
 
+def require(logger: Logger) -> None:
+    """Raise `LoggerUnavailable` now, before anything is written, if `logger` cannot be opened."""
+    if logger == "tensorboard":
+        _summary_writer()
+
+
+def _summary_writer():
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:  # torch's writer imports the tensorboard package
+        raise LoggerUnavailable(
+            "--logger tensorboard needs the tensorboard package: pip install 'nerfaug[tensorboard]'"
+        ) from None
+    return SummaryWriter
+
+
 class TensorBoardLog:
     """A training callback (`CaptureSession.train(..., callback=log)`) that writes each entry's
     `scalars` at its step into `folder`; `close()` flushes the event file."""
 
     def __init__(self, folder: Path):
-        try:
-            from torch.utils.tensorboard import SummaryWriter
-        except ImportError:  # torch's writer imports the tensorboard package
-            raise LoggerUnavailable(
-                "--logger tensorboard needs the tensorboard package: pip install 'nerfaug[tensorboard]'"
-            ) from None
         self.folder = Path(folder)
-        self.writer = SummaryWriter(log_dir=str(self.folder))
+        self.writer = _summary_writer()(log_dir=str(self.folder))
 
     def __call__(self, entry: Mapping) -> None:
         for tag, value in scalars(entry).items():

@@ -74,7 +74,11 @@ def test_no_command_help_shows_none_for_a_default(capsys, monkeypatch):
     assert "--selection.metric M11 M12 M13 M21 M22 M23 M31 M32 M33" in propose
     assert "(default: the identity)" in propose and "(default: the largest score)" in propose
     assert "--elevation LOW HIGH" in propose and "(default: any)" in propose
-    assert "(default: the NERFAUG_TOKEN environment variable, if set)" in helps["serve"]
+    monkeypatch.setenv("COLUMNS", "80")  # one column of option groups: a help's words in order
+    with pytest.raises(SystemExit):
+        main(["serve", "--help"])
+    serve = " ".join(capsys.readouterr().out.replace("│", " ").split())
+    assert "(default: the NERFAUG_TOKEN environment variable, if set)" in serve
 
 
 def test_the_metric_is_nine_numbers_row_by_row_on_the_command_line():
@@ -279,4 +283,4 @@ def test_an_engine_preset_is_offered_without_none_and_a_typo_gets_the_closest_na
     assert refused.value.code == 2
     error = " ".join(capsys.readouterr().err.replace("│", " ").split())
     assert "'None'" not in error and "None," not in error
-    assert "unknown name 'papr'; did you mean 'paper'? choose one of: paper, cpu, nerfacto-cpu, test" in error
+    assert "unknown engine preset 'papr'; did you mean 'paper'? choose one of: paper, cpu, nerfacto-cpu, test" in error

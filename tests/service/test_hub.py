@@ -50,3 +50,18 @@ def test_a_session_linked_out_of_the_root_is_neither_listed_nor_served_nor_made(
         assert hub.work.pending() == 0 and sorted(p.name for p in (tmp_path / "outside").iterdir()) == ["s"]
     finally:
         hub.shutdown()
+
+
+def test_the_services_engine_settings_change_the_engine_of_each_session_it_creates(tmp_path):
+    from nerfaug.service.models import FromDataset
+
+    hub = SessionHub(tmp_path, engine_settings={"hidden_dim": 48})
+    plain = SessionHub(tmp_path)
+    try:
+        request = FromDataset(id="s", dataset="data", engine="cpu")
+        assert hub.settings_of(request).engine == "cpu+hidden_dim=48"
+        assert hub.settings_of(FromDataset(id="s", dataset="data")).engine == "nerfacto-cpu+hidden_dim=48"
+        assert plain.settings_of(request) is request
+    finally:
+        hub.shutdown()
+        plain.shutdown()

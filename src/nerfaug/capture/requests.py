@@ -45,7 +45,7 @@ from tyro.constructors import PrimitiveConstructorSpec
 from nerfaug import camera_schema
 from nerfaug.camera_schema import MAX_IMAGE_SIDE
 from nerfaug.errors import DatasetError
-from nerfaug.nerf.config import EnginePreset
+from nerfaug.nerf.config import PRESETS, parse_variant
 from nerfaug.registry import check_name
 from nerfaug.schema import SCHEMA, RequestError, Schema, adapter, problem_text, validated
 
@@ -333,14 +333,27 @@ def _direction(value: tuple[float, float, float]) -> tuple[float, float, float]:
 DEFAULT_SESSION_ENGINE = "nerfacto-cpu"
 
 
+def _engine_name(name: str) -> str:
+    parse_variant(name)  # an unknown preset or setting, or a badly typed value: refused by name
+    return name
+
+
+# A preset's name, or a variant that changes some of its settings ("paper+hidden_dim=32", as
+# `--engine paper --engine.field.hidden-dim 32` names it).
+EngineName = Annotated[
+    str, AfterValidator(_engine_name), tyro.conf.arg(metavar="{" + ",".join(PRESETS) + "}|PRESET+SETTING=VALUE")
+]
+
+
 @dataclass(kw_only=True)
 class SessionSettings(Schema):
     """What shapes a new session (`nerfaug train DATA --out RUN`); a session keeps its own."""
 
     __pydantic_config__ = SCHEMA
 
-    engine: EnginePreset = DEFAULT_SESSION_ENGINE
-    """the NeRF engine: nerfacto-cpu (nerfacto shrunk), cpu (K-planes), paper (a GPU's), test."""
+    engine: EngineName = DEFAULT_SESSION_ENGINE
+    """the NeRF engine: nerfacto-cpu (nerfacto shrunk), cpu (K-planes), paper (a GPU's), test; any of its
+    settings changed with --engine.GROUP.SETTING (listed below)."""
     seed: Seed = 0
     """seeds the model, its training and every proposal (0 to 2^53-1, exact in any JSON client)."""
     downscale: Downscale = 1

@@ -383,6 +383,7 @@ class CaptureSession(SessionFolder):
         *,
         hold: contextlib.AbstractContextManager = contextlib.nullcontext(),
         each: Callable[[dict], None] | None = None,
+        log: Callable[[dict], None] | None = None,
     ) -> dict:
         """Train `steps` more steps, `CHUNK_STEPS` at a time, saving once `checkpoint_every`
         seconds passed since the last save, and at the end (also when `stop()` ends it early).
@@ -393,6 +394,8 @@ class CaptureSession(SessionFolder):
             hold: held around each chunk and the last save (the service's lock of the session,
                 so that its other requests run between chunks).
             each: called after each chunk, holding `hold`, with its last history entry.
+            log: called every few steps with that step's history entry (a training log,
+                `nerfaug.training_log`).
 
         Returns:
             The last history entry ({"step", "loss", "psnr"}).
@@ -410,7 +413,7 @@ class CaptureSession(SessionFolder):
                     with hold:
                         if self.step >= target or stop():
                             break
-                        last = self.train(min(CHUNK_STEPS, target - self.step))
+                        last = self.train(min(CHUNK_STEPS, target - self.step), callback=log)
                         bar.update(task, completed=self.step - start, psnr=last.get("psnr", math.nan))
                         if monotonic() - saved_at >= checkpoint_every:
                             self.save()

@@ -16,6 +16,7 @@ from typing import Annotated, ClassVar, Literal
 import tyro
 
 from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig, PresetName
+from nerfaug.nerf.config import EngineOptions, EngineSettings, variant_name
 from nerfaug.registry import Presets
 
 DEFAULT_PRESET = "quick"
@@ -49,6 +50,9 @@ class Run:
         force: move the runs already in --out aside (into OUT/superseded/, nothing is deleted) and
             redo every run; needed when OUT's sweep.json is missing or its settings differ.
         report: write report.md / report.html at the end.
+        engine_settings: any setting of the engine, over those of --engine (e.g.
+            --engine.field.hidden-dim 32): the runs' engine is then the variant that changes them
+            ("cpu+hidden_dim=32"), recorded and fingerprinted as such.
     """
 
     PRESETS: ClassVar[Presets[ExperimentConfig]] = PROTOCOL_PRESETS
@@ -64,6 +68,7 @@ class Run:
     address: Address = None
     force: bool = False
     report: bool = True
+    engine_settings: EngineOptions = field(default_factory=EngineSettings)
 
     @classmethod
     def from_preset(cls, name: str) -> Run:
@@ -73,8 +78,14 @@ class Run:
     def __call__(self) -> None:
         from nerfaug.cli import run_work  # torch: here, so that `nerfaug run --help` loads none
 
+        protocol = self.protocol
+        if given := self.engine_settings.given():
+            try:
+                protocol = protocol.replace(engine=variant_name(protocol.engine, given))
+            except ValueError as error:
+                raise SystemExit(f"--engine: {error}") from None
         run_work.run(
-            self.protocol,
+            protocol,
             self.out,
             data=self.data,
             backend=self.backend,

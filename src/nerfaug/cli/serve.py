@@ -23,6 +23,7 @@ from nerfaug.capture.requests import (
 )
 from nerfaug.cli.option_names import as_options
 from nerfaug.device_choice import Device
+from nerfaug.nerf.config import EngineOptions, EngineSettings, variant_name
 
 TOKEN_ENV = "NERFAUG_TOKEN"
 
@@ -46,6 +47,7 @@ def serve(
     checkpoint_every: float = CHECKPOINT_EVERY_S,
     threads: int = 1,
     max_upload_mb: float = 25.0,
+    engine_settings: EngineOptions = EngineSettings(),  # noqa: B008 -- read-only: nothing given
 ) -> None:
     """Serve capture sessions over HTTP (JSON): create sessions, add captures, train in the
     background, propose reachable views, and uncertainty images of any pose. The API and its
@@ -64,12 +66,19 @@ def serve(
         checkpoint_every: save a training session after this many seconds (and when a job ends).
         threads: torch threads for training.
         max_upload_mb: the largest image file accepted, in MB.
+        engine_settings: any engine setting (e.g. --engine.field.hidden-dim 32), over those of the
+            engine each new session asks for: its engine is then the variant that changes them.
     """
     token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
     _check_serve(root, host, port, token, checkpoint_every, threads, max_upload_mb)
+    engine = engine_settings.given()
+    try:
+        variant_name("paper", engine)  # each setting's name and value, before the service starts
+    except ValueError as error:
+        raise SystemExit(f"--engine: {error}") from None
     from nerfaug.cli import serve_work  # torch: here, so that `nerfaug serve --help` loads none
 
-    uvicorn, app = serve_work.service_app(root, device, token, checkpoint_every, threads, max_upload_mb)
+    uvicorn, app = serve_work.service_app(root, device, token, checkpoint_every, threads, max_upload_mb, engine)
     # The event loop answers /health and states while worker threads run torch: it gets the GIL
     # after 1 ms rather than 5, and the cyclic collector skips what was loaded at start (a full
     # pass over those ~375,000 objects took 0.4 s on the 2-core machine, every thread stopped).

@@ -13,8 +13,11 @@ from nerfaug.capture import pool
 from nerfaug.device import configure_process, resolve_device
 
 
-def service_app(root: Path, device: str, token, checkpoint_every: float, threads: int, max_upload_mb: float):
-    """(uvicorn, the service's app over the sessions in `root`), torch set up for `threads`."""
+def service_app(
+    root: Path, device: str, token, checkpoint_every: float, threads: int, max_upload_mb: float, engine_settings=None
+):
+    """(uvicorn, the service's app over the sessions in `root`), torch set up for `threads`;
+    `engine_settings` (flat name -> value) change the engine of every session it creates."""
     try:  # the service's packages are optional (FastAPI, imported by the service's modules)
         import uvicorn
 
@@ -25,7 +28,9 @@ def service_app(root: Path, device: str, token, checkpoint_every: float, threads
         ) from None
     configure_process(threads=threads)
     _log_to_stderr(app)
-    sessions = hub.SessionHub(root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every)
+    sessions = hub.SessionHub(
+        root, device=str(resolve_device(device)), checkpoint_every=checkpoint_every, engine_settings=engine_settings
+    )
     return uvicorn, app.create_app(sessions, token=token, max_upload_mb=max_upload_mb)
 
 

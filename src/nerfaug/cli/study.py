@@ -13,6 +13,7 @@ import tyro
 
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
 from nerfaug.experiment.study_spec import DEFAULT_PRESET, StudySpec
+from nerfaug.nerf.config import EngineOptions, EngineSettings
 from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
 
@@ -43,6 +44,8 @@ class Study(StudySpec):
         selection: options of the selection methods (every one is part of the runs' fingerprint;
             left at the preset's, they change nothing); a method's own settings (e.g.
             ours-authors') apply over them.
+        engine_settings: any engine setting, over those of every engine the study runs (e.g.
+            --engine.field.hidden-dim 32): each engine is then the variant that changes it.
     """
 
     PRESETS: ClassVar[Presets[ExperimentConfig]] = STUDY_PRESETS
@@ -53,6 +56,7 @@ class Study(StudySpec):
     results_doc: ResultsDoc = None
     budget_s: BudgetSeconds = None
     selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
+    engine_settings: EngineOptions = field(default_factory=EngineSettings)
 
     @classmethod
     def from_preset(cls, name: str) -> Study:
@@ -72,4 +76,5 @@ class Study(StudySpec):
             summary_only=self.summary_only,
             results_doc=self.results_doc,
             budget_s=self.budget_s,
+            engine_settings=self.engine_settings.given(),
         )

@@ -10,15 +10,18 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from nerfaug.cli.run_size import per_cell, size_line
 from nerfaug.cli.run_work import runs_to_do
+from nerfaug.device import device_kind
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.layout import StudyFolder
-from nerfaug.experiment.study import table_keys
+from nerfaug.experiment.study import default_engines, table_keys
 from nerfaug.experiment.study_spec import StudySpec
 from nerfaug.experiment.sweep import default_workers
+from nerfaug.nerf.config import variant_name
 from nerfaug.report import study_page, study_table
 from nerfaug.selection import METHODS
 from nerfaug.selection.config import SelectionConfig
@@ -32,9 +35,13 @@ def study(
     summary_only: bool,
     results_doc: Path | None,
     budget_s: float | None,
+    engine_settings: dict | None = None,
 ) -> None:
     """`nerfaug study`: the runs of `spec` with `selection` (none with `summary_only`), then the
-    table and the page (and `results_doc`)."""
+    table and the page (and `results_doc`); `engine_settings` (flat name -> value) change every
+    engine the study runs."""
+    if engine_settings:
+        spec = with_engine_settings(spec, engine_settings)
     out = Path(spec.out)
     table_path = Path(spec.table) if spec.table is not None else StudyFolder(out).table
     previous = study_table.read_table(table_path) if table_path.exists() else None
@@ -50,6 +57,16 @@ def study(
         for key, why in failed.items():
             print(f"  {key}: {why}", file=sys.stderr)
         raise SystemExit(1)
+
+
+def with_engine_settings(spec: StudySpec, settings: dict) -> StudySpec:
+    """`spec` whose engines (--engines, or the default ones for its device) are each the variant
+    with `settings` changed."""
+    engines = spec.engines or default_engines(device_kind(spec.device))[0]
+    try:
+        return replace(spec, engines=tuple(variant_name(engine, settings) for engine in engines))
+    except ValueError as error:
+        raise SystemExit(f"--engine: {error}") from None
 
 
 def method_records() -> dict[str, dict]:

@@ -11,6 +11,7 @@ runs, so that `nerfaug train --help` answers at once.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -28,6 +29,8 @@ from nerfaug.capture.requests import (
 )
 from nerfaug.cli.option_names import as_options
 from nerfaug.device_choice import Device
+from nerfaug.nerf.config import EngineOptions, EngineSettings, parse_variant, variant_name
+from nerfaug.training_log import Logger, LoggerUnavailable, require
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
 # The session settings the command line gives, each None unless given (at its default value
@@ -40,11 +43,30 @@ Settings = Annotated[GivenSettings, tyro.conf.arg(name="")]
 THREADS = 1
 
 
-def _check_training(steps: int, checkpoint_every: float) -> None:
-    """--steps and --checkpoint-every, checked before anything is read or written."""
+def _check_training(steps: int, checkpoint_every: float, logger: Logger) -> None:
+    """--steps, --checkpoint-every and --logger, checked before anything is read or written."""
     with as_options():
         check_steps(steps)
         check_checkpoint_every(checkpoint_every)
+    try:
+        require(logger)
+    except LoggerUnavailable as error:
+        raise SystemExit(str(error)) from None
+
+
+def with_engine_settings(settings: GivenSettings, engine: EngineSettings) -> GivenSettings:
+    """`settings` whose engine is --engine (or the default) with the --engine.GROUP.SETTING given
+    changed: one engine name, a variant such as "paper+hidden_dim=32", which the session records."""
+    name, given = settings.engine or SessionSettings().engine, engine.given()
+    try:  # before anything is read: an unknown engine or setting is one line naming it
+        parse_variant(name)
+        if given:
+            name = variant_name(name, given)
+    except ValueError as error:
+        raise SystemExit(f"--engine: {error}") from None
+    if settings.engine is None and not given:
+        return settings  # no engine given: a session keeps its own
+    return replace(settings, engine=name)
 
 
 def train(
@@ -60,6 +82,8 @@ def train(
     threads: int = THREADS,
     initial: Annotated[int | None, replaced_by("every view of the split", "INT")] = None,
     layout: int = 0,
+    logger: Logger = "none",
+    engine_settings: EngineOptions = EngineSettings(),  # noqa: B008 -- read-only: nothing given
 ) -> None:
     """Train a capture session until step --steps: start it on a dataset, resume it, or train it further.
 
@@ -86,15 +110,22 @@ def train(
             --images DATA/<their folder> --poses poses.json` adds the chosen ones.
         layout: with --initial, the half the views lie on: 0, 1 or 2, each turned a third of
             the way round.
+        logger: "tensorboard": also write each loss as TensorBoard scalars into RUN/tensorboard
+            while training (`tensorboard --logdir RUN/tensorboard`; needs `pip install
+            'nerfaug[tensorboard]'`).
+        engine_settings: any setting of the engine, over those of --engine (e.g.
+            --engine.field.hidden-dim 32); the session's engine is then named by the settings it
+            changes ("nerfacto-cpu+hidden_dim=32").
     """
-    _check_training(steps, checkpoint_every)
+    _check_training(steps, checkpoint_every, logger)
+    settings = with_engine_settings(settings, engine_settings)
     start = None
     if initial is not None:
         with as_options():
             start = SparseStart(initial=initial, layout=layout).checked()
     from nerfaug.cli import train_work  # torch: here, so that `nerfaug train --help` loads none
 
-    train_work.train(path, out, steps, settings, split, device, checkpoint_every, threads, start)
+    train_work.train(path, out, steps, settings, split, device, checkpoint_every, threads, start, logger)
 
 
 def add(
@@ -105,6 +136,7 @@ def add(
     device: Device = "auto",
     checkpoint_every: float = CHECKPOINT_EVERY_S,
     threads: int = THREADS,
+    logger: Logger = "none",
 ) -> None:
     """Add captured images at the poses of a poses JSON, then train on for --steps more steps.
 
@@ -124,8 +156,9 @@ def add(
         device: where the NeRF trains.
         checkpoint_every: save the session after this many seconds of training (and at the end).
         threads: torch threads for training (one by default, as each run of a sweep).
+        logger: "tensorboard": also write each loss as TensorBoard scalars into RUN/tensorboard.
     """
-    _check_training(steps, checkpoint_every)  # before anything is written: a refused call changes nothing
+    _check_training(steps, checkpoint_every, logger)  # before anything is written: a refused call changes nothing
     from nerfaug.cli import train_work  # torch: here, so that `nerfaug add --help` loads none
 
-    train_work.add(run, images, poses, steps, device, checkpoint_every, threads)
+    train_work.add(run, images, poses, steps, device, checkpoint_every, threads, logger)

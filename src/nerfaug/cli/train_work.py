@@ -26,10 +26,20 @@ from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.health import EmptyModelWarning
 from nerfaug.selection.selectors import DirectDraw, UniformFill
+from nerfaug.training_log import Logger, LoggerUnavailable, open_log
 
 
 def train(
-    path: Path, out: Path | None, steps: int, given, split, device: str, checkpoint_every: float, threads: int, start
+    path: Path,
+    out: Path | None,
+    steps: int,
+    given,
+    split,
+    device: str,
+    checkpoint_every: float,
+    threads: int,
+    start,
+    logger: Logger = "none",
 ):
     """`nerfaug train PATH` (`nerfaug.cli.train.train`) with its options, `given` the session
     settings the command line gives (a `GivenSettings`), `start` a sparse start (or None)."""
@@ -37,12 +47,22 @@ def train(
     run, data, compared = _which_session(path, out, given.given_names(), steps)
     settings = given.filled()
     if run is None:
-        _finish(_create(path, out, settings, split, device, start), steps, checkpoint_every)
+        _finish(_create(path, out, settings, split, device, start), steps, checkpoint_every, logger)
     elif not _at_step(run, data, settings, split, compared, steps):
-        _train_further(open_session(run, device, changing="train"), steps, checkpoint_every, resuming=data is not None)
+        session = open_session(run, device, changing="train")
+        _train_further(session, steps, checkpoint_every, resuming=data is not None, logger=logger)
 
 
-def add(run: Path, images: Path, poses: Path, steps: int, device: str, checkpoint_every: float, threads: int):
+def add(
+    run: Path,
+    images: Path,
+    poses: Path,
+    steps: int,
+    device: str,
+    checkpoint_every: float,
+    threads: int,
+    logger: Logger = "none",
+):
     """`nerfaug add RUN` (`nerfaug.cli.train.add`) with its options."""
     configure(threads)
     session = open_session(run, device, changing="add")
@@ -52,7 +72,7 @@ def add(run: Path, images: Path, poses: Path, steps: int, device: str, checkpoin
     print(f"added {len(names)} views ({', '.join(names)}); the dataset now has {session.summary().views} views")
     if steps:
         print(f"training from step {session.step} until step {session.step + steps}", flush=True)
-    last = train_session(session, steps, checkpoint_every)
+    last = train_session(session, steps, checkpoint_every, logger)
     if steps:
         print(f"step {session.step}, training PSNR {last['psnr']:.2f} dB")
         health = session.health()
@@ -114,9 +134,10 @@ def resume_command(run: Path, target: int) -> str:
     return f"nerfaug train {shlex.quote(str(run))} --steps {target}"
 
 
-def train_session(session, steps: int, checkpoint_every: float) -> dict:
+def train_session(session, steps: int, checkpoint_every: float, logger: Logger = "none") -> dict:
     """`session.train_for(steps, checkpoint_every)`, where a first Ctrl-C stops at the next chunk
-    and saves, a second at once, keeping the last save.
+    and saves, a second at once, keeping the last save; `logger` logs the training as it goes
+    (`nerfaug.training_log`: "tensorboard" into RUN/tensorboard).
 
     Raises:
         Interrupted: after Ctrl-C, saying at which step the session was saved and the command that
@@ -131,9 +152,13 @@ def train_session(session, steps: int, checkpoint_every: float) -> dict:
         print("stopping after the current steps to save the session (Ctrl-C again: stop at once)", file=sys.stderr)
 
     go_on = resume_command(session.run_dir, session.step + steps)
+    try:
+        log = open_log(logger, session.run_dir)
+    except LoggerUnavailable as error:
+        raise SystemExit(str(error)) from None
     previous = signal.signal(signal.SIGINT, stop)
     try:
-        last = session.train_for(steps, checkpoint_every, stop=lambda: bool(asked))
+        last = session.train_for(steps, checkpoint_every, stop=lambda: bool(asked), log=log)
     except KeyboardInterrupt:
         raise Interrupted(
             f"{session.run_dir}: interrupted at step {session.step}; the session saved at step "
@@ -141,6 +166,8 @@ def train_session(session, steps: int, checkpoint_every: float) -> dict:
         ) from None
     finally:
         signal.signal(signal.SIGINT, previous)
+        if log is not None:
+            log.close()
     if asked:
         raise Interrupted(
             f"{session.run_dir}: interrupted; the session is saved at step {session.step} "
@@ -197,7 +224,7 @@ def _refuse_other_settings(folder, data: Path | None, settings: SessionSettings,
         )
 
 
-def _train_further(session, target: int, every_s: float, resuming: bool) -> None:
+def _train_further(session, target: int, every_s: float, resuming: bool, logger: Logger = "none") -> None:
     if session.step >= target:  # another command reached it while this one waited for the lock
         print(_reached(session.run_dir, session.step, target), flush=True)
         return
@@ -207,7 +234,7 @@ def _train_further(session, target: int, every_s: float, resuming: bool) -> None
         f"({session.summary().views} views)",
         flush=True,
     )
-    _finish(session, target - session.step, every_s)
+    _finish(session, target - session.step, every_s, logger)
 
 
 def _create(data: Path, out: Path, settings: SessionSettings, split: str | None, device: str, start=None):
@@ -236,8 +263,8 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     return session
 
 
-def _finish(session, steps: int, every_s: float) -> None:
-    last = train_session(session, steps, every_s)
+def _finish(session, steps: int, every_s: float, logger: Logger = "none") -> None:
+    last = train_session(session, steps, every_s, logger)
     psnr = f", training PSNR {last['psnr']:.2f} dB" if "psnr" in last else ""
     print(f"{session.run_dir}: step {session.step}{psnr}")
     health = session.health()

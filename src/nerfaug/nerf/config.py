@@ -577,3 +577,7 @@ def _given_settings(form: Any) -> dict[str, Any]:
 EngineSettings = _given_form(NerfConfig)
 """The engine's settings as options of a command (`--engine.field.hidden-dim 32`), each None unless
 given; `EngineSettings().given()` are those given, by flat name, for `variant_name`."""
+
+EngineOptions = Annotated[EngineSettings, tyro.conf.arg(name="engine")]  # type: ignore[valid-type]
+"""`EngineSettings` as a command's options, named under --engine (beside `--engine NAME`), the same
+on every command that trains (train, run, study, serve)."""

@@ -141,7 +141,7 @@ async def created(hub: SessionHub, session_id: str, create) -> dict:
 
 @router.post("/sessions/from-dataset", status_code=201, response_model=models.Created)
 async def create_from_dataset(request: models.FromDataset, hub: Hub):
-    data = hub.dataset_path(request.dataset, request.split)
+    data, request = hub.dataset_path(request.dataset, request.split), hub.settings_of(request)
 
     def create(folder, warn):
         return CaptureSession.create(data, folder, request, split=request.split, device=hub.device, warn=warn)
@@ -158,7 +158,7 @@ async def create_from_uploads(
         description=f"the images, in the order of the poses (at most {MAX_CAPTURES_PER_REQUEST})"
     ),
 ):
-    request = form_json(settings, "settings", models.FromUploads)
+    request = hub.settings_of(form_json(settings, "settings", models.FromUploads))
 
     def create(folder, warn):
         files = read_uploads(images, limit)

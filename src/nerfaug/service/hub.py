@@ -7,10 +7,12 @@ queued when it could not run (an unknown session, an id taken, too many sessions
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 from nerfaug.capture.pool import MAX_TRAINING, SessionPool
 from nerfaug.capture.requests import CHECKPOINT_EVERY_S
+from nerfaug.nerf.config import variant_name
 from nerfaug.service.errors import status_of
 from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
 
@@ -21,6 +23,8 @@ class SessionHub(SessionPool):
     Args:
         root, device, checkpoint_every, max_training: the pool's (`SessionPool`).
         workers, per_session, total: the request queues' bounds (`WorkQueues`).
+        engine_settings: engine settings (flat name -> value) changed in every session created
+            (`nerfaug serve --engine.field.hidden-dim 32`).
     """
 
     def __init__(
@@ -32,10 +36,18 @@ class SessionHub(SessionPool):
         per_session: int = PER_SESSION,
         total: int = TOTAL,
         max_training: int = MAX_TRAINING,
+        engine_settings: dict | None = None,
     ):
         # A failed job's error as a request's would be answered: never what a file holds.
         super().__init__(root, device, checkpoint_every, max_training, describe=lambda error: status_of(error)[1])
         self.work = WorkQueues(workers, per_session, total)
+        self.engine_settings = dict(engine_settings or {})
+
+    def settings_of(self, request):
+        """A creation request (`SessionSettings`) whose engine carries the service's engine settings."""
+        if not self.engine_settings:
+            return request
+        return replace(request, engine=variant_name(request.engine, self.engine_settings)).checked()
 
     def submit(self, session_id: str, action: Callable):
         """`run(session_id, action)` queued behind the session's earlier requests (a Future)."""

@@ -1,0 +1,75 @@
+"""Any engine setting is an option of every command that trains, with one syntax:
+`--engine NAME --engine.GROUP.SETTING VALUE`. The command's engine becomes the variant that
+changes those settings (`paper+hidden_dim=48`), which sessions and runs record and fingerprint."""
+
+import json
+
+import pytest
+import torch
+
+from nerfaug.cameras import Cameras
+from nerfaug.cli import main
+from nerfaug.data import Views, write_blender_split
+from nerfaug.experiment.sweep import SweepOutcome
+from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
+from nerfaug.nerf.config import NerfConfig
+
+OVERRIDE = ["--engine.field.hidden-dim", "48", "--engine.optimiser.batch-size", "64"]
+
+
+@pytest.fixture
+def swept(monkeypatch):
+    """The configs `nerfaug run` would sweep, without running anything."""
+    import nerfaug.experiment.sweep as sweep
+
+    configs = []
+    monkeypatch.setattr(sweep, "run_sweep", lambda config, out, **_: configs.append(config) or SweepOutcome([], {}))
+    return configs
+
+
+def test_run_takes_engine_settings_over_its_engine(swept, tmp_path):
+    main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", "--engine", "cpu", *OVERRIDE])
+    (config,) = swept
+    assert config.engine == "cpu+hidden_dim=48+batch_size=64"
+    engine = NerfConfig.preset(config.engine)
+    assert (engine.field.hidden_dim, engine.optimiser.batch_size) == (48, 64)
+    record = config.fingerprinted()
+    assert record["engine.hidden_dim"] == 48 and record["engine.plane_features"] == 8  # the rest: cpu's
+
+
+def test_run_without_engine_settings_keeps_the_engine_name_as_given(swept, tmp_path):
+    main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", "--engine", "cpu+lr=0.005"])
+    assert swept[0].engine == "cpu+lr=0.005"
+
+
+def test_study_applies_engine_settings_to_every_engine(monkeypatch, tmp_path):
+    import nerfaug.cli.study_work as study_work
+
+    seen = []
+    monkeypatch.setattr(study_work, "run", lambda spec, *args, **kwargs: seen.append(spec) or {})
+    monkeypatch.setattr(study_work, "record_table", lambda *args: {"runs": []})
+    monkeypatch.setattr(study_work.study_page, "write_study", lambda *args: [])
+    main(["study", "--out", str(tmp_path / "study"), "--engines", "cpu", "nerfacto-cpu", "--preset", "tiny", *OVERRIDE])
+    assert seen[0].engines == ("cpu+hidden_dim=48+batch_size=64", "nerfacto-cpu+hidden_dim=48+batch_size=64")
+
+
+def test_train_records_the_variant_and_trains_with_its_settings(tmp_path):
+    generator = torch.Generator().manual_seed(0)
+    poses, images = sample_uniform_poses(4, generator), torch.rand(4, 8, 8, 3, generator=generator)
+    data, run = tmp_path / "data", tmp_path / "run"
+    cameras, names = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, 8, 8), [f"./x/r_{i}" for i in range(4)]
+    write_blender_split(data, "train", Views(cameras, images, names))
+    main(["train", str(data), "--out", str(run), "--steps", "2", "--device", "cpu", "--engine", "test", *OVERRIDE])
+    state = json.loads((run / "session.json").read_text())
+    assert state["engine"] == "test+hidden_dim=48+batch_size=64"
+    assert NerfConfig.from_dict(state["engine_config"]) == NerfConfig.preset("test", hidden_dim=48, batch_size=64)
+
+
+def test_a_bad_engine_setting_is_one_line_naming_it(capsys, tmp_path):
+    with pytest.raises(SystemExit):
+        main(["run", "--out", str(tmp_path / "o"), "--preset", "tiny", "--engine.renderer.background-mode", "grey"])
+    assert "background-mode" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["serve", "--root", str(tmp_path), "--engine.sampler.proposal.samples", "8"])
+    err = capsys.readouterr().err
+    assert err.startswith("nerfaug: --engine: proposal_samples (8,)") and err.count("\n") == 1
