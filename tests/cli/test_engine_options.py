@@ -53,16 +53,18 @@ def test_study_applies_engine_settings_to_every_engine(monkeypatch, tmp_path):
     assert seen[0].engines == ("cpu+hidden_dim=48+batch_size=64", "nerfacto-cpu+hidden_dim=48+batch_size=64")
 
 
-def test_train_records_the_variant_and_trains_with_its_settings(tmp_path):
+def test_train_records_the_variant_trains_with_its_settings_and_logs(tmp_path):
     generator = torch.Generator().manual_seed(0)
     poses, images = sample_uniform_poses(4, generator), torch.rand(4, 8, 8, 3, generator=generator)
     data, run = tmp_path / "data", tmp_path / "run"
     cameras, names = Cameras.from_fov(poses, BLENDER_CAMERA_ANGLE_X, 8, 8), [f"./x/r_{i}" for i in range(4)]
     write_blender_split(data, "train", Views(cameras, images, names))
-    main(["train", str(data), "--out", str(run), "--steps", "2", "--device", "cpu", "--engine", "test", *OVERRIDE])
+    args = ["--steps", "20", "--device", "cpu", "--engine", "test", "--logger", "tensorboard", *OVERRIDE]
+    main(["train", str(data), "--out", str(run), *args])
     state = json.loads((run / "session.json").read_text())
     assert state["engine"] == "test+hidden_dim=48+batch_size=64"
     assert NerfConfig.from_dict(state["engine_config"]) == NerfConfig.preset("test", hidden_dim=48, batch_size=64)
+    assert len(list((run / "tensorboard").glob("events.out.tfevents.*"))) == 1  # --logger tensorboard
 
 
 def test_a_bad_engine_setting_is_one_line_naming_it(capsys, tmp_path):
