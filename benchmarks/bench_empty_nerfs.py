@@ -28,14 +28,14 @@ from nerfaug.capture.requests import SparseStart
 from nerfaug.nerf.config import NerfConfig, parse_variant
 
 
-def one_run(data: Path, engine: str, seed: int, views: str, steps: int) -> dict:
+def one_run(data: Path, engine: str, seed: int, views: str, steps: int, split: str | None = None) -> dict:
     start = None if views == "all" else SparseStart(initial=int(views))
     with tempfile.TemporaryDirectory(prefix="nerfaug-empty-") as tmp:
         began = time.perf_counter()
         base, changes = parse_variant(engine)  # a preset, or a variant: "cpu+average_init_density=0.01"
         settings = SessionSettings(engine=base, seed=seed)
         config = NerfConfig.preset(base, **changes) if changes else None
-        session = CaptureSession.create(data, Path(tmp) / "run", settings, config=config, start=start)
+        session = CaptureSession.create(data, Path(tmp) / "run", settings, split=split, config=config, start=start)
         last = session.train(steps)
         seconds = time.perf_counter() - began
         health = session.health()
@@ -78,6 +78,9 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     parser.add_argument("--views", nargs="+", default=["12", "all"], help='initial views ("all": the train split)')
     parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument(
+        "--split", default=None, help='the split to train on ("train" for a scene `nerfaug scene render` wrote: its pool)'
+    )
     parser.add_argument("--out", type=Path, required=True, help="JSON file (runs already in it are kept)")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -90,7 +93,7 @@ def main() -> None:
                 for seed in args.seeds:
                     if (data.name, engine, seed, views, args.steps) in have:
                         continue
-                    record = one_run(data, engine, seed, views, args.steps)
+                    record = one_run(data, engine, seed, views, args.steps, args.split)
                     done.append(record)
                     h = record["health"]
                     print(
