@@ -79,7 +79,7 @@ def main() -> None:
     parser.add_argument("--views", nargs="+", default=["12", "all"], help='initial views ("all": the train split)')
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument(
-        "--split", default=None, help='the split to train on ("train" for a scene `nerfaug scene render` wrote: its pool)'
+        "--split", default=None, help='the split ("train": the pool of a scene `nerfaug scene render` wrote)'
     )
     parser.add_argument("--out", type=Path, required=True, help="JSON file (runs already in it are kept)")
     args = parser.parse_args()
