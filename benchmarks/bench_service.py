@@ -68,7 +68,7 @@ def bench_propose(args, work: Path, data: Path) -> dict:
     process, url = start_service(root, "cpu")
     try:
         with httpx.Client(base_url=url, timeout=600.0) as client:
-            body = {"id": SESSION, "dataset": f"data/{data.name}", "split": "initial", "engine": args.preset}
+            body = {"id": SESSION, "dataset": f"data/{data.name}", "split": "initial", "engine": args.engine}
             answer(client.post("/sessions/from-dataset", json=body))
             state = train(client, SESSION, args.steps, timeout=1800.0)
             # The same session in this process: a copy of the folder the service saved after training.
@@ -147,8 +147,8 @@ def bench_loop(args, work: Path, data: Path) -> dict:
         str(work / "loop-service"),
         "--data",
         str(data),
-        "--preset",
-        args.preset,
+        "--engine",
+        args.engine,
         "--rounds",
         str(args.rounds),
         "--views-per-round",
@@ -175,7 +175,7 @@ def main() -> None:
     parser.add_argument("--scene", default="lego")
     parser.add_argument("--resolution", type=int, default=64)
     parser.add_argument("--samples", type=int, default=8, help="Cycles samples per pixel of every render")
-    parser.add_argument("--preset", default="cpu", choices=("cpu", "paper", "test"))
+    parser.add_argument("--engine", default="cpu", choices=("cpu", "nerfacto-cpu", "paper", "test"))
     parser.add_argument("--steps", type=int, default=200, help="training steps before the timed proposals")
     parser.add_argument("--n", type=int, default=4, help="views per proposal")
     parser.add_argument("--method", default="ours")

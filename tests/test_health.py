@@ -71,7 +71,7 @@ def test_a_proposal_from_an_empty_session_is_refused_unless_allowed(tmp_path):
 
     views = ball_views()
     write_blender_split(tmp_path / "data", "train", views)
-    session = CaptureSession.create(tmp_path / "data", tmp_path / "run", SessionSettings(preset="test", seed=1))
+    session = CaptureSession.create(tmp_path / "data", tmp_path / "run", SessionSettings(engine="test", seed=1))
     with torch.no_grad():
         session.trainer.model.field.density_mlp[-1].bias[0] = -30.0
     request = ProposalRequest(n=2, n_candidates=20, selection=SelectionConfig(entropy_resolution=4))

@@ -12,7 +12,7 @@ import pytest
 
 pytestmark = [pytest.mark.slow]
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_service.py"
-TOY = ["--resolution", "24", "--samples", "2", "--preset", "test", "--steps", "10", "--candidates", "20"]
+TOY = ["--resolution", "24", "--samples", "2", "--engine", "test", "--steps", "10", "--candidates", "20"]
 TOY += ["--entropy-resolution", "4", "--repeat", "2", "--rounds", "1", "--views-per-round", "2"]
 TOY += ["--steps-per-round", "10", "--eval-views", "2", "--status-steps", "300", "--status-polls", "3"]
 

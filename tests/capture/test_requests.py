@@ -48,7 +48,8 @@ def refusal(make) -> RequestError:
         ({"radius": 1e7}, "radius 10000000.0: must be <= 1e+06"),
         ({"up": (0, 0, 0)}, "up (0, 0, 0): must be a non-zero direction"),
         ({"centre": (float("nan"), 0, 0)}, "centre[0] nan: Input should be a finite number"),
-        ({"engine": "fastest"}, "engine 'fastest': Input should be"),
+        ({"engine": "fastest"}, "engine 'fastest': unknown engine preset 'fastest'; choose one of: paper,"),
+        ({"engine": "paper+hidden_dim=wide"}, "engine 'paper+hidden_dim=wide': hidden_dim='wide' is not a valid value"),
     ],
 )
 def test_session_settings_out_of_range_name_the_field_and_value(fields, says):

@@ -102,7 +102,7 @@ def test_a_session_grows_and_exports_a_dataset_in_a_registered_format(toy, tmp_p
     data = tmp_path / "data"
     toy.write(data, "train", toy_views(half_hemisphere_poses(5, radius=2.0)))
     toy.write(data, "test", toy_views(half_hemisphere_poses(2, radius=2.0, azimuth_start=1.0)))
-    session = CaptureSession.create(data, tmp_path / "run", SessionSettings(preset="test", seed=1))
+    session = CaptureSession.create(data, tmp_path / "run", SessionSettings(engine="test", seed=1))
     assert session.state.dataset.format == "toy"  # Blender cannot hold its camera: kept as it is
     assert (session.dataset_dir / "toy_train.json").is_file()
 

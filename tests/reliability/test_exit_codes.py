@@ -9,7 +9,7 @@ from nerfaug.capture import CaptureSession
 
 
 def test_a_failure_of_the_work_exits_1_with_one_line(bases, tmp_path, monkeypatch):
-    def broken(self, steps):
+    def broken(self, steps, callback=None):
         raise RuntimeError("the GPU fell off")
 
     monkeypatch.setattr(CaptureSession, "train", broken)

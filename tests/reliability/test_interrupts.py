@@ -22,8 +22,8 @@ def _interrupt_at(monkeypatch, step: int, times: int = 1) -> None:
     """Send SIGINT `times` times once a training chunk ends at `step`."""
     train = CaptureSession.train
 
-    def train_then_interrupt(self, steps):
-        last = train(self, steps)
+    def train_then_interrupt(self, steps, callback=None):
+        last = train(self, steps, callback)
         if self.step == step:
             for _ in range(times):
                 os.kill(os.getpid(), signal.SIGINT)

@@ -334,7 +334,10 @@ DEFAULT_SESSION_ENGINE = "nerfacto-cpu"
 
 
 def _engine_name(name: str) -> str:
-    parse_variant(name)  # an unknown preset or setting, or a badly typed value: refused by name
+    try:  # an unknown preset or setting, or a badly typed value: refused by name
+        parse_variant(name)
+    except ValueError as error:  # the refusal names the field and value before the reason
+        raise ValueError(str(error).removeprefix(f"engine {name!r}: ")) from None
     return name
 
 
