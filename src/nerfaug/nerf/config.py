@@ -333,14 +333,6 @@ class NerfConfig:
             return cls().with_settings(**data)
         return _build(cls, data, "engine")
 
-    def batch_support(self) -> str | None:
-        """Why this engine cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
-        if self.sampler.kind != "proposal":
-            return (
-                f"trial batches need the proposal sampler; this engine uses {self.sampler.kind!r}: run it with batch 1"
-            )
-        return None
-
 
 def _leaves(cls: type, path: tuple[str, ...] = (), prefix: str = "") -> dict[str, tuple[str, ...]]:
     """flat name -> path of every setting under the dataclass `cls` (groups are dataclasses)."""
@@ -457,8 +449,11 @@ mixed in one cell of a study."""
 
 
 def batch_support(config: NerfConfig) -> str | None:
-    """Why engine `config` cannot train in trial batches, or None when it can (`NerfConfig.batch_support`)."""
-    return config.batch_support()
+    """Why engine `config` cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
+    if config.sampler.kind != "proposal":
+        kind = config.sampler.kind
+        return f"trial batches need the proposal sampler; this engine uses {kind!r}: run it with batch 1"
+    return None
 
 
 def _setting(base: NerfConfig, name: str, text: str, where: str):
@@ -516,14 +511,18 @@ def _variant_text(value: Any) -> str:
 def variant_name(engine: str, settings: dict[str, Any]) -> str:
     """The engine `engine` (a preset or a variant) with `settings` (flat name -> value) changed, as
     one name: variant_name("paper", {"hidden_dim": 32}) == "paper+hidden_dim=32". Settings equal
-    to the engine's own are left out, so an engine named with its own values keeps its name."""
+    to the preset's own are left out, so an engine named with its preset's values keeps its name.
+
+    Raises:
+        ValueError: an unknown setting (by name), or a value a component refuses.
+    """
     base, changes = parse_variant(engine)
     changes |= {flat: tuple(value) if isinstance(value, list) else value for flat, value in settings.items()}
-    preset = PRESETS[base].with_settings()  # an unknown name in `settings`: refused here, by name
-    preset.with_settings(**changes)
+    preset = PRESETS[base]
+    preset.with_settings(**changes)  # an unknown setting, or one a component refuses: refused here
     changes = {flat: value for flat, value in changes.items() if _get(preset, FLAT_NAMES[flat]) != value}
     name = VARIANT_SEPARATOR.join([base, *(f"{k}={_variant_text(v)}" for k, v in changes.items())])
-    parse_variant(name)  # the components' checks, before any run is named by it
+    parse_variant(name)  # the name reads back, before any run is named by it
     return name
 
 
