@@ -51,6 +51,7 @@ def one_run(data: Path, engine: str, seed: int, views: str, steps: int, split: s
             "train_psnr": float(last.get("psnr", float("nan"))),
             "occupied_fraction": occupied,
             "seconds": round(seconds, 1),
+            "date": date.today().isoformat(),  # the file's "date" is its last write; records span days
             "health": health.to_dict(),
         }
 

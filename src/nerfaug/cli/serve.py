@@ -23,7 +23,7 @@ from nerfaug.capture.requests import (
 )
 from nerfaug.cli.option_names import as_options
 from nerfaug.device_choice import Device
-from nerfaug.nerf.config import EngineOptions, EngineSettings, variant_name
+from nerfaug.nerf.config import PRESETS, EngineOptions, EngineSettings, variant_name
 
 TOKEN_ENV = "NERFAUG_TOKEN"
 
@@ -72,10 +72,7 @@ def serve(
     token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
     _check_serve(root, host, port, token, checkpoint_every, threads, max_upload_mb)
     engine = engine_settings.given()
-    try:
-        variant_name("paper", engine)  # each setting's name and value, before the service starts
-    except ValueError as error:
-        raise SystemExit(f"--engine: {error}") from None
+    _check_engine_settings(engine)
     from nerfaug.cli import serve_work  # torch: here, so that `nerfaug serve --help` loads none
 
     uvicorn, app = serve_work.service_app(root, device, token, checkpoint_every, threads, max_upload_mb, engine)
@@ -86,6 +83,28 @@ def serve(
     gc.freeze()
     print(f"serving the sessions in {root} on http://{host}:{port} (API docs: /docs)", flush=True)
     uvicorn.run(app, host=host, port=port, log_level="warning")
+
+
+def _check_engine_settings(settings: dict) -> None:
+    """The --engine.GROUP.SETTING given, tried on every engine before the service starts: refused
+    when no engine takes them, and the engines that refuse them named (their sessions will be
+    refused, 422 naming "engine")."""
+    if not settings:
+        return
+    refusals = {}
+    for engine in PRESETS:
+        try:
+            variant_name(engine, settings)
+        except ValueError as error:
+            refusals[engine] = str(error)
+    if len(refusals) == len(PRESETS):
+        raise SystemExit(f"--engine: {next(iter(refusals.values()))}")
+    if refusals:
+        names = ", ".join(refusals)
+        print(
+            f"warning: a session asking for the engine {names} will be refused: {next(iter(refusals.values()))}",
+            file=sys.stderr,
+        )
 
 
 def _check_serve(root: Path, host: str, port: int, token, checkpoint_every: float, threads: int, max_upload_mb: float):

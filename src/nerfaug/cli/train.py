@@ -27,9 +27,9 @@ from nerfaug.capture.requests import (
     given_form,
     replaced_by,
 )
-from nerfaug.cli.option_names import as_options
+from nerfaug.cli.option_names import as_options, checked
 from nerfaug.device_choice import Device
-from nerfaug.nerf.config import EngineOptions, EngineSettings, parse_variant, variant_name
+from nerfaug.nerf.config import EngineOptions, EngineSettings, variant_name
 from nerfaug.training_log import Logger, LoggerUnavailable, require
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
@@ -57,15 +57,13 @@ def _check_training(steps: int, checkpoint_every: float, logger: Logger) -> None
 def with_engine_settings(settings: GivenSettings, engine: EngineSettings) -> GivenSettings:
     """`settings` whose engine is --engine (or the default) with the --engine.GROUP.SETTING given
     changed: one engine name, a variant such as "paper+hidden_dim=32", which the session records."""
-    name, given = settings.engine or SessionSettings().engine, engine.given()
-    try:  # before anything is read: an unknown engine or setting is one line naming it
-        parse_variant(name)
-        if given:
-            name = variant_name(name, given)
+    given = engine.given()
+    if not given:
+        return settings  # the engine's name is checked with the other settings (`checked`)
+    try:  # before anything is read: an unknown setting, or a value its group refuses, is one line naming it
+        name = variant_name(settings.engine or SessionSettings().engine, given)
     except ValueError as error:
         raise SystemExit(f"--engine: {error}") from None
-    if settings.engine is None and not given:
-        return settings  # no engine given: a session keeps its own
     return replace(settings, engine=name)
 
 
@@ -119,13 +117,26 @@ def train(
     """
     _check_training(steps, checkpoint_every, logger)
     settings = with_engine_settings(settings, engine_settings)
+    checked_settings = checked(settings.filled())  # the one check of each session setting, before anything is read
     start = None
     if initial is not None:
         with as_options():
             start = SparseStart(initial=initial, layout=layout).checked()
     from nerfaug.cli import train_work  # torch: here, so that `nerfaug train --help` loads none
 
-    train_work.train(path, out, steps, settings, split, device, checkpoint_every, threads, start, logger)
+    train_work.train(
+        path,
+        out,
+        steps,
+        checked_settings,
+        settings.given_names(),
+        split,
+        device,
+        checkpoint_every,
+        threads,
+        start,
+        logger,
+    )
 
 
 def add(

@@ -20,7 +20,7 @@ from nerfaug.capture.requests import SessionSettings, check_threads
 from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint
-from nerfaug.cli.option_names import as_options, checked, option
+from nerfaug.cli.option_names import as_options, option
 from nerfaug.data import load_dataset
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
@@ -33,7 +33,8 @@ def train(
     path: Path,
     out: Path | None,
     steps: int,
-    given,
+    settings: SessionSettings,
+    given: set[str],
     split,
     device: str,
     checkpoint_every: float,
@@ -41,11 +42,11 @@ def train(
     start,
     logger: Logger = "none",
 ):
-    """`nerfaug train PATH` (`nerfaug.cli.train.train`) with its options, `given` the session
-    settings the command line gives (a `GivenSettings`), `start` a sparse start (or None)."""
+    """`nerfaug train PATH` (`nerfaug.cli.train.train`) with its options: `settings` the session
+    settings (checked), `given` the names of those the command line gave, `start` a sparse start
+    (or None)."""
     configure(threads)
-    run, data, compared = _which_session(path, out, given.given_names(), steps)
-    settings = given.filled()
+    run, data, compared = _which_session(path, out, given, steps)
     if run is None:
         _finish(_create(path, out, settings, split, device, start), steps, checkpoint_every, logger)
     elif not _at_step(run, data, settings, split, compared, steps):
@@ -195,7 +196,7 @@ def _at_step(run: Path, data: Path | None, settings: SessionSettings, split, giv
     """Whether the session in `run` is at step `steps` already (and says so), once the settings
     `given` (every one when None) agree with the session's."""
     folder = SessionFolder.open(run)  # the captures are checked all the same: a damaged session is never done
-    _refuse_other_settings(folder, data, checked(settings), split, given, steps)
+    _refuse_other_settings(folder, data, settings, split, given, steps)
     if folder.state.step < steps:
         return False
     folder.checkpoint()

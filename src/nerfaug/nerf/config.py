@@ -29,12 +29,27 @@ from dataclasses import dataclass, field, fields, is_dataclass
 from typing import Annotated, Any, ClassVar, Literal, get_args, get_origin, get_type_hints
 
 import tyro
+from annotated_types import Ge, Gt, Le, Lt, MinLen
 
 from nerfaug.registry import Presets, lookup, unknown
+from nerfaug.schema import validated
 
 # What rays that pass through the scene see (`RendererConfig.background_mode`); the last two need
 # no background colour from the caller.
 BACKGROUND_MODES = ("fixed", "last_sample", "last_composited")
+
+
+# Each setting's bounds, declared with its type and checked once, by pydantic, wherever settings
+# are changed (`with_settings`, `from_dict`): a width of 0 or a negative learning rate is refused
+# as one line naming the setting, never trained.
+Count = Annotated[int, Ge(1)]
+"""A size or a number of things: at least one."""
+Steps = Annotated[int, Ge(0)]
+"""A number of training steps (0: none)."""
+Positive = Annotated[float, Gt(0)]
+NonNegative = Annotated[float, Ge(0)]
+Counts = Annotated[tuple[Count, ...], MinLen(1)]
+"""One size or more (one per tri-plane, per proposal network)."""
 
 
 def _flat(name: str) -> dict:
@@ -50,7 +65,7 @@ class SceneConfig:
     """samples lie in [near, far] along each ray (Blender: 2 and 6)."""
     far: float = 6.0
     """the far end of every ray."""
-    box_half_size: float = 1.5
+    box_half_size: Positive = 1.5
     """the scene is the axis-aligned box [-h, h]^3; density is 0 outside."""
 
     def __post_init__(self) -> None:
@@ -63,15 +78,15 @@ class HashGridConfig:
     """A multiresolution hash grid (nerfacto's encoding)."""
 
     FLAT_PREFIX: ClassVar[str] = "hash_"
-    levels: int = 16
+    levels: Count = 16
     """grid levels."""
-    features_per_level: int = 2
+    features_per_level: Count = 2
     """features per level."""
-    log2_table_size: int = 19
+    log2_table_size: Annotated[int, Ge(1), Le(30)] = 19
     """log2 of the hash table's entries per level."""
-    base_resolution: int = 16
+    base_resolution: Count = 16
     """the coarsest grid resolution."""
-    max_resolution: int = 2048
+    max_resolution: Count = 2048
     """the finest grid resolution."""
 
 
@@ -80,9 +95,9 @@ class PlanesConfig:
     """A factorised multi-scale tri-plane grid (K-planes; much faster on a CPU)."""
 
     FLAT_PREFIX: ClassVar[str] = "plane_"
-    resolutions: tuple[int, ...] = (64, 256)
+    resolutions: Counts = (64, 256)
     """one tri-plane per resolution."""
-    features: int = 8
+    features: Count = 8
     """channels of each plane."""
 
 
@@ -96,19 +111,19 @@ class FieldConfig:
     """the hash grid (encoding "hash")."""
     planes: PlanesConfig = PlanesConfig()
     """the tri-planes (encoding "kplanes")."""
-    hidden_dim: int = 64
+    hidden_dim: Count = 64
     """density MLP width."""
-    geo_feat_dim: int = 15
+    geo_feat_dim: Count = 15
     """size of the feature the density MLP passes on to the colour MLP."""
-    color_hidden_dim: int = 64
+    color_hidden_dim: Count = 64
     """colour MLP width."""
-    color_layers: int = 2
+    color_layers: Count = 2
     """colour MLP hidden layers."""
-    sh_levels: int = 4
+    sh_levels: Annotated[int, Ge(1), Le(4)] = 4
     """spherical-harmonics levels of the direction encoding (4 -> 16 terms)."""
     density_activation: Literal["trunc_exp", "softplus"] = "trunc_exp"
     """"trunc_exp" (nerfacto) or "softplus"."""
-    average_init_density: float = 0.01
+    average_init_density: Positive = 0.01
     """the density of a freshly initialised field, on average."""
 
 
@@ -117,17 +132,17 @@ class OccupancyConfig:
     """An occupancy grid whose empty cells the stratified samples skip."""
 
     FLAT_PREFIX: ClassVar[str] = "occupancy_"
-    resolution: int = 64
+    resolution: Count = 64
     """grid cells per axis."""
-    update_every: int = 16
+    update_every: Count = 16
     """training steps between updates of the grid."""
-    warmup_steps: int = 256
+    warmup_steps: Steps = 256
     """steps during which every cell counts as occupied."""
-    ema_decay: float = 0.95
+    ema_decay: Annotated[float, Ge(0), Lt(1)] = 0.95
     """EMA decay of the cells' opacities."""
-    threshold: float = 0.01
+    threshold: NonNegative = 0.01
     """opacity below which a cell is empty."""
-    update_fraction: float = 0.25
+    update_fraction: Annotated[float, Gt(0), Le(1)] = 0.25
     """fraction of all cells probed at random per update (besides the occupied ones)."""
 
 
@@ -143,27 +158,27 @@ class ProposalConfig:
     """
 
     FLAT_PREFIX: ClassVar[str] = "proposal_"
-    samples: tuple[int, ...] = (256, 96)
+    samples: Counts = (256, 96)
     """samples per proposal level (one entry per proposal network)."""
-    hash_levels: int = 5
+    hash_levels: Count = 5
     """hash levels of each proposal network."""
-    max_resolutions: tuple[int, ...] = (128, 256)
+    max_resolutions: Counts = (128, 256)
     """finest hash resolution of each proposal network."""
-    log2_table_size: int = 17
+    log2_table_size: Annotated[int, Ge(1), Le(30)] = 17
     """log2 of the proposal networks' hash table size."""
-    hidden_dim: int = 16
+    hidden_dim: Count = 16
     """proposal MLP width."""
-    anneal_steps: int = 1000
+    anneal_steps: Count = 1000
     """steps over which the proposal weights' annealing runs."""
-    anneal_slope: float = 10.0
+    anneal_slope: Positive = 10.0
     """slope of the annealing."""
-    interlevel_loss_mult: float = field(default=1.0, metadata=_flat("interlevel_loss_mult"))
+    interlevel_loss_mult: NonNegative = field(default=1.0, metadata=_flat("interlevel_loss_mult"))
     """weight of the interlevel loss."""
-    distortion_loss_mult: float = field(default=0.002, metadata=_flat("distortion_loss_mult"))
+    distortion_loss_mult: NonNegative = field(default=0.002, metadata=_flat("distortion_loss_mult"))
     """weight of the distortion loss."""
-    update_every: int = 0
+    update_every: Steps = 0
     """nerfacto's proposal-update schedule: at most this many steps between updates (0: every step)."""
-    warmup_steps: int = 5000
+    warmup_steps: Count = 5000
     """steps over which the update interval grows to `update_every`."""
 
 
@@ -174,9 +189,9 @@ class SamplerConfig:
     kind: str = field(default="occupancy", metadata=_flat("sampler"))
     """"occupancy" (stratified samples, empty cells of an occupancy grid skipped) or "proposal"
     (nerfacto's proposal networks)."""
-    num_samples: int = 48
+    num_samples: Count = 48
     """colour samples per ray."""
-    transmittance_eps: float = 1e-4
+    transmittance_eps: Annotated[float, Ge(0), Lt(1)] = 1e-4
     """colour is not evaluated where the transmittance is below this."""
     occupancy: OccupancyConfig = OccupancyConfig()
     """the occupancy grid (sampler "occupancy")."""
@@ -195,17 +210,17 @@ class SamplerConfig:
 class OptimiserConfig:
     """What each step trains on, and Adam's settings."""
 
-    batch_size: int = 4096
+    batch_size: Count = 4096
     """rays per step, drawn uniformly from all pixels of all training views."""
-    field_lr: float = 1e-2
+    field_lr: Positive = 1e-2
     """initial learning rate of the NeRF field (paper: 0.002 for chair/materials)."""
-    lr: float = 1e-2
+    lr: Positive = 1e-2
     """initial learning rate of every other parameter group (the proposal networks)."""
-    lr_final: float = 1e-4
+    lr_final: Positive = 1e-4
     """each group decays exponentially to this at step `lr_decay_steps`."""
-    lr_decay_steps: int = 200_000
+    lr_decay_steps: Count = 200_000
     """the step at which the learning rates reach `lr_final`."""
-    adam_eps: float = 1e-15
+    adam_eps: Positive = 1e-15
     """Adam's epsilon."""
 
 
@@ -224,7 +239,7 @@ class RendererConfig:
     random_background: bool = False
     """composite training pixels that have an alpha channel over a random colour each step
     (nerfacto's trick against floaters on transparent data)."""
-    render_chunk: int = 16384
+    render_chunk: Count = 16384
     """rays per chunk when rendering without gradients."""
 
     def __post_init__(self) -> None:
@@ -315,7 +330,7 @@ class NerfConfig:
             for step in groups:
                 group = group[step]
             group[leaf] = value
-        return _build(NerfConfig, data, "engine")  # built once: each group checks its settings together
+        return _checked(_build(NerfConfig, data, "engine"))  # built once: each group checks its settings together
 
     def to_dict(self) -> dict:
         """The nested settings as plain data (tuples stay tuples; JSON makes them lists)."""
@@ -331,7 +346,18 @@ class NerfConfig:
         """
         if set(data) <= set(FLAT_NAMES) and data:
             return cls().with_settings(**data)
-        return _build(cls, data, "engine")
+        return _checked(_build(cls, data, "engine"))
+
+
+def _checked(config: NerfConfig) -> NerfConfig:
+    """`config`, once every setting has its type and lies within the bounds declared with it.
+
+    Raises:
+        RequestError (a ValueError): the first refused setting by its path, its value and why:
+            "field.hidden_dim 0: must be >= 1".
+    """
+    validated(NerfConfig, dataclasses.asdict(config))  # a check only: `config` keeps its values as given
+    return config
 
 
 def _leaves(cls: type, path: tuple[str, ...] = (), prefix: str = "") -> dict[str, tuple[str, ...]]:

@@ -11,7 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from nerfaug.capture.pool import MAX_TRAINING, SessionPool
-from nerfaug.capture.requests import CHECKPOINT_EVERY_S
+from nerfaug.capture.requests import CHECKPOINT_EVERY_S, RequestError
 from nerfaug.nerf.config import variant_name
 from nerfaug.service.errors import status_of
 from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
@@ -47,7 +47,11 @@ class SessionHub(SessionPool):
         """A creation request (`SessionSettings`) whose engine carries the service's engine settings."""
         if not self.engine_settings:
             return request
-        return replace(request, engine=variant_name(request.engine, self.engine_settings)).checked()
+        try:
+            engine = variant_name(request.engine, self.engine_settings)
+        except ValueError as error:  # e.g. proposal settings for an engine without proposal networks
+            raise RequestError("engine", request.engine, f"refuses this service's engine settings: {error}") from None
+        return replace(request, engine=engine).checked()
 
     def submit(self, session_id: str, action: Callable):
         """`run(session_id, action)` queued behind the session's earlier requests (a Future)."""
