@@ -1,11 +1,11 @@
-"""How a session chooses its next views: what is asked (`ProposalRequest`, a light schema of
-`nerfaug.capture.proposal_request`), the candidate cameras, the selection method's call on the
-session's NeRF (`SessionModel`), and the proposal's record."""
+"""The steps of a session's proposal around the selection itself (`CaptureSession.propose` calls
+`select_views` between them): its random source, the candidate cameras its constraints allow, the
+proposal a selection makes among them (with its hemisphere map), and the proposal's record. Each
+step takes only the fields of the request (`ProposalRequest`) it needs."""
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,14 +15,12 @@ from nerfaug.cameras import Cameras
 from nerfaug.capture.constraints import constrained_indices
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
-from nerfaug.capture.proposal_request import ProposalRequest, ViewConstraints
+from nerfaug.capture.proposal_request import ViewConstraints
 from nerfaug.capture.state import ProposalRecord, now
 from nerfaug.data.frames import check_pose
 from nerfaug.data.world_frame import ENGINE_RADIUS
-from nerfaug.health import EmptyModel, Health
 from nerfaug.maps import plot_hemisphere_map
-from nerfaug.progress import progress_bar
-from nerfaug.selection import hemisphere_candidates, matching_poses, select_views
+from nerfaug.selection import Selection, hemisphere_candidates, matching_poses
 from nerfaug.selection.candidates import with_poses
 
 
@@ -78,139 +76,148 @@ def named_candidates(
     return given[kept], None if names is None else [names[i] for i in kept]
 
 
-def propose(
-    request: ProposalRequest,
+@dataclass(frozen=True)
+class Candidates:
+    """The candidates a proposal chooses among, once the constraints have left out the others.
+
+    Attributes:
+        world: the world-frame cameras (n_candidates).
+        names: the pool's names of them (a sparse start's pool), None for other candidates.
+        described: how session.json names them ("hemisphere", "pool", a file, "given").
+    """
+
+    world: Cameras
+    names: list[str] | None
+    described: str
+
+
+def proposal_generator(
+    generator: torch.Generator | None, session_seed: int, number: int, asked: int | None
+) -> tuple[torch.Generator, int | None]:
+    """The random source of proposal `number`, and the seed it was made from: the caller's
+    `generator` (seed None), else one seeded from the request's seed `asked`, else from the
+    session's seed and the proposal's number (`proposal_seed`), so that a resumed session proposes
+    exactly what the original would have."""
+    if generator is not None:
+        return generator, None
+    seed = proposal_seed(session_seed, number) if asked is None else int(asked)
+    return torch.Generator().manual_seed(seed), seed
+
+
+def allowed_candidates(
     model: SessionModel,
-    number: int,
-    folder: Path,
-    generator: torch.Generator | None = None,
-    progress: bool = False,
-    map: bool = True,
-    health: Callable[[], Health] | None = None,
-) -> tuple[Proposal, ProposalRecord]:
-    """Choose `request.n` views to capture next, and write them (with every candidate's score)
-    to `folder/proposal_NNN.json` (and the map beside it).
-
-    `request` is checked already (`CaptureSession.propose` checks it, once).
-
-    Args:
-        model: the session's NeRF that scores the candidates.
-        number: this proposal's number in the session (0 for the first).
-        folder: where the proposal's files go (`run/proposals`).
-        generator: random source for the candidates and the selector; None seeds one from the
-            request's seed, else from the session seed and the proposal number (`proposal_seed`).
-        progress: show how many candidates are scored (a live bar, or lines in a pipe).
-        map: draw the hemisphere map of every candidate's score beside the proposal's JSON.
-        health: measures whether the NeRF learned its views (`nerfaug.health`), once the request
-            and its candidates are found possible (so a refused request says only why) and before
-            any candidate is scored.
-
-    Returns:
-        The proposal, and its record for the session's history ("empty_model": true when it was
-        made, as asked, from an empty NeRF).
+    candidates,
+    n_candidates: int,
+    constraints: ViewConstraints | None,
+    n: int,
+    generator: torch.Generator,
+) -> Candidates:
+    """The candidates of a request (`named_candidates`) that its constraints allow.
 
     Raises:
-        EmptyModel: `health` finds the NeRF empty and the request does not say `allow_empty`.
+        TooFewCandidates: the constraints leave fewer than `n`.
+        ValueError: fewer than `n` candidates are left once the poses trained on are left out.
     """
-    n, method, hemisphere = request.n, request.method, model.hemisphere
-    used_seed = None
-    if generator is None:
-        used_seed = proposal_seed(model.seed, number) if request.seed is None else int(request.seed)
-        generator = torch.Generator().manual_seed(used_seed)
-    world, pool_names = named_candidates(model, request.candidates, request.n_candidates, generator)
-    allowed = constrained_indices(world.camera_to_world, hemisphere, request.constraints, n).tolist()
-    world = world[allowed]
-    from_pool = pool_names is not None
-    if len(world) < n:
+    world, names = named_candidates(model, candidates, n_candidates, generator)
+    allowed = constrained_indices(world.camera_to_world, model.hemisphere, constraints, n).tolist()
+    described = describe_candidates(candidates, names is not None)
+    if len(allowed) < n:
         raise ValueError(
-            f"{describe_candidates(request.candidates, from_pool)}: cannot propose {n} views from {len(world)} "
-            "candidates (poses the model already trains on are left out); ask for fewer views or give more "
-            "candidates"
+            f"{described}: cannot propose {n} views from {len(allowed)} candidates (poses the model already "
+            "trains on are left out); ask for fewer views or give more candidates"
         )
-    found = health() if health is not None else None
-    empty = found is not None and found.empty
-    if empty and not request.allow_empty:
-        raise EmptyModel(
-            f"{folder.parent}: no views proposed: {found.line()} (or ask with allow_empty, `--allow-empty`, to "
-            "propose from it all the same)"
-        )
-    engine_train = model.train_cameras
-    engine = hemisphere.cameras_to_engine(world)
-    if (engine.width, engine.height) != (engine_train.width, engine_train.height):
-        engine = engine.resized(engine_train.width, engine_train.height)
-    with progress_bar(enabled=progress, transient=True) as bar:
-        task = bar.add_task(f"scoring candidates ({method})", total=len(engine))
-        selection = select_views(
-            method,
-            model.model,
-            engine_train,
-            engine.to(model.device),
-            n,
-            generator,
-            request.selection,
-            min_separation=math.radians(request.min_separation),
-            progress=lambda done: bar.update(task, completed=done),
-        )
-        bar.update(task, completed=len(engine))
+    return Candidates(world[allowed], None if names is None else [names[i] for i in allowed], described)
+
+
+def engine_cameras(model: SessionModel, world: Cameras) -> Cameras:
+    """World-frame candidates as the NeRF sees them: in its frame, at its training views' size."""
+    trained = model.train_cameras
+    engine = model.hemisphere.cameras_to_engine(world)
+    if (engine.width, engine.height) != (trained.width, trained.height):
+        engine = engine.resized(trained.width, trained.height)
+    return engine
+
+
+def proposal_of(
+    selection: Selection,
+    candidates: Candidates,
+    engine: Cameras,
+    model: SessionModel,
+    number: int,
+    seed: int | None,
+    min_separation: float,
+    map_path: Path | None,
+) -> Proposal:
+    """The proposal a selection makes among `candidates` (`engine`: the same in the NeRF's
+    frame), and its hemisphere map of every candidate's score at `map_path` (None: no map)."""
     chosen = selection.indices.long()
-    poses = world.camera_to_world[chosen]
-    azimuth, polar, _ = hemisphere.angles(poses)
-    if from_pool:  # the pool's own names: `add` takes the chosen images from the dataset by them
-        names = [pool_names[allowed[i]] for i in chosen.tolist()]
+    poses = candidates.world.camera_to_world[chosen]
+    azimuth, polar, _ = model.hemisphere.angles(poses)
+    if candidates.names is not None:  # the pool's own names: `add` takes the chosen images from the dataset by them
+        names = [candidates.names[i] for i in chosen.tolist()]
     else:
-        names = [f"capture_{number:03d}_{i:02d}" for i in range(n)]
-    map_path = None
-    if map:
+        names = [f"capture_{number:03d}_{i:02d}" for i in range(len(chosen))]
+    if map_path is not None:
         map_path = plot_hemisphere_map(
             engine.camera_to_world,
             selection.scores,
-            engine_train.camera_to_world.cpu(),
+            model.train_cameras.camera_to_world.cpu(),
             engine.camera_to_world[chosen],
-            path=folder / f"proposal_{number:03d}.png",
-            title=f"proposal {number}: {method} at step {model.step}",
-            label=selection.score_label(request.selection),
+            path=map_path,
+            title=f"proposal {number}: {selection.method} at step {model.step}",
+            label=selection.score_label(selection.config),
         )
-    proposal = Proposal(
+    return Proposal(
         number=number,
-        method=selection.method or method,
+        method=selection.method,
         poses=poses,
         names=names,
         azimuth=azimuth,
         polar=polar,
         indices=chosen,
-        candidates=world,
+        candidates=candidates.world,
         scores=selection.scores.float(),
         components=dict(selection.components),
         map_path=map_path,
         step=model.step,
-        seed=used_seed,
-        camera_angle_x=float(world.camera_angle_x[0]),
-        hemisphere=hemisphere,
-        min_separation=request.min_separation,
+        seed=seed,
+        camera_angle_x=float(candidates.world.camera_angle_x[0]),
+        hemisphere=model.hemisphere,
+        min_separation=min_separation,
         uniform_fill=selection.uniform_fill,
     )
-    record_path = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
-    record = ProposalRecord(
-        number=number,
+
+
+def record_of(
+    proposal: Proposal,
+    file: str,
+    described: str,
+    selection: Selection,
+    constraints: ViewConstraints | None,
+    empty_model: bool,
+) -> ProposalRecord:
+    """What the session's history keeps of `proposal`, written to `file` (relative to the run);
+    "empty_model": true when it was made, as asked, from an empty NeRF."""
+    return ProposalRecord(
+        number=proposal.number,
         method=proposal.method,
-        n=n,
-        step=model.step,
-        seed=used_seed,
-        candidates=describe_candidates(request.candidates, from_pool),
-        n_candidates=len(world),
-        names=names,
-        poses=poses.tolist(),
-        azimuth=azimuth.tolist(),
-        polar=polar.tolist(),
-        file=f"{folder.name}/{record_path.name}",
+        n=len(proposal.names),
+        step=proposal.step,
+        seed=proposal.seed,
+        candidates=described,
+        n_candidates=len(proposal.candidates),
+        names=proposal.names,
+        poses=proposal.poses.tolist(),
+        azimuth=proposal.azimuth.tolist(),
+        polar=proposal.polar.tolist(),
+        file=file,
         created=now(),
         selection=selection.config.to_dict(),
-        **constraints_record(request.constraints),
-        **separation_record(request.min_separation),
-        **({"uniform_fill": selection.uniform_fill} if selection.uniform_fill else {}),
-        **({"empty_model": True} if empty else {}),
+        **constraints_record(constraints),
+        **separation_record(proposal.min_separation),
+        **({"uniform_fill": proposal.uniform_fill} if proposal.uniform_fill else {}),
+        **({"empty_model": True} if empty_model else {}),
     )
-    return proposal, record
 
 
 def separation_record(min_separation: float) -> dict:

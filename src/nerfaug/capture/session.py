@@ -36,13 +36,13 @@ from torch import Tensor
 from nerfaug import owned
 from nerfaug.cameras import Cameras
 from nerfaug.capture import add, choose, integrity
-from nerfaug.capture.choose import ProposalRequest
 from nerfaug.capture.dataset import default_split, duplicate_frames, sparse_start
 from nerfaug.capture.evaluate import evaluate_model
 from nerfaug.capture.folder import SessionFolder, camera_of
 from nerfaug.capture.images import ImageFile, check_image_files, write_files
 from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal
+from nerfaug.capture.proposal_request import ProposalRequest
 from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
     FISHER_WIDTH,
@@ -84,11 +84,12 @@ from nerfaug.data.interface import DatasetSplit, NewFrame
 from nerfaug.data.views import Views
 from nerfaug.data.world_frame import estimate_hemisphere, pole_tilt_degrees
 from nerfaug.evaluation import EvaluationResult
-from nerfaug.health import EmptyModelWarning, Health, model_health
+from nerfaug.health import EmptyModel, EmptyModelWarning, Health, model_health
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.trainer import Trainer
 from nerfaug.progress import progress_bar
+from nerfaug.selection import select_views
 
 CHUNK_STEPS = 10  # training steps between looks at the clock and at `stop`
 
@@ -460,13 +461,43 @@ class CaptureSession(SessionFolder):
         Warns:
             EmptyModelWarning: as `EmptyModel`, when the request says `allow_empty`.
         """
-        folder = self.run_dir / PROPOSALS_DIR
-        number, shown = len(self.state.proposals), bool(self.trainer.progress)  # as the session was opened
+        folder, number = self.run_dir / PROPOSALS_DIR, len(self.state.proposals)
         request = (request or ProposalRequest()).checked()  # once: a request the command or the service checked passes
-        health = functools.cache(self.health)  # measured once, by `choose.propose` when it gets that far
-        proposal, record = choose.propose(request, self.session_model(), number, folder, generator, shown, map, health)
-        if record.model_dump().get("empty_model"):
-            warnings.warn(f"{self.run_dir}: proposed from an empty NeRF: {health().line()}", EmptyModelWarning, 2)
+        model = self.session_model()
+        generator, seed = choose.proposal_generator(generator, model.seed, number, request.seed)
+        candidates = choose.allowed_candidates(
+            model, request.candidates, request.n_candidates, request.constraints, request.n, generator
+        )
+        health = self.health()  # once the request is found possible (a refused one says only why), before scoring
+        if health.empty and not request.allow_empty:
+            raise EmptyModel(
+                f"{self.run_dir}: no views proposed: {health.line()} (or ask with allow_empty, `--allow-empty`, "
+                "to propose from it all the same)"
+            )
+        engine = choose.engine_cameras(model, candidates.world)
+        with progress_bar(enabled=bool(self.trainer.progress), transient=True) as bar:  # as the session was opened
+            task = bar.add_task(f"scoring candidates ({request.method})", total=len(engine))
+            selection = select_views(
+                request.method,
+                model.model,
+                model.train_cameras,
+                engine.to(model.device),
+                request.n,
+                generator,
+                request.selection,
+                min_separation=math.radians(request.min_separation),
+                progress=lambda done: bar.update(task, completed=done),
+            )
+            bar.update(task, completed=len(engine))
+        map_path = folder / f"proposal_{number:03d}.png" if map else None
+        proposal = choose.proposal_of(
+            selection, candidates, engine, model, number, seed, request.min_separation, map_path
+        )
+        written = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
+        file = f"{folder.name}/{written.name}"
+        record = choose.record_of(proposal, file, candidates.described, selection, request.constraints, health.empty)
+        if health.empty:
+            warnings.warn(f"{self.run_dir}: proposed from an empty NeRF: {health.line()}", EmptyModelWarning, 2)
         self.state.proposals.append(record)
         return proposal
 
