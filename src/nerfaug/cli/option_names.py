@@ -9,6 +9,7 @@ import contextlib
 import dataclasses
 
 from nerfaug.capture.requests import RequestError, words
+from nerfaug.nerf.config import variant_name
 
 
 def option(field: str) -> str:
@@ -34,3 +35,20 @@ def checked(request):
     """`request.checked()`, a refused value shown as its option."""
     with as_options(omitted=("constraints.",)):
         return request.checked()
+
+
+def engine_refusal(error: ValueError) -> str:
+    """An engine setting's refusal as the option that sets it: `--engine.field.hidden-dim 0: must
+    be >= 1` (a refusal of settings together, or of the name: `--engine: ...`)."""
+    if isinstance(error, RequestError) and error.argument:
+        return f"--engine.{error.argument.replace('_', '-')} {words(error.value)}: {error.problem}"
+    return f"--engine: {error}"
+
+
+def engine_variant(engine: str, settings: dict) -> str:
+    """`variant_name(engine, settings)`: the engine with the --engine.GROUP.SETTING given changed,
+    one line naming the option (SystemExit) when a setting is refused."""
+    try:
+        return variant_name(engine, settings)
+    except ValueError as error:
+        raise SystemExit(engine_refusal(error)) from None

@@ -15,8 +15,9 @@ from typing import Annotated, ClassVar, Literal
 
 import tyro
 
+from nerfaug.cli.option_names import engine_variant
 from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig, PresetName
-from nerfaug.nerf.config import EngineOptions, EngineSettings, variant_name
+from nerfaug.nerf.config import EngineOptions, EngineSettings
 from nerfaug.registry import Presets
 
 DEFAULT_PRESET = "quick"
@@ -80,10 +81,7 @@ class Run:
 
         protocol = self.protocol
         if given := self.engine_settings.given():
-            try:
-                protocol = protocol.replace(engine=variant_name(protocol.engine, given))
-            except ValueError as error:
-                raise SystemExit(f"--engine: {error}") from None
+            protocol = protocol.replace(engine=engine_variant(protocol.engine, given))
         run_work.run(
             protocol,
             self.out,

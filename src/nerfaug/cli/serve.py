@@ -21,7 +21,7 @@ from nerfaug.capture.requests import (
     check_threads,
     replaced_by,
 )
-from nerfaug.cli.option_names import as_options
+from nerfaug.cli.option_names import as_options, engine_refusal
 from nerfaug.device_choice import Device
 from nerfaug.nerf.config import PRESETS, EngineOptions, EngineSettings, variant_name
 
@@ -96,9 +96,9 @@ def _check_engine_settings(settings: dict) -> None:
         try:
             variant_name(engine, settings)
         except ValueError as error:
-            refusals[engine] = str(error)
+            refusals[engine] = engine_refusal(error)
     if len(refusals) == len(PRESETS):
-        raise SystemExit(f"--engine: {next(iter(refusals.values()))}")
+        raise SystemExit(next(iter(refusals.values())))
     if refusals:
         names = ", ".join(refusals)
         print(

@@ -13,6 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from nerfaug.cli.option_names import engine_variant
 from nerfaug.cli.run_size import per_cell, size_line
 from nerfaug.cli.run_work import runs_to_do
 from nerfaug.device import device_kind
@@ -21,7 +22,6 @@ from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.study import default_engines, table_keys
 from nerfaug.experiment.study_spec import StudySpec
 from nerfaug.experiment.sweep import default_workers
-from nerfaug.nerf.config import variant_name
 from nerfaug.report import study_page, study_table
 from nerfaug.selection import METHODS
 from nerfaug.selection.config import SelectionConfig
@@ -63,10 +63,7 @@ def with_engine_settings(spec: StudySpec, settings: dict) -> StudySpec:
     """`spec` whose engines (--engines, or the default ones for its device) are each the variant
     with `settings` changed."""
     engines = spec.engines or default_engines(device_kind(spec.device))[0]
-    try:
-        return replace(spec, engines=tuple(variant_name(engine, settings) for engine in engines))
-    except ValueError as error:
-        raise SystemExit(f"--engine: {error}") from None
+    return replace(spec, engines=tuple(engine_variant(engine, settings) for engine in engines))
 
 
 def method_records() -> dict[str, dict]:

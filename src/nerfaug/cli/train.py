@@ -27,9 +27,9 @@ from nerfaug.capture.requests import (
     given_form,
     replaced_by,
 )
-from nerfaug.cli.option_names import as_options, checked
+from nerfaug.cli.option_names import as_options, checked, engine_variant
 from nerfaug.device_choice import Device
-from nerfaug.nerf.config import EngineOptions, EngineSettings, variant_name
+from nerfaug.nerf.config import EngineOptions, EngineSettings
 from nerfaug.training_log import Logger, LoggerUnavailable, require
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
@@ -60,11 +60,8 @@ def with_engine_settings(settings: GivenSettings, engine: EngineSettings) -> Giv
     given = engine.given()
     if not given:
         return settings  # the engine's name is checked with the other settings (`checked`)
-    try:  # before anything is read: an unknown setting, or a value its group refuses, is one line naming it
-        name = variant_name(settings.engine or SessionSettings().engine, given)
-    except ValueError as error:
-        raise SystemExit(f"--engine: {error}") from None
-    return replace(settings, engine=name)
+    # Before anything is read: an unknown setting, or a value out of its bounds, is one line naming it.
+    return replace(settings, engine=engine_variant(settings.engine or SessionSettings().engine, given))
 
 
 def train(
