@@ -5,6 +5,7 @@ reads these names."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 from nerfaug import owned
@@ -52,3 +53,16 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
             f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
             f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
         )
+
+
+def remove_unfinished(run_dir: Path, existed: bool) -> None:
+    """Remove what a failed `create` wrote: the run folder, or its contents when it was there
+    before (empty or only nerfaug's marker: `check_new_run` refused anything else)."""
+    if not existed:
+        shutil.rmtree(run_dir, ignore_errors=True)
+        return
+    for path in run_dir.iterdir():
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)

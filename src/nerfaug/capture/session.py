@@ -23,7 +23,6 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
-import shutil
 import tempfile
 import warnings
 from collections.abc import Callable, Sequence
@@ -66,20 +65,21 @@ from nerfaug.capture.runfolder import (
     RUN_KIND,
     SESSION_FILE,
     check_new_run,
+    remove_unfinished,
 )
 from nerfaug.capture.state import (
     AdditionRecord,
-    DatasetInfo,
     DuplicateViews,
     SessionError,
     SessionState,
     SessionSummary,
     SourceInfo,
     TiltedPole,
+    new_state,
     now,
 )
 from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
-from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format, plainest_format
+from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format
 from nerfaug.data.interface import DatasetSplit, NewFrame
 from nerfaug.data.views import Views
 from nerfaug.data.world_frame import estimate_hemisphere, pole_tilt_degrees
@@ -209,7 +209,7 @@ class CaptureSession(SessionFolder):
             source, cameras, pool, record = sparse_start(source, views, hemisphere, start)
         origin = SourceInfo(data_dir=str(data_dir), split=split, format=source.format.name)
         engine, config = (settings.engine, NerfConfig.preset(settings.engine)) if config is None else ("custom", config)
-        state = _new_state(origin, source, cameras, settings, engine, config, background, hemisphere)
+        state = new_state(origin, source, cameras, settings, engine, config, background, hemisphere)
         if pool is not None:
             state.start, state.pool = record, POOL_FILE
         # Everything is checked: from here on the run folder is written, and marked as nerfaug's first;
@@ -221,7 +221,7 @@ class CaptureSession(SessionFolder):
                 atomic_write_json(run_dir / POOL_FILE, pool)
             return cls._build(run_dir, source, state, config, device, progress)
         except BaseException:
-            _remove_unfinished(run_dir, existed)
+            remove_unfinished(run_dir, existed)
             raise
 
     @classmethod
@@ -586,45 +586,3 @@ class CaptureSession(SessionFolder):
         """PSNR, SSIM and LPIPS of the NeRF's renders of world-frame `views` (`held_out`) against
         their images; see `nerfaug.capture.evaluate.evaluate_model`."""
         return evaluate_model(self.session_model(), views, lpips, progress)
-
-
-def _new_state(origin: SourceInfo, source, cameras, settings: SessionSettings, engine, config, background, hemisphere):
-    """The `SessionState` of a new session on `source` (read from `origin`), whose cameras are
-    `cameras`, its engine `config` (named `engine`: the one place the name is resolved is `create`)."""
-    return SessionState(
-        source=origin,
-        dataset=DatasetInfo.of(plainest_format(source, cameras)),
-        engine=engine,
-        engine_config=config.to_dict(),
-        seed=settings.seed,
-        downscale=settings.downscale,
-        background=tuple(float(c) for c in background),
-        intrinsics=Intrinsics(
-            width=cameras.width,
-            height=cameras.height,
-            fx=float(cameras.fx[0]),
-            fy=float(cameras.fy[0]),
-            cx=float(cameras.cx[0]),
-            cy=float(cameras.cy[0]),
-            camera_angle_x=float(cameras.camera_angle_x[0]),
-        ),
-        hemisphere=hemisphere,
-        hemisphere_estimated={
-            "centre": settings.centre is None,
-            "radius": settings.radius is None,
-            "up": settings.estimate_up,
-        },
-    )
-
-
-def _remove_unfinished(run_dir: Path, existed: bool) -> None:
-    """Remove what a failed `create` wrote: the run folder, or its contents when it was there
-    before (empty or only nerfaug's marker: `check_new_run` refused anything else)."""
-    if not existed:
-        shutil.rmtree(run_dir, ignore_errors=True)
-        return
-    for path in run_dir.iterdir():
-        if path.is_dir() and not path.is_symlink():
-            shutil.rmtree(path, ignore_errors=True)
-        else:
-            path.unlink(missing_ok=True)

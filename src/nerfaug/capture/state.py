@@ -34,7 +34,7 @@ import nerfaug
 from nerfaug.capture.dataset import default_split
 from nerfaug.capture.requests import Downscale, Intrinsics, RequestError, Seed, SessionSettings
 from nerfaug.capture.runfolder import DATASET_SPLIT, SESSION_FILE
-from nerfaug.data.formats import FORMATS
+from nerfaug.data.formats import FORMATS, plainest_format
 from nerfaug.data.interface import Format
 from nerfaug.data.world_frame import Hemisphere
 from nerfaug.errors import NerfaugError
@@ -334,3 +334,32 @@ class SessionSummary(BaseModel):
     additions: int
     hemisphere: dict = Field(description="centre, radius, up (world frame)")
     intrinsics: Intrinsics
+
+
+def new_state(origin: SourceInfo, source, cameras, settings: SessionSettings, engine, config, background, hemisphere):
+    """The `SessionState` of a new session on `source` (read from `origin`), whose cameras are
+    `cameras`, its engine `config` (named `engine`: the one place the name is resolved is `create`)."""
+    return SessionState(
+        source=origin,
+        dataset=DatasetInfo.of(plainest_format(source, cameras)),
+        engine=engine,
+        engine_config=config.to_dict(),
+        seed=settings.seed,
+        downscale=settings.downscale,
+        background=tuple(float(c) for c in background),
+        intrinsics=Intrinsics(
+            width=cameras.width,
+            height=cameras.height,
+            fx=float(cameras.fx[0]),
+            fy=float(cameras.fy[0]),
+            cx=float(cameras.cx[0]),
+            cy=float(cameras.cy[0]),
+            camera_angle_x=float(cameras.camera_angle_x[0]),
+        ),
+        hemisphere=hemisphere,
+        hemisphere_estimated={
+            "centre": settings.centre is None,
+            "radius": settings.radius is None,
+            "up": settings.estimate_up,
+        },
+    )

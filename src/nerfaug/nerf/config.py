@@ -41,15 +41,11 @@ BACKGROUND_MODES = ("fixed", "last_sample", "last_composited")
 
 # Each setting's bounds, declared with its type and checked once, by pydantic, wherever settings
 # are changed (`with_settings`, `from_dict`): a width of 0 or a negative learning rate is refused
-# as one line naming the setting, never trained.
-Count = Annotated[int, Ge(1)]
-"""A size or a number of things: at least one."""
-Steps = Annotated[int, Ge(0)]
-"""A number of training steps (0: none)."""
-Positive = Annotated[float, Gt(0)]
-NonNegative = Annotated[float, Ge(0)]
+# as one line naming the setting, never trained. Count: a size or number of things; Counts: one
+# or more of them (per tri-plane, per proposal network); Steps: training steps (0: none).
+Count, Steps = Annotated[int, Ge(1)], Annotated[int, Ge(0)]
+Positive, NonNegative = Annotated[float, Gt(0)], Annotated[float, Ge(0)]
 Counts = Annotated[tuple[Count, ...], MinLen(1)]
-"""One size or more (one per tri-plane, per proposal network)."""
 
 
 def _flat(name: str) -> dict:
@@ -350,12 +346,8 @@ class NerfConfig:
 
 
 def _checked(config: NerfConfig) -> NerfConfig:
-    """`config`, once every setting has its type and lies within the bounds declared with it.
-
-    Raises:
-        RequestError (a ValueError): the first refused setting by its path, its value and why:
-            "field.hidden_dim 0: must be >= 1".
-    """
+    """`config`, once each setting has its type and bounds; else a RequestError (a ValueError)
+    naming the first refused one by its path: "field.hidden_dim 0: must be >= 1"."""
     validated(NerfConfig, dataclasses.asdict(config))  # a check only: `config` keeps its values as given
     return config
 
