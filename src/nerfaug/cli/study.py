@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, ClassVar
+from typing import Annotated, ClassVar, Literal
 
 import tyro
 
@@ -39,6 +39,9 @@ class Study(StudySpec):
         summary_only: run nothing; rewrite the summary from the table (updated from OUT's run
             folders where OUT holds a study).
         results_doc: also write this Markdown page (e.g. docs/results.md), figures beside it.
+        hypotheses: whose planned hypotheses the summary judges (docs/study-plan.md): the
+            procedural study's (H1-H4), the real-scene study's (R1-R4), the GPU study's (G1-G4),
+            none, or auto (chosen from the table's engines and scenes).
         budget_s: start no run that would end more than this many seconds from now (by the
             longest run or trial batch so far); the same command goes on with the rest.
         selection: options of the selection methods (every one is part of the runs' fingerprint;
@@ -54,6 +57,7 @@ class Study(StudySpec):
     force: bool = False
     summary_only: bool = False
     results_doc: ResultsDoc = None
+    hypotheses: Literal["auto", "procedural", "real", "gpu", "none"] = "auto"
     budget_s: BudgetSeconds = None
     selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
     engine_settings: EngineOptions = field(default_factory=EngineSettings)
@@ -75,6 +79,7 @@ class Study(StudySpec):
             force=self.force,
             summary_only=self.summary_only,
             results_doc=self.results_doc,
+            hypotheses=self.hypotheses,
             budget_s=self.budget_s,
             engine_settings=self.engine_settings.given(),
         )

@@ -36,10 +36,11 @@ def study(
     results_doc: Path | None,
     budget_s: float | None,
     engine_settings: dict | None = None,
+    hypotheses: str = "auto",
 ) -> None:
     """`nerfaug study`: the runs of `spec` with `selection` (none with `summary_only`), then the
     table and the page (and `results_doc`); `engine_settings` (flat name -> value) change every
-    engine the study runs."""
+    engine the study runs; `hypotheses` names the plan whose hypotheses the pages judge."""
     if engine_settings:
         spec = with_engine_settings(spec, engine_settings)
     out = Path(spec.out)
@@ -48,10 +49,10 @@ def study(
     failed = {} if summary_only else run(spec, selection, previous, workers, force, budget_s)
     recorded = record_table(out, table_path, previous)
     print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
-    paths = study_page.write_study(out, recorded)
+    paths = study_page.write_study(out, recorded, hypotheses)
     print("study summary: " + ", ".join(str(p) for p in paths))
     if results_doc is not None:
-        print(f"results: {study_page.write_results_doc(recorded, table_path, results_doc)}")
+        print(f"results: {study_page.write_results_doc(recorded, table_path, results_doc, hypotheses)}")
     if failed:
         print(f"{len(failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
         for key, why in failed.items():

@@ -1,12 +1,31 @@
 """The verdicts on the study's planned hypotheses (docs/study-plan.md, written before its runs),
 computed from the study's cells and regimes, so the page never states one by hand. A hypothesis
-whose cells are not all run yet is "open" unless the cells run already decide it.
+whose cells are not all run yet is "partial: n of m runs" unless the cells run already decide it;
+beside a real-scene "not supported" stands the smallest effect its test could have seen. The GPU
+study's G1-G4 are judged by `nerfaug.report.study_verdicts`.
 """
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from nerfaug.report.document import Block, Heading, Paragraph, Table, p_value
-from nerfaug.report.study import OURS, Study, regime_comparisons
+from nerfaug.report.study import OURS, REFERENCE, Study, regime_comparisons
+from nerfaug.report.study_verdicts import (
+    GPU_ENGINES,
+    GPU_HELD_BACK,
+    GPU_SCENES,
+    dead_per_cell,
+    dead_runs,
+    detectable,
+    gpu_engines,
+    gpu_rows,
+    min_detectable_effect,
+    regime_test,
+    says,
+)
 from nerfaug.statistics import seed_level_comparison
 
 PAPER_REGIME = "nerfacto-cpu-last-sample"
@@ -275,31 +294,180 @@ REAL_HYPOTHESES = (
 )
 
 
-def hypotheses_of(study: Study) -> tuple:
-    """The planned hypotheses of this study: the procedural plan's when it ran only the procedural
-    three scenes, the real-scene plan's when it ran only that plan's scenes, else none (a study of
-    a user's own scenes has no plan of this project's to judge)."""
-    scenes = {c.scene for c in study.cells}
+GPU_HEADERS = ["", "hypothesis", "test", "verdict", "evidence", "smallest effect it could have seen", "dead runs"]
+KINDS = ("auto", "procedural", "real", "gpu", "none")
+"""Which plan's hypotheses a page judges: `auto` chooses from the table's engines and scenes."""
+
+
+def _base(engine: str) -> str:
+    return engine.split("+")[0]  # a variant "paper+batch_size=64" is of its preset's study
+
+
+def plan_kind(study: Study, plan: str = "auto") -> str:
+    """The plan whose hypotheses the page judges: the GPU study's when the table holds only the
+    paper engine on that plan's scenes; the procedural plan's when only its three scenes; the
+    real-scene plan's when only its scenes; else none (a study of a user's own scenes has no plan
+    of this project's to judge). `plan` other than "auto" is taken as given."""
+    if plan not in KINDS:
+        raise ValueError(f"hypotheses: {plan!r} is not one of {', '.join(KINDS)}")
+    if plan != "auto":
+        return plan
+    scenes, engines = {c.scene for c in study.cells}, {_base(e) for e in study.engines}
+    if engines and engines <= set(GPU_ENGINES) and scenes <= {*GPU_SCENES, GPU_HELD_BACK}:
+        return "gpu"
     if scenes <= set(PLAN_SCENES):
-        return HYPOTHESES
-    return REAL_HYPOTHESES if scenes <= {*REAL_SCENES, HELD_BACK} else ()
+        return "procedural"
+    return "real" if scenes <= {*REAL_SCENES, HELD_BACK} else "none"
 
 
-def hypotheses_blocks(study: Study) -> list[Block]:
-    if not hypotheses_of(study):
+def hypotheses_of(study: Study, plan: str = "auto") -> tuple:
+    """The planned hypotheses (procedural H1-H4 or real-scene R1-R4) as (name, text, judge);
+    the GPU study's are rows of their own (`study_verdicts.gpu_rows`)."""
+    return {"procedural": HYPOTHESES, "real": REAL_HYPOTHESES}.get(plan_kind(study, plan), ())
+
+
+def _runs(study: Study, engines, scenes) -> tuple[int, int]:
+    """(runs in the table, runs planned) of the plan's methods and trials on these cells."""
+    methods, trials = study.plan.get("methods", []), int(study.plan.get("trials", 0))
+    done = {
+        (r["engine"], r["scene"], r["method"], r["trial"])
+        for r in study.table["runs"]
+        if r["engine"] in engines and r["scene"] in scenes and r["method"] in methods and r["trial"] < trials
+    }
+    return len(done), len(engines) * len(scenes) * len(methods) * trials
+
+
+def _real_floor(study: Study, name: str) -> str:
+    """Beside a real-scene "not supported": per engine, the smallest effect its tests could see."""
+    parts = []
+    for engine in real_engines(study):
+        cells, _ = _real_cells(study, engine)
+        if name == "R2":
+            tests = [regime_test(cells, high, low, len(RANKING)) for high, low in RANKING]
+        else:
+            methods = OURS_FAMILY if name == "R1" else ("ours-batch-sharp",)
+            if name == "R3" and engine != "nerfacto-cpu":
+                continue
+            comparisons = regime_comparisons(cells)
+            tests = [comparisons[m] for m in methods if m in comparisons]
+        tests = [t for t in tests if t["n_seeds"] > 1]
+        if not tests:
+            continue
+        k, n = tests[0]["n_comparisons"], tests[0]["n_seeds"]
+        mde = min_detectable_effect(n, k)
+        spreads = [float(np.std(t["seed_means"], ddof=1)) for t in tests]
+        if math.isinf(mde):
+            parts.append(f"{engine}: {detectable(tests[0]['seed_means'], k)}")
+        else:
+            parts.append(
+                f"{engine}: {n} seed pairs, x{k}: smallest attainable p x {k} = {p_value(min(1.0, 2.0 ** (1 - n) * k))}"
+                "; "
+                f"detectable (80 % power): {mde:.2f} per-seed SDs = {_range(mde * min(spreads), mde * max(spreads))} "
+                f"dB at the observed SD{'s' if len(spreads) > 1 else ''}"
+            )
+    return " | ".join(parts)
+
+
+def _range(low: float, high: float) -> str:
+    return f"{low:.2f}" if f"{low:.2f}" == f"{high:.2f}" else f"{low:.2f}-{high:.2f}"
+
+
+def _real_dead(study: Study, name: str) -> str:
+    dead = dead_runs(study)
+    found = [d for d in dead if d[0] in real_engines(study) and d[1] in {*REAL_SCENES, HELD_BACK}]
+    if not found:
+        return "none flagged (runs recorded before the health check are not checked)"
+    parts = []
+    for engine in real_engines(study):
+        cells, _ = _real_cells(study, engine)
+        pairs = RANKING if name == "R2" else [(m, REFERENCE) for m in OURS_FAMILY]
+        tests = (
+            [
+                (f"{h} - {lo}", regime_test(cells, h, lo, cells[0].n_comparisons if name != "R2" else 2, dead))
+                for h, lo in pairs
+            ]
+            if cells
+            else []
+        )
+        parts.append(
+            f"{engine}: {dead_per_cell(study, engine, REAL_SCENES)}; without them: "
+            + "; ".join(says(t, e) for t, e in tests)
+        )
+    return " | ".join(parts)
+
+
+def hypotheses_blocks(study: Study, plan: str = "auto") -> list[Block]:
+    kind = plan_kind(study, plan)
+    if kind == "gpu":
+        return gpu_blocks(study)
+    if kind not in ("procedural", "real"):
         return []
+    if kind == "real":
+        engines, scenes = list(dict.fromkeys([*REAL_ENGINES, *real_engines(study)])), REAL_SCENES
+    else:
+        engines, scenes = (PAPER_REGIME, *STABLE_REGIMES), PLAN_SCENES
+    done, planned = _runs(study, engines, scenes)
     rows = []
-    for name, text, judge in hypotheses_of(study):
+    for name, text, judge in hypotheses_of(study, plan):
         verdict, evidence = judge(study)
-        rows.append([name, text, f"**{verdict}**", evidence])
+        if verdict == "open":
+            verdict = f"partial: {done} of {planned} runs"
+        row = [name, text, f"**{verdict}**", evidence]
+        if kind == "real":
+            row += [_real_floor(study, name) if verdict == "not supported" else "", _real_dead(study, name)]
+        rows.append(row)
+    headers = ["", "hypothesis", "verdict", "evidence"]
+    if kind == "real":
+        headers += ["smallest effect it could have seen", "dead runs"]
     return [
         Heading("The planned hypotheses"),
         Paragraph(
             "Stated before the runs in docs/study-plan.md, with the tests above; each verdict is computed from the "
-            "table (open: the cells run so far do not decide it)."
+            'table (partial: the cells run so far do not decide it). "Not supported" says the test did not find '
+            "the effect, not that there is none: beside it, the smallest effect the test could have seen (the "
+            "effect it detects 4 times in 5, by the t-test's power at the Bonferroni-corrected level, in per-seed "
+            "SDs and in dB at the observed spread)."
         ),
-        Table(["", "hypothesis", "verdict", "evidence"], rows),
+        Table(headers, rows),
     ]
 
 
-__all__ = ["HYPOTHESES", "REAL_HYPOTHESES", "hypotheses_blocks", "hypotheses_of", "r1", "r2", "r3", "r4"]
+def gpu_blocks(study: Study) -> list[Block]:
+    """G1-G4 of the GPU study's plan, per engine of the table, with the dead runs per cell."""
+    blocks: list[Block] = [
+        Heading("The planned hypotheses (the GPU study)"),
+        Paragraph(
+            'Stated before the runs in docs/study-plan.md ("Plan of 2026-11-27: the GPU study"), with its tests: '
+            f"per regime, each seed's mean over {', '.join(GPU_SCENES)} of the paired PSNR differences, the exact "
+            "sign-flip test, Bonferroni x5 (G2: x2); G4 per cell on the held-back scene. Every verdict is computed "
+            "from the table: a hypothesis is judged only when its cells are complete (partial: n of m runs, the "
+            'numbers as they stand, deciding nothing). "Not supported" says the test did not find the effect, not '
+            "that there is none: beside it, the smallest effect the test could have seen (4 times in 5, by the "
+            "t-test's power at the corrected level, in per-seed SDs and in dB at the observed spread). Dead runs "
+            "(the NeRF rendered background only) stay in their cells for the planned analysis; the last column "
+            "gives the same tests without the pairs holding one."
+        ),
+    ]
+    for engine in gpu_engines(study):
+        rows = gpu_rows(study, engine)
+        if len(gpu_engines(study)) > 1:
+            rows = [[f"{r[0]} ({engine})", *r[1:]] for r in rows]
+        scenes = (*GPU_SCENES, GPU_HELD_BACK)
+        blocks.append(
+            Table(GPU_HEADERS, rows, [f"dead runs per cell, engine {engine}: {dead_per_cell(study, engine, scenes)}"])
+        )
+    return blocks
+
+
+__all__ = [
+    "HYPOTHESES",
+    "KINDS",
+    "REAL_HYPOTHESES",
+    "hypotheses_blocks",
+    "hypotheses_of",
+    "plan_kind",
+    "r1",
+    "r2",
+    "r3",
+    "r4",
+]

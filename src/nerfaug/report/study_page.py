@@ -31,6 +31,7 @@ from nerfaug.report.figures import method_colours, plot_boxplots
 from nerfaug.report.pooled import plot_paired_differences
 from nerfaug.report.study import ALPHA, BOOTSTRAP_SEED, OURS, REFERENCE, Cell, Study, collect_study
 from nerfaug.report.study_hypotheses import hypotheses_blocks
+from nerfaug.report.study_verdicts import floor_text, verdict_line
 
 
 def _difference(entry: dict | None, metric: str) -> str:
@@ -112,7 +113,7 @@ def _header(study: Study) -> list[Block]:
         (
             f"protocol: {config.get('n_initial', '?')} initial views, {config.get('n_new', '?')} added at step "
             f"{config.get('add_at_step', '?')}, {config.get('steps', '?')} steps, {config.get('resolution', '?')} px, "
-            f"{_pool_text(study, config)}, {config.get('n_test', '?')} test views"
+            f"{_pool_text(study, config)}, {_test_views_text(study, config)}"
         ),
         f"runs in the table: {len(study.table['runs'])}",
     ]
@@ -139,6 +140,18 @@ def _uniform_fill_text(study: Study) -> str:
         f"runs whose method found fewer candidates with a positive score than views to add, and drew the "
         f"others uniformly: {sum(len(v) for v in filled.values())} ({'; '.join(parts)})"
     )
+
+
+def _test_views_text(study: Study, config: dict) -> str:
+    """The test views the runs were scored on, per scene where the table records them (a captured
+    set keeps fewer than the protocol asks), e.g. "test views: 50 (cow, mic), 12 (dtu_scan24)"."""
+    counts: dict[int, list[str]] = {}
+    for name, scene in study.table.get("scenes", {}).items():
+        if "test_views" in scene:
+            counts.setdefault(len(scene["test_views"]), []).append(name)
+    if not counts:
+        return f"{config.get('n_test', '?')} test views"
+    return "test views per scene: " + ", ".join(f"{n} ({', '.join(sorted(s))})" for n, s in sorted(counts.items()))
 
 
 def _pool_text(study: Study, config: dict) -> str:
@@ -206,11 +219,7 @@ def _which_method(study: Study) -> list[Block]:
                     f"{entry['wins']} of {entry['n_seeds']} seeds)."
                 )
             )
-            lines[-1] += (
-                " Uniform selection is as good a choice here."
-                if not per_scene
-                else " Across the scenes, none is a surer choice than uniform."
-            )
+            lines[-1] += " " + floor_text(entry)
         if per_scene:
             lines[-1] += f" Per scene (the primary test), better than uniform: {per_scene}."
         if worse:
@@ -419,11 +428,13 @@ def cell_tables(cell: Cell) -> list[Block]:
     return [Heading(f"{cell.scene}, engine {cell.engine}", 3), Table(headers, metrics_rows, notes), coverage]
 
 
-def study_blocks(study: Study, figures: dict) -> list[Block]:
-    blocks: list[Block] = [Heading("nerfaug study: where each method wins", 1), *_header(study)]
+def study_blocks(study: Study, figures: dict, plan: str = "auto") -> list[Block]:
+    """The page's blocks; `plan` chooses the planned hypotheses judged (`study_hypotheses.KINDS`)."""
+    blocks: list[Block] = [Heading("nerfaug study: where each method wins", 1), Paragraph(verdict_line(study))]
+    blocks += _header(study)
     blocks += _which_method(study) + _methods_section(study)
     blocks += [Heading("Per scene and engine: the paired test"), where_wins_table(study)]
-    blocks += _regime_section(study, figures) + hypotheses_blocks(study) + _incomplete_section(study)
+    blocks += _regime_section(study, figures) + hypotheses_blocks(study, plan) + _incomplete_section(study)
     blocks.append(Heading("Per scene and engine"))
     blocks.append(
         Paragraph(
@@ -510,14 +521,14 @@ def make_study_figures(study: Study, folder: Path) -> dict:
 # ----------------------------------------------------------------------------- pages
 
 
-def write_study(root: Path, table: dict) -> list[Path]:
-    """Write ROOT/study.md and its figures (ROOT/figures/) from the study's table. Returns
-    study.md, then the figures."""
+def write_study(root: Path, table: dict, plan: str = "auto") -> list[Path]:
+    """Write ROOT/study.md and its figures (ROOT/figures/) from the study's table, judging the
+    hypotheses of `plan` (`study_hypotheses.KINDS`). Returns study.md, then the figures."""
     study = collect_study(table)
     folder = StudyFolder(Path(root))
     figures = make_study_figures(study, folder.figures)
     path = folder.summary
-    atomic_write_bytes(path, to_markdown(study_blocks(study, figures), folder.root).encode())
+    atomic_write_bytes(path, to_markdown(study_blocks(study, figures, plan), folder.root).encode())
     return [path, *figures.values()]
 
 
@@ -535,7 +546,7 @@ def kept_reading(path: Path) -> str | None:
     return text[start : end + len(READING_END)] if 0 <= start < end else None
 
 
-def write_results_doc(table: dict, table_path: Path, path: Path = Path("docs/results.md")) -> Path:
+def write_results_doc(table: dict, table_path: Path, path: Path = Path("docs/results.md"), plan: str = "auto") -> Path:
     """Write the study's page at `path` (e.g. docs/results.md) from its table (at `table_path`, named
     on the page), with its figures in a folder beside it (`<stem>/`). A hand-written reading of
     the numbers, between `READING_START` and `READING_END`, is kept (after the header) when the
@@ -546,19 +557,20 @@ def write_results_doc(table: dict, table_path: Path, path: Path = Path("docs/res
     path = Path(path)
     folder = path.parent / path.stem
     figures = make_study_figures(study, folder)
-    blocks = study_blocks(study, figures)
+    blocks = study_blocks(study, figures, plan)
     blocks[0] = Heading("Results: where each selection method wins", 1)
+    option = "" if plan == "auto" else f" --hypotheses {plan}"
     blocks.insert(
-        1,
+        2,
         Paragraph(
             f"Generated on {datetime.now(UTC):%Y-%m-%d %H:%M UTC} by `nerfaug study --summary-only --table "
-            f"{table_path} --results-doc {path}` from the per-run table `{table_path}` alone; every number below "
-            "is computed from it, and the same command re-derives this page."
+            f"{table_path} --results-doc {path}{option}` from the per-run table `{table_path}` alone; every number "
+            "below is computed from it, and the same command re-derives this page."
         ),
     )
     markdown = to_markdown(blocks, path.parent)
     reading = kept_reading(path)
-    if reading is not None:  # after the header's first two blocks (title, provenance)
+    if reading is not None:  # after the header's first blocks (title, verdict, provenance)
         head, _, rest = markdown.partition("\n## ")
         markdown = f"{head.rstrip()}\n\n{reading}\n\n## {rest}" if rest else f"{markdown.rstrip()}\n\n{reading}\n"
     atomic_write_bytes(path, markdown.encode())
