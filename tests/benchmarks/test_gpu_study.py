@@ -50,6 +50,17 @@ def test_the_deciding_comparison_runs_first():
     assert [(k.scene, k.method, k.trial) for k in order[60:62]] == [("lego", "uniform", 0), ("lego", "ours", 0)]
 
 
+def test_study_runs_on_the_gpu_keep_the_papers_plan_and_skip_what_does_not_come_back(bench):
+    from nerfaug.experiment.config import STUDY_PRESETS
+
+    gpu = STUDY_PRESETS["gpu"]
+    assert (gpu.engine, gpu.resolution, gpu.steps, gpu.n_test) == ("paper", 400, 10_000, 200)
+    args = bench.parser().parse_args(["run"])
+    assert (args.device, args.engine, args.resolution, args.steps, args.preset) == ("cuda", "paper", 400, 10_000, "gpu")
+    # Neither the uncertainty images nor the hemisphere map: a call brings back the records only.
+    assert not gpu.view_uncertainty and not gpu.hemisphere_map
+
+
 def test_batches_are_sized_by_the_measured_times_and_learn_from_finished_ones():
     # 2 s a step alone, 3 s for four at once (a GPU serving several runs): 10 steps, 5 views of 1 s.
     model = TimeModel(steps=10, n_test=5, step_s={1: 2.0, 4: 3.0}, view_s=1.0, overhead_s=1.0, default_select_s=4.0)
