@@ -9,11 +9,15 @@ Three modes:
   data/gpu-study/, with the digest of its files; refused over --max-mib (a device call carries at
   most 64 MiB, the repository included).
 - `run` (on the GPU machine: no Blender, no network): unpack the packs it finds (the plan's scenes
-  among them, in the plan's order), run the next runs that the committed table lacks, in trial
-  batches, for at most --budget-s seconds (no run is started that would end later), and write
-  every finished run's records and the table as it then stands into one archive under $OUT.
+  among them, in the plan's order), measure this machine at the study's size (a few training
+  steps alone and in a trial batch, one test view), then run the plan's next runs that the
+  committed table lacks, in the plan's order (ours and uniform on a scene first), each batch as
+  many runs as the memory holds and the time left fits, until --budget-s; the archive under $OUT
+  (every finished run's records, the table, gpu-call.json: what was measured and why the call
+  stopped) is re-written after each batch. `--toy DIR` first makes a toy scene (the CPU mode).
 - `merge` (here): unpack such an archive, record its runs in the committed table
-  (`nerfaug study --summary-only`) and regenerate the page.
+  (`nerfaug study --summary-only`) and regenerate the page; a cell whose runs would mix engine
+  versions is refused.
 
     # here, once per scene (the README's "Real scenes" for the downloads):
     nerfaug scene prepare ~/downloads/mic --out data/real400/mic --width 400
@@ -23,8 +27,8 @@ Three modes:
     # here, with what came back:
     python benchmarks/gpu_study.py merge gpu-study.tar.gz
 
-`run` smoke-tests on the CPU through the same code with `--engine`, `--preset tiny` and
-`--resolution` of a toy dataset (tests/benchmarks/test_gpu_study.py).
+`DEVICE=cpu bash benchmarks/gpu_study.sh` runs the same code on the CPU with a toy scene, a small
+engine and `--preset tiny` (tests/benchmarks/test_gpu_study.py).
 """
 
 from __future__ import annotations
