@@ -9,11 +9,15 @@ Three modes:
   data/gpu-study/, with the digest of its files; refused over --max-mib (a device call carries at
   most 64 MiB, the repository included).
 - `run` (on the GPU machine: no Blender, no network): unpack the packs it finds (the plan's scenes
-  among them, in the plan's order), run the next runs that the committed table lacks, in trial
-  batches, for at most --budget-s seconds (no run is started that would end later), and write
-  every finished run's records and the table as it then stands into one archive under $OUT.
+  among them, in the plan's order), measure this machine at the study's size (a few training
+  steps alone and in a trial batch, one test view), then run the plan's next runs that the
+  committed table lacks, in the plan's order (ours and uniform on a scene first), each batch as
+  many runs as the memory holds and the time left fits, until --budget-s; the archive under $OUT
+  (every finished run's records, the table, gpu-call.json: what was measured and why the call
+  stopped) is re-written after each batch. `--toy DIR` first makes a toy scene (the CPU mode).
 - `merge` (here): unpack such an archive, record its runs in the committed table
-  (`nerfaug study --summary-only`) and regenerate the page.
+  (`nerfaug study --summary-only`) and regenerate the page; a cell whose runs would mix engine
+  versions is refused.
 
     # here, once per scene (the README's "Real scenes" for the downloads):
     nerfaug scene prepare ~/downloads/mic --out data/real400/mic --width 400
@@ -23,8 +27,8 @@ Three modes:
     # here, with what came back:
     python benchmarks/gpu_study.py merge gpu-study.tar.gz
 
-`run` smoke-tests on the CPU through the same code with `--engine`, `--preset tiny` and
-`--resolution` of a toy dataset (tests/benchmarks/test_gpu_study.py).
+`DEVICE=cpu bash benchmarks/gpu_study.sh` runs the same code on the CPU with a toy scene, a small
+engine and `--preset tiny` (tests/benchmarks/test_gpu_study.py).
 """
 
 from __future__ import annotations
@@ -127,14 +131,18 @@ def unpack(packs: Path, into: Path) -> dict[str, Path]:
 
 
 def run(args) -> dict:
-    """The next runs of the plan that the table lacks, within the budget; the archive of what finished."""
+    """The next runs of the plan that the table lacks, in the plan's order, as many as fit the
+    budget; the archive of what finished, re-written after each batch."""
     from nerfaug.cli.study_work import record_table
     from nerfaug.device import configure_process
-    from nerfaug.experiment.study import StudySpec, make_plan, run_study
+    from nerfaug.experiment.study import EngineSweep, StudySpec, gpu_study_order, make_plan
     from nerfaug.report.study_table import read_table
 
     began = time.monotonic()
+    deadline = began + args.budget_s
     configure_process(threads=args.threads)
+    if args.toy is not None:
+        toy(args.toy, args.packs)
     datasets = unpack(args.packs, args.work / "data")
     scenes = [s for s in PLAN["scenes"] if s in datasets] + sorted(set(datasets) - set(PLAN["scenes"]))
     if not scenes:
@@ -153,6 +161,7 @@ def run(args) -> dict:
         scenes = [s for s in scenes if s not in held]
         if not scenes:
             raise SystemExit("only held-back scenes were carried; carry the packs of the scenes still running")
+    most = args.batch or (_memory_batch(args) if args.device != "cpu" else 2)
     spec = StudySpec(
         out=args.work / "study",
         engines=(args.engine,),
@@ -165,39 +174,176 @@ def run(args) -> dict:
         device=args.device,
         preset=args.preset,
         table=table_path,
-        batch=args.batch,
+        # Always trial batches (a batch of one included): every run of the study is of one engine version.
+        batch=max(2, most),
     )
     plan = make_plan(spec, spec.command(), progress=False)
-    print(f"GPU study: {', '.join(scenes)}; {args.budget_s:.0f} s for runs", flush=True)
-    # One trial batch at a time, each archived when it ends: a call cut short keeps what finished.
-    longest, units, failed, unstarted = 0.0, 0, {}, None
-    while unstarted != 0:
-        left = args.budget_s - (time.monotonic() - began)
-        if units and left < 1.1 * longest:
+    sweep = EngineSweep(plan, args.engine, previous)
+    names = [Path(datasets[s]).resolve().name for s in scenes]
+    todo = [k for k in gpu_study_order(names, methods, plan.config.trials) if sweep.pending(k)]
+    summary = {"scenes": scenes, "device": args.device, "budget_s": args.budget_s, "max_batch": most,
+               "batches": [], "finished": 0, "failed": {}}  # fmt: skip
+    print(f"GPU study: {', '.join(scenes)}; {len(todo)} runs to go; {args.budget_s:.0f} s in all", flush=True)
+    if todo and deadline - time.monotonic() < args.margin_s:
+        summary["stopped"] = (
+            f"{len(todo)} runs to go; {max(0.0, deadline - time.monotonic()):.0f} s of the budget were left after "
+            f"start-up, under the {args.margin_s:.0f} s kept back: nothing measured, no run started"
+        )
+        print("stopped: " + summary["stopped"], flush=True)
+        todo_left = todo
+        todo = []
+    else:
+        todo_left = None
+    if todo:
+        model = measure(sweep, todo[0], most, args)
+        summary["measured"] = model.to_dict()
+        single = model.predict([todo[0].method])
+        left = deadline - time.monotonic()
+        summary["single_run_s"] = single
+        print(f"measured: {_rates(model, most)}; a single run about {single:.0f} s; {left:.0f} s left", flush=True)
+        if single * args.margin > args.budget_s:
+            summary["cannot_fit"] = (
+                f"a single run at this size takes about {single:.0f} s, more than a whole call's "
+                f"{args.budget_s:.0f} s: "
+                "no run can finish in one call; a run split across calls would have to carry its trial batch's "
+                "models and optimiser state, " + _checkpoint_size(sweep) + ", over the 64 MiB a call carries"
+            )
+            print(summary["cannot_fit"], flush=True)
+        if args.measure_only:
+            summary["stopped"], todo_left, todo = "measured only (--measure-only)", todo, []
+    while todo:
+        left = deadline - time.monotonic() - args.margin_s
+        unit = _one_config(sweep, todo)
+        n = model.fits([k.method for k in unit], left, most, args.margin)
+        if n == 0:
+            summary["stopped"] = (
+                f"{len(todo)} runs left; the next ({todo[0]}) needs about {model.predict([todo[0].method]):.0f} s "
+                f"(x{args.margin:g} and {args.margin_s:.0f} s kept), {max(0.0, left + args.margin_s):.0f} s were left"
+            )
+            print("stopped: " + summary["stopped"], flush=True)
             break
-        start = time.monotonic()
-        outcomes = run_study(plan, workers=1, table=previous, budget_s=1e-3, progress=not args.quiet)
-        longest, units = max(longest, time.monotonic() - start), units + 1
-        unstarted = sum(1 if o["unstarted"] is None else o["unstarted"] for o in outcomes.values())
-        failed.update({f"{e}: {k}": why for e, o in outcomes.items() for k, why in o["failed"].items()})
-        previous = record_table(spec.out, table_path, previous)
-        if args.archive is not None:
-            archive(args.work, args.archive)
-    summary = {
-        "scenes": scenes,
-        "units": units,
-        "longest_unit_s": longest,
-        "failed": failed,
-        "runs_left_in_plan": unstarted,
-        "table_runs": len(previous["runs"]) if previous else 0,
-        "wall_s": time.monotonic() - began,
-    }
-    (args.work / "study" / "gpu-call.json").write_text(json.dumps(summary, indent=2, default=str))
+        unit, todo = unit[:n], [k for k in todo if k not in unit[:n]]
+        predicted, start = model.predict([k.method for k in unit]), time.monotonic()
+        print(f"batch of {n}: {', '.join(map(str, unit))} (about {predicted:.0f} s)", flush=True)
+        outcomes = sweep.run(unit)
+        results = [o for o in outcomes.values() if isinstance(o, dict)]
+        summary["failed"].update({str(k): o for k, o in outcomes.items() if isinstance(o, str)})
+        summary["finished"] += len(results)
+        previous = record_table(sweep.root.parent, table_path, previous) if results else previous
+        wall = time.monotonic() - start
+        summary["batches"].append({"runs": [str(k) for k in unit], "finished": len(results), "predicted_s": predicted,
+                                   "wall_s": wall})  # fmt: skip
+        model.learn(results, wall)
+        _write_summary(args, summary, began, todo, previous)
+        print(f"  {len(results)} of {n} finished in {wall:.0f} s", flush=True)
+    todo = todo_left if todo_left is not None else todo
+    if summary["finished"] == 0 and "stopped" not in summary and todo:
+        summary["stopped"] = "no run finished (see failed)"
+    _write_summary(args, summary, began, todo, previous)
+    if args.archive is not None:
+        print(f"archive: {args.archive}")
+    print(json.dumps({k: v for k, v in summary.items() if k not in ("batches", "measured")}, default=str))
+    return summary
+
+
+def _write_summary(args, summary: dict, began: float, todo: list, previous: dict | None) -> None:
+    """gpu-call.json (what this call did and why it stopped) and the archive, as they now stand."""
+    summary.update(
+        runs_left_in_plan=len(todo),
+        table_runs=len(previous["runs"]) if previous else 0,
+        wall_s=time.monotonic() - began,
+    )
+    path = args.work / "study" / "gpu-call.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(summary, indent=2, default=str))
     if args.archive is not None:
         archive(args.work, args.archive)
-        print(f"archive: {args.archive}")
-    print(json.dumps(summary, default=str))
-    return summary
+
+
+def _one_config(sweep, todo: list) -> list:
+    """The head of `todo` that trains under one engine configuration (a scene with its own field
+    learning rate trains apart): what one trial batch may hold."""
+    first = repr(sweep.config.engine_config(todo[0].scene))
+    head = []
+    for key in todo:
+        if repr(sweep.config.engine_config(key.scene)) != first:
+            break
+        head.append(key)
+    return head
+
+
+def _memory_batch(args) -> int:
+    """Runs a trial batch may hold on this GPU, by its free memory (`auto_batch_size`)."""
+    from nerfaug.nerf.batch import auto_batch_size
+    from nerfaug.nerf.config import NerfConfig
+
+    size, text = auto_batch_size(NerfConfig.preset(args.engine), args.device, 10**6)
+    print(text, flush=True)
+    return size
+
+
+def measure(sweep, key, most: int, args):
+    """This machine's times at the study's size (the smoke part of a call): a trial batch of one
+    run and one of `most` runs of `key`'s scene trained `--probe-steps` steps after a warm-up,
+    one test view rendered and scored; a `TimeModel` from them."""
+    import torch
+
+    from nerfaug.evaluation import psnr
+    from nerfaug.experiment.budget import TimeModel
+    from nerfaug.experiment.protocol import load_scene_data
+    from nerfaug.nerf.batch_trainer import BatchTrainer
+
+    def sync():
+        if sweep.config.device == "cuda" or str(sweep.config.device).startswith("cuda"):
+            torch.cuda.synchronize()
+
+    start = time.monotonic()
+    data = load_scene_data(sweep.datasets[key.scene], sweep.config, layout=0)
+    setup = time.monotonic() - start
+    engine = sweep.config.engine_config(key.scene)
+    step_s, warm = {}, max(2, args.probe_steps // 4)
+    for n in sorted({1, most}):
+        trainer = BatchTrainer([data.initial] * n, engine, list(range(n)), sweep.config.device, progress=False)
+        trainer.train(warm)
+        sync()
+        start = time.monotonic()
+        trainer.train(warm + args.probe_steps)
+        sync()
+        step_s[n] = (time.monotonic() - start) / args.probe_steps
+    model = trainer.trained_run(0).model
+    start = time.monotonic()
+    with torch.no_grad():
+        render = model.render_image(data.test.cameras, 0)["rgb"].clamp(0, 1)
+        psnr(render, data.test.image(0).to(render.device))
+    sync()
+    view_s = (time.monotonic() - start) * 1.2  # LPIPS and SSIM besides the PSNR
+    del trainer, model
+    if torch.cuda.is_available():
+        torch.cuda.empty_cache()
+    # Before any run finished, a selection is allowed what scoring a tenth of the test views takes.
+    return TimeModel(
+        steps=sweep.config.steps,
+        n_test=len(data.test),
+        step_s=step_s,
+        view_s=view_s,
+        overhead_s=setup + 2.0,
+        default_select_s=max(2.0, 0.1 * len(data.test) * view_s),
+    )
+
+
+def _rates(model, most: int) -> str:
+    sizes = sorted({1, most})
+    steps = ", ".join(f"{model.step_seconds(n):.4f} s a step with {n} run(s) in a batch" for n in sizes)
+    return f"{steps}, {model.view_s:.3f} s a test view"
+
+
+def _checkpoint_size(sweep) -> str:
+    """What one run's training state weighs (parameters and Adam's two moments, float32)."""
+    from nerfaug.nerf.model import NerfModel
+
+    model = NerfModel(sweep.config.engine_config(sweep.config.scenes[0]))
+    n = sum(p.numel() for p in model.parameters())
+    return f"{n * 12 / 2**20:.0f} MiB a run ({n / 1e6:.1f} M parameters with Adam's two moments)"
 
 
 def _complete(table: dict | None, scene: str, args, methods) -> bool:
@@ -227,12 +373,26 @@ def archive(work: Path, out: Path) -> Path:
 
 
 def merge(args) -> None:
-    """Record an archive's runs in the committed table and regenerate the page."""
+    """Record an archive's runs in the committed table and regenerate the page. Refused when a
+    cell (engine, scene) would hold runs of more than one engine version; an archive without a
+    finished run is reported (its call's record says why) and changes nothing."""
     into = args.work / "merge"
     if into.exists():
         raise SystemExit(f"{into}: exists; choose another --work folder")
     with tarfile.open(args.archive) as tar:
         tar.extractall(into, filter="data")
+    # A run's engine is its sweep's folder: study/<engine>/...
+    results = [
+        json.loads(p.read_text()) | {"engine": p.relative_to(into / "study").parts[0]}
+        for p in sorted((into / "study").rglob("result.json"))
+    ]
+    call = into / "study" / "gpu-call.json"
+    if not results:
+        why = json.loads(call.read_text()).get("stopped", "") if call.is_file() else "no record of the call"
+        print(f"{args.archive}: no finished run; nothing merged. The call's record: {why}")
+        return
+    table = json.loads(args.table.read_text()) if args.table.is_file() else {"runs": []}
+    check_versions(table.get("runs", []), results, args.archive)
     from nerfaug.cli import main as nerfaug
 
     nerfaug(
@@ -241,6 +401,56 @@ def merge(args) -> None:
             "--table", str(args.table), "--results-doc", str(args.page),
         ]
     )  # fmt: skip
+
+
+def check_versions(recorded: list[dict], results: list[dict], source) -> None:
+    """Refuse (SystemExit naming the cell and the versions) runs that would put more than one
+    engine version in a cell (engine, scene) of the table: the plan compares methods within one
+    engine version only. `recorded`: the table's runs; `results`: an archive's result.json
+    records with their "engine"."""
+    versions: dict[tuple, set] = {}
+    for run in [*recorded, *results]:
+        versions.setdefault((run["engine"], run["scene"]), set()).add(run.get("engine_version"))
+    mixed = {cell: found for cell, found in versions.items() if len(found) > 1}
+    if mixed:
+        (engine, scene), found = next(iter(mixed.items()))
+        names = ", ".join(sorted(v or "the reference engine (none recorded)" for v in found))
+        raise SystemExit(
+            f"{source}: the cell {engine}/{scene} would hold runs of engine versions {names}; a cell never mixes "
+            "versions (docs/study-plan.md): nothing merged"
+        )
+
+
+def toy(out: Path, packs: Path) -> dict:
+    """A toy scene made here without Blender or a download (an analytic sphere coloured by its
+    normal, on white: 3 initial, 12 train and 4 test views of 24 px), packed as a study scene:
+    what the CPU mode of `gpu_study.sh` runs."""
+    import torch
+
+    from nerfaug.cameras import Cameras, image_rays
+    from nerfaug.data import Views, write_blender_split
+    from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, sample_uniform_poses
+
+    def views(poses: torch.Tensor, prefix: str, size: int = 24) -> Views:
+        cameras = Cameras.from_fov(poses.float(), BLENDER_CAMERA_ANGLE_X, size, size)
+        images, alphas = [], []
+        for i in range(len(cameras)):
+            origins, directions = image_rays(cameras, i)
+            b = (origins * directions).sum(-1)
+            disc = b**2 - ((origins**2).sum(-1) - 0.8**2)
+            hit_point = origins + (-b - disc.clamp_min(0).sqrt())[:, None] * directions
+            normal = torch.nn.functional.normalize(hit_point, dim=-1)
+            hit = (disc > 0).float()
+            images.append((hit[:, None] * (0.5 + 0.5 * normal) + (1 - hit[:, None])).reshape(size, size, 3))
+            alphas.append(hit.reshape(size, size))
+        names = [f"{prefix}_{i}" for i in range(len(cameras))]
+        return Views(cameras, torch.stack(images), names, torch.stack(alphas))
+
+    out = Path(out)
+    write_blender_split(out, "initial", views(half_hemisphere_poses(3), "i"))
+    write_blender_split(out, "train", views(sample_uniform_poses(12, torch.Generator().manual_seed(0)), "r"))
+    write_blender_split(out, "test", views(sample_uniform_poses(4, torch.Generator().manual_seed(1)), "t"))
+    return pack(out, Path(packs) / f"{out.name}.tar")
 
 
 def parser() -> argparse.ArgumentParser:
@@ -267,11 +477,22 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--trials", type=int, default=PLAN["trials"])
     r.add_argument("--methods", nargs="+")
     r.add_argument("--layouts", type=int, default=PLAN["layouts"])
-    # One trial's methods per batch: a unit of work is one seed-paired trial, and a call cut short
-    # loses at most one.
-    r.add_argument("--batch", type=int, default=len(PLAN["methods"]), help="runs per trial batch (0: auto)")
+    r.add_argument(
+        "--batch",
+        type=int,
+        default=0,
+        help="the most runs in a trial batch (0: what the GPU's memory holds; 2 on a CPU)",
+    )
+    r.add_argument("--margin", type=float, default=1.15, help="a batch starts when this times its predicted time fits")
+    r.add_argument("--margin-s", type=float, default=20.0, help="seconds kept back at the end (records, archive)")
+    r.add_argument("--probe-steps", type=int, default=40, help="training steps timed by the measurement")
+    r.add_argument("--measure-only", action="store_true", help="measure this machine's times, run nothing")
+    r.add_argument("--toy", type=Path, help="first make the toy scene here and pack it into --packs (the CPU mode)")
     r.add_argument("--threads", type=int, default=max(1, min(8, os.cpu_count() or 1)))
     r.add_argument("--quiet", action="store_true")
+    t = sub.add_parser("toy", help="a toy scene made here (no Blender, no download), packed: the CPU mode's")
+    t.add_argument("--out", type=Path, required=True, help="the dataset folder to write (its name is the scene's)")
+    t.add_argument("--packs", type=Path, default=PACKS)
     m = sub.add_parser("merge", help="record an archive's runs in the committed table; regenerate the page")
     m.add_argument("archive", type=Path)
     m.add_argument("--work", type=Path, default=Path("/tmp/gpu-study-merge"))
@@ -286,6 +507,8 @@ def main(argv: list[str] | None = None):
         return pack(args.folder, args.out, args.scene, args.max_mib)
     if args.mode == "run":
         return run(args)
+    if args.mode == "toy":
+        return toy(args.out, args.packs)
     return merge(args)
 
 

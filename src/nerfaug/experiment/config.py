@@ -94,6 +94,10 @@ class ExperimentConfig:
     # per pixel).
     view_uncertainty: bool = True
     """save the first test view's uncertainty images (the report's figure and AUSE; no metric needs them)."""
+    # Off in the GPU study, whose calls bring back only the runs' records: matplotlib's figure cost
+    # about 2 s a run on the CPU (BENCHMARKS.md, "Cheaper trials"); the report draws its own maps.
+    hemisphere_map: bool = True
+    """draw the run's selection scores over the hemisphere (uncertainty.png in its folder)."""
     # Only the kind (cpu / cuda) is fingerprinted: the two give different numbers (other kernels and
     # reduction orders), so a results folder never mixes them.
     device: Device = "auto"
@@ -228,7 +232,13 @@ STUDY_PRESETS: Presets[ExperimentConfig] = Presets(
         # The GPU study (docs/study-plan.md, 2026-11-27): the paper engine at the paper's scale
         # (400 px, 10k steps, 200 test views); the page shows no uncertainty images.
         "gpu": ExperimentConfig(
-            engine="paper", resolution=400, steps=10_000, n_test=200, render_samples=32, view_uncertainty=False
+            engine="paper",
+            resolution=400,
+            steps=10_000,
+            n_test=200,
+            render_samples=32,
+            view_uncertainty=False,
+            hemisphere_map=False,
         ),
     },
 )

@@ -390,16 +390,17 @@ def finish_run(
         data.pool.cameras.camera_to_world,
         data.initial.cameras.camera_to_world,
     )
-    plot_hemisphere_map(
-        data.pool.cameras.camera_to_world,
-        selection.scores,
-        data.initial.cameras.camera_to_world,
-        data.pool.cameras.camera_to_world[chosen],
-        path=folder / FILES.uncertainty,
-        title=f"{key.scene}: {key.method}",
-        label=selection.score_label(config.selection),
-        train_label="initial views",
-    )
+    if config.hemisphere_map:
+        plot_hemisphere_map(
+            data.pool.cameras.camera_to_world,
+            selection.scores,
+            data.initial.cameras.camera_to_world,
+            data.pool.cameras.camera_to_world[chosen],
+            path=folder / FILES.uncertainty,
+            title=f"{key.scene}: {key.method}",
+            label=selection.score_label(config.selection),
+            train_label="initial views",
+        )
     write_metrics(folder, evaluation.to_dict())
     write_history(folder, trained.history)
     spec = get_method(key.method)

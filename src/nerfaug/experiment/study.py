@@ -17,6 +17,7 @@ import os
 import platform
 import sys
 import time
+import traceback
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -26,10 +27,11 @@ from nerfaug.data.prepare import PREPARED
 from nerfaug.device import resolve_device
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig, check_workers
 from nerfaug.experiment.layout import StudyFolder
-from nerfaug.experiment.protocol import render_builtin, scene_folder
-from nerfaug.experiment.store import RunKey
+from nerfaug.experiment.protocol import prepare_scene, render_builtin, run_trial_batch, scene_folder
+from nerfaug.experiment.runfolder import write_error
+from nerfaug.experiment.store import RunKey, check_sweep, read_result, run_fingerprint
 from nerfaug.experiment.study_spec import PROCEDURAL_SCENES, StudySpec
-from nerfaug.experiment.sweep import check_config, run_sweep
+from nerfaug.experiment.sweep import check_config, run_sweep, scene_name, sweep_record
 from nerfaug.jsonio import atomic_write_json, read_json
 from nerfaug.nerf.config import PRESETS, NerfConfig
 from nerfaug.nerf.registry import check_names
@@ -199,6 +201,69 @@ GPU_STUDY_SCENES = ("mic", "lego", "maryRose", "dtu_scan24", "moldGoldCape")
 """The GPU study's planned scenes (docs/study-plan.md, 2026-11-27), on the paper engine at 400 px:
 mic, the procedural lego stand-in and two real captures, the last held back for replication."""
 GPU_STUDY_HELD_BACK = ("moldGoldCape",)
+GPU_STUDY_FIRST = ("uniform", "ours")
+"""The GPU study's deciding comparison (docs/study-plan.md, amended 2026-11-28): on each scene,
+ours and uniform over every trial run before the scene's other methods."""
+
+
+def gpu_study_order(scenes, methods, trials: int, first=GPU_STUDY_FIRST) -> list[RunKey]:
+    """The GPU study's runs in the order its slots run them: scene by scene (in `scenes`' order);
+    within a scene the methods of `first` trial by trial (seed pairs complete as early as they
+    can), then the scene's other methods trial by trial. `scenes` are names as results show them."""
+    leading = [m for m in methods if m in first]
+    rest = [m for m in methods if m not in first]
+    return [
+        RunKey(scene, method, trial)
+        for scene in scenes
+        for group in (leading, rest)
+        for trial in range(trials)
+        for method in group
+    ]
+
+
+class EngineSweep:
+    """One engine's sweep of a study, opened for runs handed out a unit at a time by a caller that
+    decides their number and order itself (a GPU slot's scheduler, `benchmarks/gpu_study.py`):
+    study.json and sweep.json written and the datasets checked as `run_study` does; every unit
+    runs as a trial batch (its runs recorded with the batched engine's version, a batch of one
+    included), so a cell never mixes engine versions."""
+
+    def __init__(self, plan: StudyPlan, engine: str, table: dict | None = None):
+        self.config = plan.engine_config(engine)
+        if not self.config.batched():
+            raise ValueError(f"--batch {self.config.batch}: an opened sweep runs trial batches; give --batch 2 or more")
+        study = StudyFolder(plan.out)
+        plan.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_json(study.record, merged_record(study.record, plan.record()))
+        self.root = study.engine(engine).root
+        self.record = sweep_record(self.config, plan.command, check_config(self.config))
+        check_sweep(self.root, self.record)
+        self.datasets = {
+            scene_name(s): prepare_scene(self.root, s, self.config, progress=False) for s in self.config.scenes
+        }
+        self.recorded = table_keys(table, engine)
+
+    def pending(self, key: RunKey) -> bool:
+        """Whether run `key` is still to run: no valid result here, none recorded in the table."""
+        expected = run_fingerprint(self.record["fingerprint"], self.record["methods"][key.method])
+        return read_result(key.folder(self.root), expected) is None and self.recorded.get(key) != expected
+
+    def run(self, keys: list[RunKey]) -> dict[RunKey, dict | str]:
+        """`keys` (runs of one engine configuration) as one trial batch. Per key, its result, or
+        the one-line reason it failed (kept in its folder's error.json, as a sweep keeps it)."""
+        try:
+            outcomes = run_trial_batch(keys, self.datasets, self.config, self.root)
+        except Exception as error:  # noqa: BLE001 (the batch as a whole failed: each of its runs did)
+            outcomes = dict.fromkeys(keys, error)
+        done = {}
+        for key, outcome in outcomes.items():
+            if isinstance(outcome, BaseException):
+                text = "".join(traceback.format_exception_only(type(outcome), outcome)).strip()
+                if key.folder(self.root).exists():
+                    write_error(key.folder(self.root), text, "".join(traceback.format_exception(outcome)))
+                outcome = text
+            done[key] = outcome
+        return done
 
 
 def run_study(
@@ -331,6 +396,8 @@ def _engines(engines, device_type: str) -> tuple[list[str], dict[str, str]]:
 
 __all__ = [
     "DEFAULT_TRIALS",
+    "EngineSweep",
+    "GPU_STUDY_FIRST",
     "GPU_STUDY_ENGINES",
     "GPU_STUDY_HELD_BACK",
     "GPU_STUDY_SCENES",
@@ -341,6 +408,7 @@ __all__ = [
     "StudyPlan",
     "default_engines",
     "engine_presets",
+    "gpu_study_order",
     "make_plan",
     "merge_records",
     "merged_record",
