@@ -399,6 +399,8 @@ def merge(args) -> None:
         [
             "study", "--summary-only", "--out", str(into / "study"),
             "--table", str(args.table), "--results-doc", str(args.page),
+            # The plan's hypotheses G1-G4, also for a toy table whose engine and scenes are not the plan's.
+            "--hypotheses", "gpu",
         ]
     )  # fmt: skip
 

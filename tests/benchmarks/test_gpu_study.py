@@ -7,6 +7,7 @@ writes the page, and refuses a cell of mixed engine versions."""
 
 import json
 import os
+import re
 import subprocess
 import sys
 import tarfile
@@ -135,7 +136,12 @@ def test_the_cpu_mode_brings_back_finished_runs_in_the_plans_order_and_the_merge
     bench.main(["merge", str(archive), "--work", str(tmp_path / "m"), "--table", str(table), "--page", str(page)])
     recorded = json.loads(table.read_text())["runs"]
     assert len(recorded) == len(runs) and {r["engine_version"] for r in recorded} == {"batched-1"}
-    assert f"runs in the table: {len(runs)}" in page.read_text()
+    text = page.read_text()
+    assert f"runs in the table: {len(runs)}" in text
+    # Every pre-registered hypothesis of the GPU plan, each with a computed verdict: a toy table
+    # is far from complete, so each is partial (a partial table decides nothing).
+    for name in ("G1", "G2", "G3", "G4"):
+        assert re.search(rf"\b{name}\b.*partial: \d+ of \d+ runs", text), name
 
 
 @pytest.mark.slow
