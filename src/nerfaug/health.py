@@ -16,7 +16,7 @@ two baselines of the scene itself rather than a fixed margin:
   not pass either.
 
 The NeRF is empty when the object's pixels are rendered (nearly) transparent, or when its
-renders do not halve the squared error of a baseline (`MIN_GAIN_DB`); `Health.reason` names the
+renders do not explain a fifth of a baseline's squared error (`MIN_GAIN_DB`); `Health.reason` names the
 test that failed.
 
 Poses the NeRF did not train on (e.g. a proposal's candidates) can be rendered beside them: how
@@ -42,14 +42,16 @@ UNTRAINED_VIEWS = 4
 OBJECT_DIFFERENCE = 0.05
 # Empty: the object's pixels are rendered at most this opaque on average...
 MIN_OBJECT_OPACITY = 0.05
-# ...or the renders do not halve a baseline's squared error: 10 log10(2) = 3.01 dB over it, i.e.
-# they explain at most half of what the mean colour leaves unexplained (R^2 <= 0.5). Why half:
-# a render without structure scores at most 0 dB over the mean-colour image, and a fog with a
-# faint trace of the object a little above it; the NeRFs that learned their views score 6.3 dB
-# and more over it (BENCHMARKS.md, "The health check against per-scene baselines"): half sits
-# in that gap, as a ratio of the scene's own error, so it means the same on a white-background
-# render (blank image at 14 dB) as on a photo set (5.5 dB).
-MIN_GAIN_DB = 10.0 * math.log10(2.0)
+# ...or the renders leave more than 80 % of a baseline's squared error: they must explain at least
+# a fifth of what the mean colour leaves unexplained (R^2 >= 0.2), -10 log10(0.8) = 0.97 dB over
+# it. Why so: no render without structure can score above 0 dB over the mean-colour image (the
+# least-squares constant), so anything above it is structure; the cow's 8 recorded empty runs
+# score -1.0 to -0.9 dB over it, and the living run that fits worst (the cow, nerfacto-cpu,
+# all views, seed 4: training PSNR 19.9 dB) +3.4 dB (BENCHMARKS.md, "The health check against
+# per-scene baselines"). A fifth sits in that gap with room on both sides, and, as a ratio of the
+# scene's own error, means the same on a white-background render (blank image at 14 dB) as on a
+# photo set (5.5 dB).
+MIN_GAIN_DB = -10.0 * math.log10(0.8)
 # An untrained pose renders empty when the object covers less than this share of what it covers
 # in the training images: candidate poses look at the same object from the same distances, so
 # a render with under a tenth of its usual extent has lost it there.
