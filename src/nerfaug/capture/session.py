@@ -468,7 +468,9 @@ class CaptureSession(SessionFolder):
         candidates = choose.allowed_candidates(
             model, request.candidates, request.n_candidates, request.constraints, request.n, generator
         )
-        health = self.health()  # once the request is found possible (a refused one says only why), before scoring
+        # Once the request is found possible (a refused one says only why), before scoring; a few
+        # candidates (poses it never trained on) rendered beside the training views, as a report.
+        health = self.health(candidates.world)
         if health.empty and not request.allow_empty:
             raise EmptyModel(
                 f"{self.run_dir}: no views proposed: {health.line()} (or ask with allow_empty, `--allow-empty`, "
@@ -496,14 +498,19 @@ class CaptureSession(SessionFolder):
         written = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
         file = f"{folder.name}/{written.name}"
         record = choose.record_of(proposal, file, candidates.described, selection, request.constraints, health.empty)
+        record.health = health.to_dict()  # a further key of the record: what `nerfaug propose` reports
         if health.empty:
             warnings.warn(f"{self.run_dir}: proposed from an empty NeRF: {health.line()}", EmptyModelWarning, 2)
         self.state.proposals.append(record)
         return proposal
 
-    def health(self) -> Health:
-        """Whether the NeRF learned its training views (`nerfaug.health`)."""
-        return model_health(self.trainer.model, self.trainer.train_views, tuple(self.state.background))
+    def health(self, untrained: Cameras | None = None) -> Health:
+        """Whether the NeRF learned its training views (`nerfaug.health`), with renders of a few
+        of `untrained` (world-frame cameras it did not train on) reported beside them."""
+        if untrained is not None:
+            untrained = choose.engine_cameras(self.session_model(), untrained)
+        background = tuple(self.state.background)
+        return model_health(self.trainer.model, self.trainer.train_views, background, untrained)
 
     def session_model(self) -> SessionModel:
         """What the steps that use the NeRF need of this session (`SessionModel`)."""

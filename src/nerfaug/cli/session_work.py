@@ -16,6 +16,7 @@ from nerfaug.capture.proposal_request import ProposalRequest
 from nerfaug.capture.simulate import render_proposals as simulated_capture
 from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train_work import configure, open_session, warning_lines
+from nerfaug.health import Health
 
 
 def propose(run: Path, request: ProposalRequest, out: Path, device: str, force: bool, threads: int) -> None:
@@ -34,6 +35,8 @@ def propose(run: Path, request: ProposalRequest, out: Path, device: str, force: 
     )
     for name, a, e in zip(proposal.names, proposal.azimuth.tolist(), proposal.elevation.tolist()):
         print(f"  {name}: azimuth {math.degrees(a):6.1f} deg, elevation {math.degrees(e):5.1f} deg")
+    # The health check, with how the NeRF renders poses it never trained on (a report, not a refusal).
+    print(Health.from_dict(session.state.proposals[-1].health).line())
 
 
 def export(run: Path, out: Path, format: str) -> None:

@@ -379,8 +379,9 @@ def finish_run(
         save_view_uncertainty(folder, trained, data.test, config.selection, seed)
         timing["view_uncertainty"] = time.perf_counter() - start
     # Whether the NeRF learned its views at all: a run that rendered background only is kept in its
-    # cell (it is what the method got) and counted on the study's page.
-    health = model_health(trained.model, trained.train_views)
+    # cell (it is what the method got) and counted on the study's page. The test views, never
+    # trained on, are the untrained poses it reports on.
+    health = model_health(trained.model, trained.train_views, untrained=data.test.cameras)
     timing["total"] = sum(timing.values())
 
     write_selection(

@@ -214,7 +214,9 @@ async def propose(session_id: str, request: ProposalRequest, hub: Hub):
     def choose(session):
         proposal = session.propose(request)
         session.save()
-        return proposal.transforms()
+        answer = proposal.transforms()
+        answer["nerfaug"]["health"] = session.state.proposals[-1].health  # the check, untrained poses included
+        return answer
 
     return await done(hub.submit(session_id, choose))
 
