@@ -7,7 +7,6 @@ imported only where the device is resolved.
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated
@@ -15,6 +14,7 @@ from typing import Annotated
 import tyro
 
 from nerfaug.device_choice import Device
+from nerfaug.experiment.fingerprints import defaults_of, engine_record, surviving
 from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
 from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
 from nerfaug.registry import Presets
@@ -33,6 +33,15 @@ from nerfaug.selection.families import (  # noqa: F401 (re-exported)
 
 # The paper lowers the field's learning rate for these scenes "for model stability when adding data".
 LOW_FIELD_LR_SCENES = {"chair": 0.002, "materials": 0.002}
+
+
+# The fields no run's fingerprint holds: which runs a sweep makes, and what a run saves beside its
+# numbers. Every other field is fingerprinted, a field added later only when it differs from its
+# neutral value (`nerfaug.experiment.fingerprints`).
+NOT_FINGERPRINTED = frozenset({"scenes", "methods", "trials", "save_renders", "view_uncertainty", "hemisphere_map"})
+# Fingerprinted in another form: the device by its kind, `batch` by the engine version it chooses,
+# the selection options and the engine by each of their settings.
+_FINGERPRINTED_AS = frozenset({"device", "batch", "selection"})
 
 
 @dataclass
@@ -111,45 +120,32 @@ class ExperimentConfig:
 
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     """options of the selection methods (every one fingerprinted); a method's own settings apply over them."""
-    # Fingerprinted when set: compiled kernels round differently.
+    # Fingerprinted when set (set apart from the default, off): compiled kernels round differently.
     compile: Annotated[str | None, tyro.conf.arg(metavar="BACKEND", help_behavior_hint="(default: off)")] = None
     """a torch.compile backend for the engine's networks ("inductor", on a GPU); off: plain PyTorch."""
 
     def fingerprinted(self) -> dict:
         """The settings that change a run's numbers; results made under others are not mixed.
 
-        Flat, so a refusal names the setting: the protocol's settings by name, every
-        `SelectionConfig` field as "selection.<field>", and the engine preset's complete
-        `NerfConfig` as "engine.<field>" ("engine" keeps the preset's name; per-scene overrides
-        are "field_lr"). Values are as JSON stores them (tuples become lists), so a setting read
-        back from sweep.json compares equal to the same setting in code.
+        Flat, so a refusal names the setting: the protocol's settings by name (every field but
+        `NOT_FINGERPRINTED`; the device by its kind; trial batches as "engine_version"), every
+        `SelectionConfig` field as "selection.<field>", and the engine preset's `NerfConfig` as
+        "engine.<flat name>" ("engine" keeps the preset's name; per-scene overrides are
+        "field_lr"). A setting added since fingerprint version 1 is left out at its neutral value
+        (`nerfaug.experiment.fingerprints`), so adding one moves no recorded fingerprint. Values
+        are as JSON stores them (tuples become lists), so a setting read back from sweep.json
+        compares equal to the same setting in code.
         """
-        keep = (
-            "seed",
-            "engine",
-            "resolution",
-            "steps",
-            "add_at_step",
-            "n_new",
-            "n_initial",
-            "pool",
-            "n_test",
-            "render_samples",
-            "field_lr",
-            "threads_per_run",
-        )
         from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
 
-        record = {k: getattr(self, k) for k in keep} | {"device": device_kind(self.device)}
-        if self.compile is not None:  # absent by default, so results made before it stay valid
-            record["compile"] = self.compile
-        if self.layouts != 1:  # likewise: one layout is what every earlier result ran
-            record["layouts"] = self.layouts
-        if self.batched():  # likewise: the reference engine is what every earlier result ran
-            record["engine_version"] = BATCH_ENGINE_VERSION
+        own = [f.name for f in dataclasses.fields(self) if f.name not in NOT_FINGERPRINTED | _FINGERPRINTED_AS]
+        record = {name: getattr(self, name) for name in own} | {"device": device_kind(self.device)}
+        # The reference engine (None) is what every run before trial batches ran.
+        record["engine_version"] = BATCH_ENGINE_VERSION if self.batched() else None
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
-        record.update({f"engine.{k}": v for k, v in NerfConfig.preset(self.engine).flat().items()})
-        return json.loads(json.dumps(record, default=str))
+        defaults = defaults_of(type(self)) | {"engine_version": None}
+        defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
+        return surviving(record, defaults) | engine_record(NerfConfig.preset(self.engine))
 
     def batched(self) -> bool:
         """Whether runs train as trial batches: `batch` > 1, or 0 (auto) on a GPU with an engine

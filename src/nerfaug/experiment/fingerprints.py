@@ -1,0 +1,116 @@
+"""Which settings a run's fingerprint hashes: the rule under which a new setting moves no recorded
+fingerprint.
+
+A run's fingerprint (`store.fingerprint` of `ExperimentConfig.fingerprinted`, with its method's
+definition: `store.run_fingerprint`) sets apart results that were computed differently. Hashing
+every setting there is would make each new one, even one whose default computes exactly what the
+code computed before it existed, move the fingerprint of every recorded run: each new setting
+would be a decision about the recorded studies. The rule:
+
+- The settings of fingerprint version 1 (`VERSION_1`: the protocol's, every `SelectionConfig`
+  field and every engine setting that existed when the rule was set) are hashed at every value,
+  as every run recorded before the rule hashed them.
+- Every other setting, the engine version among them, is hashed only when it differs from its
+  neutral value: the value under which a run computes what it computed before the setting
+  existed. That is the setting's default, unless `NEUTRAL` declares another (a setting whose
+  default changes the numbers, e.g. a new kernel on by default, is hashed at that default).
+
+So a setting added with a neutral default moves no recorded fingerprint, and a run that sets it
+otherwise is never mixed with those that did not. A change of arithmetic that no setting names
+is a new engine version (`nerf.config.BATCH_ENGINE_VERSION` is one): recorded runs keep theirs.
+
+Light: no torch (`nerfaug run --help` imports `experiment.config`, which imports this).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from types import MappingProxyType
+from typing import Any
+
+from nerfaug.nerf.config import NerfConfig
+
+_PROTOCOL_1 = (
+    "seed engine resolution steps add_at_step n_new n_initial pool n_test render_samples field_lr threads_per_run "
+    "device"
+)
+_SELECTION_1 = (
+    "entropy_resolution entropy_mode normalisation entropy_weight distance_weight metric scale_m sampler "
+    "authors_threshold max_draws fisher_method fisher_train_pixels fisher_train_chunk fisher_train_probes "
+    "fisher_resolution fisher_probes fisher_lambda fisher_cache_floats chunk background scoring_fov scoring_crop "
+    "min_polar entropy_max_polar distance_rotations temperature sharpness batch_entropy_sigma"
+)
+_ENGINE_1 = (
+    "near far box_half_size encoding hash_levels hash_features_per_level hash_log2_table_size hash_base_resolution "
+    "hash_max_resolution plane_resolutions plane_features hidden_dim geo_feat_dim color_hidden_dim color_layers "
+    "sh_levels density_activation average_init_density sampler num_samples transmittance_eps occupancy_resolution "
+    "occupancy_update_every occupancy_warmup_steps occupancy_ema_decay occupancy_threshold occupancy_update_fraction "
+    "proposal_samples proposal_hash_levels proposal_max_resolutions proposal_log2_table_size proposal_hidden_dim "
+    "proposal_anneal_steps proposal_anneal_slope interlevel_loss_mult distortion_loss_mult proposal_update_every "
+    "proposal_warmup_steps batch_size field_lr lr lr_final lr_decay_steps adam_eps background_mode random_background "
+    "render_chunk"
+)
+
+VERSION_1 = frozenset(
+    [*_PROTOCOL_1.split()]
+    + [f"selection.{name}" for name in _SELECTION_1.split()]
+    + [f"engine.{name}" for name in _ENGINE_1.split()]
+)
+"""The settings hashed at every value, by their names in a fingerprint's record: those every run
+recorded before this rule hashed. Frozen: a setting added since is not named here. (`compile`,
+`layouts` and `engine_version` were already left out at their neutral values, by hand.)"""
+
+NEUTRAL: MappingProxyType[str, Any] = MappingProxyType({})
+"""Settings outside `VERSION_1` whose neutral value is not their default, by their names in a
+fingerprint's record ("selection.NAME", "engine.FLAT_NAME", a protocol field's name) -> the value
+under which runs compute what they computed before the setting existed. None so far: every setting
+added since version 1 defaults to its neutral value."""
+
+
+def as_stored(value: Any) -> Any:
+    """`value` as JSON stores it (tuples become lists), so that a setting read back from sweep.json
+    compares equal to the same setting in code."""
+    return json.loads(json.dumps(value, default=str))
+
+
+def defaults_of(cls: type) -> dict[str, Any]:
+    """The default of each field of the dataclass `cls` that has one, by name."""
+    found = {}
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            found[f.name] = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            found[f.name] = f.default_factory()
+    return found
+
+
+def surviving(settings: dict[str, Any], defaults: dict[str, Any]) -> dict[str, Any]:
+    """The settings a fingerprint hashes: `settings` (every setting that changes a run's numbers,
+    by its name in the record) as JSON stores them, without those outside `VERSION_1` that equal
+    their neutral value (`NEUTRAL`, else their entry in `defaults`). A setting with neither is kept.
+
+    Equal means the same JSON text, so a setting is left out only when hashing it would hash its
+    neutral value: 1 and 1.0, or 0 and false, are not taken for each other.
+    """
+    stored = as_stored(settings)
+    neutral = as_stored({**defaults, **NEUTRAL})
+    return {
+        name: value
+        for name, value in stored.items()
+        if name in VERSION_1 or name not in neutral or _text(value) != _text(neutral[name])
+    }
+
+
+def engine_record(engine: NerfConfig) -> dict[str, Any]:
+    """The settings of `engine` a fingerprint hashes, as "engine.FLAT_NAME" (`NerfConfig.flat`); the
+    neutral value of a setting outside `VERSION_1` is its default in `NerfConfig()`."""
+    return surviving(_engine_names(engine.flat()), _engine_names(NerfConfig().flat()))
+
+
+def _engine_names(flat: dict[str, Any]) -> dict[str, Any]:
+    return {f"engine.{name}": value for name, value in flat.items()}
+
+
+def _text(value: Any) -> str:
+    return json.dumps(value, sort_keys=True)
