@@ -26,6 +26,7 @@ import math
 import tempfile
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from time import monotonic
 
@@ -82,7 +83,7 @@ from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format
 from nerfaug.data.interface import DatasetSplit, NewFrame
 from nerfaug.data.views import Views
-from nerfaug.data.world_frame import estimate_hemisphere, pole_tilt_degrees
+from nerfaug.data.world_frame import TILTED_POLE_DEGREES, estimate_hemisphere, pole_is_estimated, pole_tilt_degrees
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.health import EmptyModel, EmptyModelWarning, Health, model_health
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
@@ -94,9 +95,15 @@ from nerfaug.selection import select_views
 CHUNK_STEPS = 10  # training steps between looks at the clock and at `stop`
 
 
-# Beyond this, the default pole cannot be the capture's up: an upright ring of cameras, even on
-# one side of the object and looking down steeply, keeps its mean up axis closer to the world's.
-TILTED_POLE_DEGREES = 60.0
+def pole_settings(settings: SessionSettings, source: DatasetSplit, cameras: Cameras | None = None) -> SessionSettings:
+    """`settings` with `estimate_up` decided for a session on `source`: as given, else on where the
+    dataset's format records no up direction and no --up is given (`pole_is_estimated`).
+    `cameras`: the split's, when loaded already."""
+    if settings.estimate_up is not None:
+        return settings
+    cameras = source.load(lazy=True).cameras if cameras is None else cameras
+    estimate = settings.up is None and pole_is_estimated(cameras.camera_to_world, source.format.z_up)
+    return replace(settings, estimate_up=estimate)
 
 
 class CaptureSession(SessionFolder):
@@ -192,14 +199,15 @@ class CaptureSession(SessionFolder):
             raise ValueError(
                 f"downscale must be at most the image size ({cameras.width}x{cameras.height}), got {settings.downscale}"
             )
-        up = "estimate" if settings.estimate_up else settings.up
+        settings = pole_settings(settings, source, cameras)
+        up = "estimate" if settings.estimate_up else (settings.up or (0.0, 0.0, 1.0))
         hemisphere = estimate_hemisphere(cameras.camera_to_world, settings.centre, settings.radius, up)
         tilt = None if settings.estimate_up else pole_tilt_degrees(cameras.camera_to_world, hemisphere.up)
         if tilt is not None and tilt > TILTED_POLE_DEGREES:
             warn(
                 f"{listing}: the cameras' mean up axis is {tilt:.0f} degrees from the hemisphere's pole "
-                f"(--up {words(settings.up)}), so the candidate views would lie on a tilted hemisphere; if this world "
-                "is not z-up (LLFF, COLMAP and DTU frames seldom are), create the session with --estimate-up "
+                f"(--up {words(hemisphere.up)}), so the candidate views would lie on a tilted hemisphere; if this "
+                "world is not z-up (LLFF, COLMAP and DTU frames seldom are), create the session with --estimate-up "
                 "or --up X Y Z",
                 TiltedPole,
             )

@@ -18,10 +18,10 @@ from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
 from nerfaug.capture.requests import SessionSettings, check_threads
 from nerfaug.capture.runfolder import SESSION_FILE
-from nerfaug.capture.session import CaptureSession
+from nerfaug.capture.session import CaptureSession, pole_settings
 from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint
 from nerfaug.cli.option_names import as_options, option
-from nerfaug.data import load_dataset
+from nerfaug.data import find_split, load_dataset
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.health import EmptyModelWarning
@@ -212,6 +212,8 @@ def _reached(run: Path, step: int, steps: int) -> str:
 def _refuse_other_settings(folder, data: Path | None, settings: SessionSettings, split, given, steps: int) -> None:
     """Refuse, in one line, what asks for another session than the one in `folder`
     (`SessionState.differences`)."""
+    if data is not None:  # the same `train DATA --out RUN` again: the default pole decided as on creation
+        settings = pole_settings(settings, find_split(data, split or default_split(data)[0]))
     found = folder.state.differences(settings, given, split, data)
     if found:
         named = "; ".join(
@@ -260,7 +262,9 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
             flush=True,
         )
     _lock(out, "train")
-    print(f"session created in {out}: {session.summary().views} views; hemisphere {session.hemisphere}")
+    pole = session.state.hemisphere_estimated.get("up", False)
+    said = " (up: the cameras' mean up axis; --up X Y Z gives another)" if pole else ""
+    print(f"session created in {out}: {session.summary().views} views; hemisphere {session.hemisphere}{said}")
     return session
 
 
