@@ -63,6 +63,7 @@ def test_the_readme_recipe_on_an_llff_capture_proposes_nothing_below_its_horizon
     main(["train", str(data), "--out", str(run), *initial, "--steps", "2", "--engine", "test", "--device", "cpu"])
     created = capsys.readouterr().out
     assert "up: the cameras' mean up axis" in created, "the estimated pole is not said"
+    assert created.splitlines()[0].endswith("; engine test (--engine chooses another)")  # said at the start
     main(["propose", str(run), "--n", "6", "--out", str(poses), "--allow-empty", "--device", "cpu"])
     frames = json.loads(poses.read_text())["frames"]
     assert len(frames) == 6

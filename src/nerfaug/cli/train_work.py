@@ -240,6 +240,11 @@ def _train_further(session, target: int, every_s: float, resuming: bool, logger:
     _finish(session, target - session.step, every_s, logger)
 
 
+def _engine(settings: SessionSettings) -> str:
+    """The engine a new session trains with, said at its start (`nerfaug run`'s default is another)."""
+    return f"engine {settings.engine} (--engine chooses another)"
+
+
 def _create(data: Path, out: Path, settings: SessionSettings, split: str | None, device: str, start=None):
     """A new session on `data` in `out`, after one line saying how many views it trains on and why."""
 
@@ -249,7 +254,7 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     if split is None:
         split, why = default_split(data)
     if start is None:
-        print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
+        print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}; {_engine(settings)}", flush=True)
     with warning_lines(), as_options():
         session = CaptureSession.create(
             data, out, settings, split=split, device=device_name(device), progress=True, start=start
@@ -258,7 +263,8 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
         count = session.state.start["of"]
         print(
             f"training on {start.initial} of the {count} views of {why} (layout {start.layout}: one half of the "
-            f"object); the other {count - start.initial} are the candidates `nerfaug propose` chooses from",
+            f"object); the other {count - start.initial} are the candidates `nerfaug propose` chooses from; "
+            f"{_engine(settings)}",
             flush=True,
         )
     _lock(out, "train")
