@@ -273,6 +273,9 @@ class CaptureSession(SessionFolder):
         if len(poses) != len(files):
             raise ValueError(f"poses: {len(poses)} poses for {len(files)} images; give one pose per image")
         frames = [NewFrame(f.name, f.data, f.suffix, pose) for f, pose in zip(files, poses)]
+        settings = settings or SessionSettings()
+        if settings.estimate_up is None:  # poses given in the caller's world, z-up unless it says (warned otherwise)
+            settings = replace(settings, estimate_up=False)
         with tempfile.TemporaryDirectory(prefix="nerfaug-captures-") as staging:
             data = DatasetSplit(Path(staging) / "data", get_format(EXCHANGE_FORMAT))
             data.append(frames, camera_of(intrinsics))
