@@ -370,9 +370,12 @@ class SessionSettings(Schema):
         replaced_by("+z; for LLFF and IDR/DTU captures the cameras' mean up axis", "FLOAT FLOAT FLOAT"),
     ] = None
     """the hemisphere's pole direction, world space."""
-    estimate_up: bool | None = None
-    """take the pole from the cameras' mean up axis (on) or from --up (off); default: on for formats that record
-    no up direction (LLFF, IDR/DTU; nerfstudio when its cameras are not upright in z) unless --up is given."""
+    estimate_up: Annotated[
+        bool | None,
+        tyro.conf.arg(help_behavior_hint="(default: on for LLFF and IDR/DTU captures, and nerfstudio ones not z-up)"),
+    ] = None
+    """take the pole from the cameras' mean up axis (on) or from --up, else +z (off); formats that record no up
+    direction have it on unless --up is given."""
 
     def differences(self, ours: SessionSettings, given=None) -> list[tuple[str, str, str]]:
         """The settings named in `given` (field names; every one when None) that differ from a
