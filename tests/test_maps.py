@@ -115,3 +115,46 @@ def test_the_rings_are_labelled_as_elevation_and_the_bar_says_what_the_scores_ar
     assert {"30° elev.", "60° elev.", "90° az."} <= texts
     assert figure.axes[1].get_ylabel() == label  # the colour bar
     assert "bits" in label and "rad²" in label and "no unit" in label
+
+
+def legend_labels(figure) -> list[str]:
+    return [
+        text.get_text()
+        for legend in figure.legends + [ax.get_legend() for ax in figure.axes]
+        if legend
+        for text in legend.get_texts()
+    ]
+
+
+def test_the_grey_where_no_candidate_lies_is_named_in_the_legend_and_only_then():
+    """A pool of captured views 5 to 55 degrees up leaves the disk's centre unscored: the legend
+    names that grey; candidates all over the hemisphere leave none, and the legend has no such entry."""
+    from nerfaug.maps import NO_CANDIDATE, hemisphere_map_figure, method_maps_figure
+
+    generator = torch.Generator().manual_seed(0)
+    azimuth = 2 * math.pi * torch.rand(200, generator=generator)
+    low = pose_from_angles(azimuth, torch.deg2rad(35 + 50 * torch.rand(200, generator=generator)))
+    train = half_hemisphere_poses(4)
+    assert NO_CANDIDATE in legend_labels(hemisphere_map_figure(low, torch.cos(azimuth), train))
+    assert NO_CANDIDATE in legend_labels(method_maps_figure({"ours": (torch.cos(azimuth), None)}, low, train))
+    spread, spread_azimuth, _ = candidates()
+    assert NO_CANDIDATE not in legend_labels(hemisphere_map_figure(spread, torch.cos(spread_azimuth), train))
+
+
+def test_a_method_without_scores_is_drawn_grey_not_in_a_colour_of_the_score_scale():
+    """uniform gives every candidate one score: its panel has no colour image (it was drawn a flat
+    mid-scale colour, as if it scored every view alike on the others' scale), and the legend says why."""
+    from nerfaug.maps import NO_SCORE, method_maps_figure
+
+    poses, azimuth, _ = candidates()
+    figure = method_maps_figure(
+        {"ours": (torch.cos(azimuth), poses[:2]), "uniform": (torch.ones(len(poses)), poses[2:4])},
+        poses,
+        half_hemisphere_poses(4),
+    )
+    ours, uniform = figure.axes[:2]
+    assert len(ours.images) == 1 and len(uniform.images) == 0
+    assert NO_SCORE in legend_labels(figure)
+    assert "min-max scaled per panel" in figure.axes[2].get_ylabel()  # the bar stays for the scored panel
+    alone = method_maps_figure({"uniform": (torch.zeros(len(poses)), None)}, poses, half_hemisphere_poses(4))
+    assert len(alone.axes) == 1  # no colour bar where nothing has a score

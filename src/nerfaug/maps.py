@@ -31,6 +31,12 @@ from nerfaug.registry import check_name
 PROJECTIONS = ("equal-area", "equidistant")
 _GRID = 200
 _CMAP = "inferno"
+# The disk's colour where nothing is scored: no candidate near (a region the candidates leave out,
+# such as the view from straight above when they come from a capture's own views), or a method
+# with no score at all.
+_UNSCORED = "0.85"
+NO_CANDIDATE = "grey: no candidate here, nothing scored"
+NO_SCORE = "grey: one score for every candidate, none to compare"
 
 
 def _disk_radius(polar, projection: str):
@@ -96,8 +102,20 @@ def _interpolate(xy: np.ndarray, values: np.ndarray, gx: np.ndarray, gy: np.ndar
 
 
 def _draw(
-    ax: Axes, candidate_c2w, scores, train_c2w, chosen_c2w, projection, centre, vmin=None, vmax=None, train_label=""
+    ax: Axes,
+    candidate_c2w,
+    scores,
+    train_c2w,
+    chosen_c2w,
+    projection,
+    centre,
+    vmin=None,
+    vmax=None,
+    train_label="",
+    unscored: str | None = None,
 ):
+    """One map on `ax`; the image drawn (None when `unscored`: the method gave every candidate
+    one score, so the disk stays grey and the legend says why, in those words)."""
     xy = hemisphere_xy(candidate_c2w, projection, centre)
     values = np.asarray(torch.as_tensor(scores).detach().cpu().double().reshape(-1))
     if values.shape[0] != xy.shape[0]:
@@ -105,18 +123,24 @@ def _draw(
     axis = np.linspace(-1.0, 1.0, _GRID)
     gx, gy = np.meshgrid(axis, axis)
     grid = _interpolate(xy, values, gx, gy)
-    grid = np.ma.masked_where(gx**2 + gy**2 > 1.0, grid)
-    ax.add_patch(Circle((0.0, 0.0), 1.0, color="0.85", zorder=0))  # shows where no candidate lies
-    image = ax.imshow(
-        grid,
-        origin="lower",
-        extent=(-1, 1, -1, 1),
-        cmap=_CMAP,
-        interpolation="bilinear",
-        vmin=vmin,
-        vmax=vmax,
-    )
-    ax.scatter(xy[:, 0], xy[:, 1], s=1.5, c="white", alpha=0.25, linewidths=0)
+    inside = gx**2 + gy**2 <= 1.0
+    grid = np.ma.masked_where(~inside, grid)
+    ax.add_patch(Circle((0.0, 0.0), 1.0, color=_UNSCORED, zorder=0))  # shows where no candidate lies
+    if unscored is not None or (np.ma.getmaskarray(grid) & inside).any():
+        # The grey is named in the legend (a patch of no size stands for it there).
+        ax.add_patch(Circle((0.0, 0.0), 0.0, color=_UNSCORED, label=unscored or NO_CANDIDATE))
+    image = None
+    if unscored is None:
+        image = ax.imshow(
+            grid,
+            origin="lower",
+            extent=(-1, 1, -1, 1),
+            cmap=_CMAP,
+            interpolation="bilinear",
+            vmin=vmin,
+            vmax=vmax,
+        )
+    ax.scatter(xy[:, 0], xy[:, 1], s=1.5, c="white" if unscored is None else "0.5", alpha=0.25, linewidths=0)
 
     theta = np.linspace(0, 2 * math.pi, 200)
     for polar_deg in (30, 60, 90):
@@ -259,21 +283,35 @@ def plot_method_maps(
     centre=(0.0, 0.0, 0.0),
     train_label: str = "training views",
 ) -> Path:
+    """`method_maps_figure(maps, candidate_c2w, train_c2w, ...)` saved as a PNG at `path`; returns the path."""
+    return save_figure(method_maps_figure(maps, candidate_c2w, train_c2w, title, projection, centre, train_label), path)
+
+
+def method_maps_figure(
+    maps: dict,
+    candidate_c2w,
+    train_c2w,
+    title: str | None = None,
+    projection: str = "equal-area",
+    centre=(0.0, 0.0, 0.0),
+    train_label: str = "training views",
+) -> Figure:
     """One hemisphere map per method, side by side, and save them as a PNG.
 
     Each panel's scores are min-max normalised for display (methods score on different scales),
-    so colours compare where a method is uncertain, not how much.
+    so colours compare where a method is uncertain, not how much. A method that gives every
+    candidate one score (uniform) has no colours: its disk stays grey, and the legend says why;
+    grey within a scored disk is where no candidate lies.
 
     Args:
         maps: method name -> (scores (n_candidates,), chosen_c2w (n_chosen, 4, 4) or None).
         candidate_c2w: Tensor or array with shape (n_candidates, 4, 4), shared by all methods.
         train_c2w: Tensor or array with shape (n_training, 4, 4).
-        path: PNG file to write.
         title: a title over all panels.
         projection, centre, train_label: as in `plot_hemisphere_map`.
 
     Returns:
-        The path written.
+        The Figure (a bare matplotlib Figure, no pyplot state).
     """
     if not maps:
         raise ValueError("no methods to draw")
@@ -285,23 +323,36 @@ def plot_method_maps(
         values = torch.as_tensor(np.asarray(scores) if not torch.is_tensor(scores) else scores).double()
         span = values.max() - values.min()
         shown = (values - values.min()) / span if span > 0 else torch.full_like(values, 0.5)
-        image = _draw(
-            ax, candidate_c2w, shown, train_c2w, chosen, projection, centre, vmin=0.0, vmax=1.0, train_label=train_label
+        # One score for every candidate (uniform's): no colour on a scale of scores it does not have.
+        drawn = _draw(
+            ax,
+            candidate_c2w,
+            shown,
+            train_c2w,
+            chosen,
+            projection,
+            centre,
+            vmin=0.0,
+            vmax=1.0,
+            train_label=train_label,
+            unscored=None if span > 0 else NO_SCORE,
         )
+        image = drawn if drawn is not None else image
         ax.set_title(name, fontsize=10)
     limit = max(ax.get_xlim()[1] for ax in axes[0])  # one scale, so the panels' disks match
     for ax in axes[0]:
         ax.set_xlim(-limit, limit)
         ax.set_ylim(-limit, limit)
-    handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
-    fig.colorbar(
-        image,
-        ax=list(axes[0]),
-        fraction=0.02,
-        pad=0.01,
-        label="each method's own score,\nmin-max scaled per panel (no unit)",
-    )
+    legend = {label: handle for ax in axes[0] for handle, label in zip(*ax.get_legend_handles_labels())}
+    fig.legend(legend.values(), legend.keys(), loc="lower center", ncol=2, fontsize=8, frameon=False)
+    if image is not None:
+        fig.colorbar(
+            image,
+            ax=list(axes[0]),
+            fraction=0.02,
+            pad=0.01,
+            label="each method's own score,\nmin-max scaled per panel (no unit)",
+        )
     if title:
         fig.suptitle(title)
-    return save_figure(fig, path)
+    return fig

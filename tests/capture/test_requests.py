@@ -59,7 +59,9 @@ def test_session_settings_out_of_range_name_the_field_and_value(fields, says):
 def test_session_settings_defaults_and_conversions():
     settings = SessionSettings(centre=[1, 2, 3], radius=2).checked()
     assert settings == SessionSettings(centre=(1.0, 2.0, 3.0), radius=2.0)
-    assert (settings.engine, settings.seed, settings.downscale, settings.up) == ("nerfacto-cpu", 0, 1, (0.0, 0.0, 1.0))
+    # No pole and no --estimate-up: the dataset's format decides (+z, or the cameras' up where it records none).
+    assert (settings.engine, settings.seed, settings.downscale) == ("nerfacto-cpu", 0, 1)
+    assert (settings.up, settings.estimate_up) == (None, None)
 
 
 @pytest.mark.parametrize(
@@ -205,7 +207,7 @@ def test_a_session_json_saved_before_digests_still_loads():
 def test_the_settings_a_session_was_made_with():
     state = SessionState.from_dict(json.loads(OLD_SESSION.read_text()), OLD_SESSION)
     ours = state.settings()
-    assert ours == SessionSettings(engine="test", seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0))
+    assert ours == SessionSettings(engine="test", seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0), estimate_up=False)
     asked = SessionSettings(engine="cpu", seed=7, centre=(0, 0, 0), radius=None, estimate_up=True)
     assert asked.differences(ours, {"engine", "seed", "centre", "radius", "up", "estimate_up"}) == [
         ("engine", "cpu", "test"),

@@ -64,6 +64,9 @@ def test_the_size_line_says_runs_resolution_and_that_it_is_an_estimate(two_cores
     assert line.startswith("nerfaug run: 20 runs (1 scene x 4 methods x 5 trials, 2 already finished), 100x100 pixels")
     assert "18 to run: about " in line and "on this device (cpu, 2 runs at a time on 2 cores)" in line
     assert "estimate" in line and "\n" not in line
+    assert "800 steps each with the cpu engine; 18 to run" in line  # `nerfaug train`'s default engine is another
+    study = size_line("nerfaug study", {("cpu", "none"): 2, ("nerfacto-cpu", "none"): 2}, 0, "2 engines", QUICK, 2)
+    assert "with the cpu and nerfacto-cpu engines; " in study
     # Two workers halve the time of many runs; more workers than cores do not go faster.
     runs = {("cpu", "none"): 40}
     one, two, four = (estimate(runs, QUICK, workers)[0] for workers in (1, 2, 4))

@@ -407,3 +407,51 @@ def test_the_training_curves_draw_each_named_loss(report):
     below = figure.axes[len(figure.axes) // 2]
     assert [line.get_label() for line in below.lines[:3]] == ["rgb", "distortion", "interlevel"]
     assert below.get_yscale() == "log" and "loss" in below.get_ylabel()
+
+
+def test_the_report_opens_with_one_plain_verdict_naming_the_engine(report):
+    """The first thing under the title, in the Markdown and the HTML: the engine, and ours against
+    each baseline on each scene, computed (lego: ours 21 vs uniform 14 and entropy 17.5; chair:
+    25.5 vs 19.5 and 22.5); three trials a side cannot support a difference after the correction."""
+    _, _, markdown, html = report
+    first = markdown.split("\n\n")[1]
+    engine = config().engine
+    assert first.startswith(f"**Verdict** (engine {engine}): on lego, ours vs uniform: +7.00 dB median PSNR, 95% CI")
+    for said in ("ours vs entropy: +3.50 dB", "on chair, ours vs uniform: +6.00 dB", "ours vs entropy: +3.00 dB"):
+        assert said in first
+    assert first.count("not supported: too few trials to support any difference (3 vs 3)") == 4
+    assert "\n" not in first and "significant" not in first
+    body = html.split("<body", 1)[1]
+    assert body.index("Verdict") < body.index("<table") and f"(engine {engine})" in body
+
+
+def test_the_verdict_says_supported_or_not_and_the_smallest_difference_the_run_could_see():
+    from nerfaug.report.sections import _comparison_words
+    from nerfaug.statistics import bootstrap_median_difference
+
+    rng = np.random.default_rng(0)
+    baseline = list(20 + rng.normal(0, 1, 10))
+    close, far = [v + 0.1 for v in baseline[::-1]], [v + 5 for v in baseline]
+    d = bootstrap_median_difference(close, baseline)
+    line = _comparison_words(close, baseline, "ours", "uniform", 3)
+    assert line.startswith(f"ours vs uniform: {d['difference']:+.2f} dB median PSNR, 95% CI {d['low']:+.2f} to ")
+    assert ", not supported (p x 3 = " in line
+    assert f"differences under about {(d['high'] - d['low']) / 2:.2f} dB, half the CI's width" in line
+    assert ", better: supported (p x 3 = " in _comparison_words(far, baseline, "ours", "uniform", 3)
+    assert ", worse: supported (p = " in _comparison_words(baseline, far, "ours", "uniform", 1)
+
+
+def test_the_loss_panel_pools_every_method_and_wears_no_methods_colour(report):
+    from matplotlib.colors import to_rgb
+
+    from nerfaug.report import collect_results
+    from nerfaug.report.figures import method_colours, training_curves_figure
+
+    root, _, _, _ = report
+    results = collect_results(root)
+    figure = training_curves_figure(results)
+    below = figure.axes[len(figure.axes) // 2]
+    methods = {tuple(round(c, 3) for c in to_rgb(colour)) for colour in method_colours(results.methods).values()}
+    drawn = {tuple(round(c, 3) for c in to_rgb(line.get_color())) for line in below.lines[:3]}
+    assert not drawn & methods, "a loss curve is drawn in a method's colour"
+    assert "every method's runs pooled" in below.get_legend().get_title().get_text()

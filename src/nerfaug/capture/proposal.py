@@ -22,6 +22,7 @@ from nerfaug.data.frames import check_pose
 from nerfaug.data.world_frame import Hemisphere
 from nerfaug.errors import FolderRefused
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
+from nerfaug.selection.separation import view_directions
 
 
 def proposal_seed(seed: int, number: int) -> int:
@@ -149,6 +150,26 @@ class Proposal:
         data["nerfaug"]["frames_sha256"] = frames_digest(data["frames"])
         atomic_write_json(path, data)
         return path
+
+
+def nearest_training_views(proposal: Proposal, training: Cameras, names: list[str]) -> list[tuple[str, float]]:
+    """Each proposed view's nearest training view and the angle to it, degrees about the
+    hemisphere's centre: the selection methods keep a proposal's views apart from one another
+    (`min_separation`), never from the views trained on, so one may lie beside a training view.
+
+    Args:
+        proposal: its poses (n, 4, 4), world frame.
+        training: the training cameras, engine frame (the session's trainer's).
+        names: one per training camera.
+
+    Returns:
+        n (name, degrees) pairs, in the proposal's order.
+    """
+    proposed = view_directions(proposal.hemisphere.to_engine(proposal.poses))
+    trained = view_directions(training.camera_to_world)
+    angles = torch.rad2deg(torch.arccos((proposed @ trained.T).clamp(-1.0, 1.0)))  # (n, n_train)
+    nearest = angles.min(dim=1)
+    return [(names[int(i)], float(a)) for a, i in zip(nearest.values, nearest.indices)]
 
 
 def frames_digest(frames: list) -> str:

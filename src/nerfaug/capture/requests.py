@@ -365,10 +365,17 @@ class SessionSettings(Schema):
     """the hemisphere's centre, world space."""
     radius: Annotated[Radius | None, replaced_by("the cameras' mean distance to the centre", "FLOAT")] = None
     """the hemisphere's radius, world units (within 1000x of the cameras' distance to the centre)."""
-    up: Annotated[Vector, AfterValidator(_direction), tyro.conf.arg(metavar="FLOAT FLOAT FLOAT")] = (0.0, 0.0, 1.0)
-    """the hemisphere's pole direction, world space (the world is z-up by default)."""
-    estimate_up: bool = False
-    """take the pole from the cameras' mean up axis instead of --up (for LLFF, COLMAP or DTU captures, seldom z-up)."""
+    up: Annotated[
+        Annotated[Vector, AfterValidator(_direction)] | None,
+        replaced_by("+z; for LLFF and IDR/DTU captures the cameras' mean up axis", "FLOAT FLOAT FLOAT"),
+    ] = None
+    """the hemisphere's pole direction, world space."""
+    estimate_up: Annotated[
+        bool | None,
+        tyro.conf.arg(help_behavior_hint="(default: on for LLFF and IDR/DTU captures, and nerfstudio ones not z-up)"),
+    ] = None
+    """take the pole from the cameras' mean up axis (on) or from --up, else +z (off); formats that record no up
+    direction have it on unless --up is given."""
 
     def differences(self, ours: SessionSettings, given=None) -> list[tuple[str, str, str]]:
         """The settings named in `given` (field names; every one when None) that differ from a
@@ -383,8 +390,10 @@ class SessionSettings(Schema):
             if f.name not in given or (f.name == "up" and self._up_skipped(ours, given)):
                 continue
             mine, theirs = getattr(self, f.name), getattr(ours, f.name)
-            if f.name == "up" and not ours.estimate_up and _close(_unit(mine), _unit(theirs)):
-                continue
+            if f.name == "up" and (mine is None or (not ours.estimate_up and _close(_unit(mine), _unit(theirs)))):
+                continue  # no pole asked for (None: the format's), or the session's own
+            if f.name == "estimate_up" and mine is None:
+                continue  # the default follows the dataset's format, which the session took already
             if f.name != "up" and _close(mine, theirs):
                 continue
             asked = "not given, so estimated" if mine is None else _words(mine, f.name, self)

@@ -26,6 +26,7 @@ import math
 import tempfile
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from time import monotonic
 
@@ -77,12 +78,13 @@ from nerfaug.capture.state import (
     TiltedPole,
     new_state,
     now,
+    pole_settings,
 )
 from nerfaug.capture.uncertainty_images import ViewMaps, view_maps
 from nerfaug.data.formats import EXCHANGE_FORMAT, FORMATS, find_split, get_format
 from nerfaug.data.interface import DatasetSplit, NewFrame
 from nerfaug.data.views import Views
-from nerfaug.data.world_frame import estimate_hemisphere, pole_tilt_degrees
+from nerfaug.data.world_frame import TILTED_POLE_DEGREES, estimate_hemisphere, pole_tilt_degrees
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.health import EmptyModel, EmptyModelWarning, Health, model_health
 from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
@@ -92,11 +94,6 @@ from nerfaug.progress import progress_bar
 from nerfaug.selection import select_views
 
 CHUNK_STEPS = 10  # training steps between looks at the clock and at `stop`
-
-
-# Beyond this, the default pole cannot be the capture's up: an upright ring of cameras, even on
-# one side of the object and looking down steeply, keeps its mean up axis closer to the world's.
-TILTED_POLE_DEGREES = 60.0
 
 
 class CaptureSession(SessionFolder):
@@ -192,14 +189,15 @@ class CaptureSession(SessionFolder):
             raise ValueError(
                 f"downscale must be at most the image size ({cameras.width}x{cameras.height}), got {settings.downscale}"
             )
-        up = "estimate" if settings.estimate_up else settings.up
+        settings = pole_settings(settings, source, cameras)
+        up = "estimate" if settings.estimate_up else (settings.up or (0.0, 0.0, 1.0))
         hemisphere = estimate_hemisphere(cameras.camera_to_world, settings.centre, settings.radius, up)
         tilt = None if settings.estimate_up else pole_tilt_degrees(cameras.camera_to_world, hemisphere.up)
         if tilt is not None and tilt > TILTED_POLE_DEGREES:
             warn(
                 f"{listing}: the cameras' mean up axis is {tilt:.0f} degrees from the hemisphere's pole "
-                f"(--up {words(settings.up)}), so the candidate views would lie on a tilted hemisphere; if this world "
-                "is not z-up (LLFF, COLMAP and DTU frames seldom are), create the session with --estimate-up "
+                f"(--up {words(hemisphere.up)}), so the candidate views would lie on a tilted hemisphere; if this "
+                "world is not z-up (LLFF, COLMAP and DTU frames seldom are), create the session with --estimate-up "
                 "or --up X Y Z",
                 TiltedPole,
             )
@@ -265,6 +263,9 @@ class CaptureSession(SessionFolder):
         if len(poses) != len(files):
             raise ValueError(f"poses: {len(poses)} poses for {len(files)} images; give one pose per image")
         frames = [NewFrame(f.name, f.data, f.suffix, pose) for f, pose in zip(files, poses)]
+        settings = settings or SessionSettings()
+        if settings.estimate_up is None:  # poses given in the caller's world, z-up unless it says (warned otherwise)
+            settings = replace(settings, estimate_up=False)
         with tempfile.TemporaryDirectory(prefix="nerfaug-captures-") as staging:
             data = DatasetSplit(Path(staging) / "data", get_format(EXCHANGE_FORMAT))
             data.append(frames, camera_of(intrinsics))

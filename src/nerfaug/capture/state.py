@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import datetime
 import json
+from dataclasses import replace
 from pathlib import Path, PurePosixPath
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 from pydantic import (
     AfterValidator,
@@ -35,9 +36,12 @@ from nerfaug.capture.dataset import default_split
 from nerfaug.capture.requests import Downscale, Intrinsics, RequestError, Seed, SessionSettings
 from nerfaug.capture.runfolder import DATASET_SPLIT, SESSION_FILE
 from nerfaug.data.formats import FORMATS, plainest_format
-from nerfaug.data.interface import Format
-from nerfaug.data.world_frame import Hemisphere
+from nerfaug.data.interface import DatasetSplit, Format
+from nerfaug.data.world_frame import Hemisphere, pole_is_estimated
 from nerfaug.errors import NerfaugError
+
+if TYPE_CHECKING:  # cameras bring torch; the state is read without it
+    from nerfaug.cameras import Cameras
 
 SESSION_FORMAT = 2
 
@@ -363,3 +367,14 @@ def new_state(origin: SourceInfo, source, cameras, settings: SessionSettings, en
             "up": settings.estimate_up,
         },
     )
+
+
+def pole_settings(settings: SessionSettings, source: DatasetSplit, cameras: Cameras | None = None) -> SessionSettings:
+    """`settings` with `estimate_up` decided for a session on `source`: as given, else on where the
+    dataset's format records no up direction and no --up is given (`pole_is_estimated`).
+    `cameras`: the split's, when loaded already."""
+    if settings.estimate_up is not None:
+        return settings
+    cameras = source.load(lazy=True).cameras if cameras is None else cameras
+    estimate = settings.up is None and pole_is_estimated(cameras.camera_to_world, source.format.z_up)
+    return replace(settings, estimate_up=estimate)

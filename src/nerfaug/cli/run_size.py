@@ -160,9 +160,11 @@ def size_line(
     to_do = sum(runs.values())
     done = f", {finished} already finished" if finished else ""
     side = config.resolution
+    names = sorted({engine for engine, _ in runs}) or [config.engine]  # said: `nerfaug train`'s default differs
+    engines = " and ".join(names)
     line = (
-        f"{what}: {to_do + finished} runs ({shape}{done}), {side}x{side} pixels, {config.steps} steps each; "
-        f"{to_do} to run: {when}"
+        f"{what}: {to_do + finished} runs ({shape}{done}), {side}x{side} pixels, {config.steps} steps each "
+        f"with the {engines} engine{'s' if len(names) > 1 else ''}; {to_do} to run: {when}"
     )
     if render is not None and render[0]:
         line += (

@@ -11,12 +11,16 @@ from pathlib import Path
 
 from nerfaug.capture.evaluate import check_evaluation_out, trained_on_count, write_evaluation
 from nerfaug.capture.folder import SessionFolder
-from nerfaug.capture.proposal import check_poses_out
-from nerfaug.capture.proposal_request import ProposalRequest
+from nerfaug.capture.proposal import check_poses_out, nearest_training_views
+from nerfaug.capture.proposal_request import DEFAULT_MIN_SEPARATION, ProposalRequest
 from nerfaug.capture.simulate import render_proposals as simulated_capture
 from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train_work import configure, open_session, warning_lines
 from nerfaug.health import Health
+
+# A proposed view closer than this to a training view (degrees about the hemisphere's centre) sees
+# nearly the same image: the default --min-separation between two proposed views.
+BESIDE_DEGREES = DEFAULT_MIN_SEPARATION
 
 
 def propose(run: Path, request: ProposalRequest, out: Path, device: str, force: bool, threads: int) -> None:
@@ -33,8 +37,21 @@ def propose(run: Path, request: ProposalRequest, out: Path, device: str, force: 
         f"proposal {proposal.number} ({proposal.method}, model at step {proposal.step}): {path} (angles in "
         f"radians), map {path.with_suffix('.png')}"
     )
-    for name, a, e in zip(proposal.names, proposal.azimuth.tolist(), proposal.elevation.tolist()):
-        print(f"  {name}: azimuth {math.degrees(a):6.1f} deg, elevation {math.degrees(e):5.1f} deg")
+    trained = session.trainer.train_views
+    nearest = nearest_training_views(proposal, trained.cameras, [Path(n).stem for n in trained.names])
+    angles = zip(proposal.names, proposal.azimuth.tolist(), proposal.elevation.tolist(), nearest)
+    for name, a, e, (near, angle) in angles:
+        print(
+            f"  {name}: azimuth {math.degrees(a):6.1f} deg, elevation {math.degrees(e):5.1f} deg (from the "
+            f"horizon, + up); nearest training view {near}, {angle:.1f} deg away"
+        )
+    beside = [name for name, (_, angle) in zip(proposal.names, nearest) if angle < BESIDE_DEGREES]
+    if beside:
+        print(
+            f"  {len(beside)} of {len(proposal)} views lie within {BESIDE_DEGREES:g} deg of a training view "
+            f"({', '.join(beside)}): they add little new. The selection keeps proposed views apart from one "
+            "another (--min-separation), not from the views trained on"
+        )
     # The health check, with how the NeRF renders poses it never trained on (a report, not a refusal).
     print(Health.from_dict(session.state.proposals[-1].health).line())
 

@@ -18,10 +18,10 @@ from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
 from nerfaug.capture.requests import SessionSettings, check_threads
 from nerfaug.capture.runfolder import SESSION_FILE
-from nerfaug.capture.session import CaptureSession
+from nerfaug.capture.session import CaptureSession, pole_settings
 from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint
 from nerfaug.cli.option_names import as_options, option
-from nerfaug.data import load_dataset
+from nerfaug.data import find_split, load_dataset
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.health import EmptyModelWarning
@@ -212,6 +212,8 @@ def _reached(run: Path, step: int, steps: int) -> str:
 def _refuse_other_settings(folder, data: Path | None, settings: SessionSettings, split, given, steps: int) -> None:
     """Refuse, in one line, what asks for another session than the one in `folder`
     (`SessionState.differences`)."""
+    if data is not None:  # the same `train DATA --out RUN` again: the default pole decided as on creation
+        settings = pole_settings(settings, find_split(data, split or default_split(data)[0]))
     found = folder.state.differences(settings, given, split, data)
     if found:
         named = "; ".join(
@@ -238,6 +240,11 @@ def _train_further(session, target: int, every_s: float, resuming: bool, logger:
     _finish(session, target - session.step, every_s, logger)
 
 
+def _engine(settings: SessionSettings) -> str:
+    """The engine a new session trains with, said at its start (`nerfaug run`'s default is another)."""
+    return f"engine {settings.engine} (--engine chooses another)"
+
+
 def _create(data: Path, out: Path, settings: SessionSettings, split: str | None, device: str, start=None):
     """A new session on `data` in `out`, after one line saying how many views it trains on and why."""
 
@@ -247,7 +254,7 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     if split is None:
         split, why = default_split(data)
     if start is None:
-        print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
+        print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}; {_engine(settings)}", flush=True)
     with warning_lines(), as_options():
         session = CaptureSession.create(
             data, out, settings, split=split, device=device_name(device), progress=True, start=start
@@ -256,11 +263,14 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
         count = session.state.start["of"]
         print(
             f"training on {start.initial} of the {count} views of {why} (layout {start.layout}: one half of the "
-            f"object); the other {count - start.initial} are the candidates `nerfaug propose` chooses from",
+            f"object); the other {count - start.initial} are the candidates `nerfaug propose` chooses from; "
+            f"{_engine(settings)}",
             flush=True,
         )
     _lock(out, "train")
-    print(f"session created in {out}: {session.summary().views} views; hemisphere {session.hemisphere}")
+    pole = session.state.hemisphere_estimated.get("up", False)
+    said = " (up: the cameras' mean up axis; --up X Y Z gives another)" if pole else ""
+    print(f"session created in {out}: {session.summary().views} views; hemisphere {session.hemisphere}{said}")
     return session
 
 

@@ -70,6 +70,7 @@ class IdrFormat(CapturedSetFormat):
     """IDR / NeuS (DTU): `cameras_sphere.npz` with the images of `image/` in name order, masks in `mask/`."""
 
     name = "idr"
+    z_up = False
     fits_rule = "any pinhole cameras"
     listing_name, images, masks = LISTING, IMAGE_FOLDERS[0], MASKS
     camera_keys = ("K",)  # each frame's, as `read_listing` gives it: a copy into this format keeps them

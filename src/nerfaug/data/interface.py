@@ -56,6 +56,10 @@ class Format(ABC):
             copied into the same format.
         png_only: whether the format's readers take PNG images only (others become PNG).
         has_splits: whether a folder holds several splits (False: one listing every split reads).
+        z_up: whether the format's world is z-up: True by its convention (NeRF-synthetic), False
+            where it records no up direction (LLFF, IDR/DTU: photogrammetry frames), None where
+            listings of both kinds are common (nerfstudio). A session's pole, when none is given,
+            follows it (`nerfaug.data.world_frame.pole_is_estimated`).
     """
 
     name: ClassVar[str]
@@ -63,6 +67,7 @@ class Format(ABC):
     camera_keys: ClassVar[tuple[str, ...]] = ()
     png_only: ClassVar[bool] = False
     has_splits: ClassVar[bool] = True
+    z_up: ClassVar[bool | None] = True
 
     def __repr__(self) -> str:
         return f"<{self.name} format>"

@@ -118,6 +118,7 @@ class LlffFormat(CapturedSetFormat):
     """LLFF: `poses_bounds.npy` listing the images of `images/` in name order; masks in `masks/`."""
 
     name = "llff"
+    z_up = False
     fits_rule = "square pixels and the principal point at the image centre"
     listing_name, images, masks = LISTING, IMAGES, MASKS
     camera_keys = ("hwf", "bounds")  # each frame's, as `read_listing` gives them: a copy into this format keeps them

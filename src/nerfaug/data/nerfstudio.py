@@ -164,6 +164,7 @@ class NerfstudioFormat(Format):
     """nerfstudio / instant-ngp: one `transforms.json` for every split, images in `images/`."""
 
     name = "nerfstudio"
+    z_up = None
     fits_rule = "any pinhole cameras, intrinsics per frame"
     camera_keys = CAMERA_KEYS
     has_splits = False

@@ -100,6 +100,34 @@ def pole_tilt_degrees(camera_to_world: Tensor, up) -> float | None:
     return math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
 
 
+# A pole farther than this from the cameras' mean up axis leaves the candidate views on a tilted
+# hemisphere, much of it below the capture's horizon.
+TILTED_POLE_DEGREES = 60.0
+
+
+def pole_is_estimated(camera_to_world: Tensor, z_up: bool | None) -> bool:
+    """Whether a capture's pole, when none is given, is the cameras' mean up axis (`estimate_up`)
+    rather than world +z: where the dataset's format records no up direction (`z_up` False: LLFF,
+    IDR/DTU), and where it may or may not (`z_up` None: nerfstudio) when +z lies more than
+    `TILTED_POLE_DEGREES` from the cameras' mean up axis. Never where the cameras' up axes cancel
+    out (no up to estimate: +z stays).
+
+    Args:
+        camera_to_world: Tensor with shape (n, 4, 4).
+        z_up: the format's `Format.z_up`.
+
+    Example:
+        >>> from nerfaug.hemisphere import half_hemisphere_poses
+        >>> upright = half_hemisphere_poses(6)
+        >>> pole_is_estimated(upright, True), pole_is_estimated(upright, None), pole_is_estimated(upright, False)
+        (False, False, True)
+    """
+    tilt = pole_tilt_degrees(camera_to_world, (0.0, 0.0, 1.0))
+    if tilt is None or z_up:
+        return False
+    return z_up is False or tilt > TILTED_POLE_DEGREES
+
+
 def plain_number(value: float, decimals: int = 4) -> str:
     """`value` rounded to `decimals` places as a person writes it: no "-0", no exponent for the
     float noise of a zero (6.95e-08 -> "0").

@@ -36,12 +36,14 @@ from nerfaug.report.sections import (
     table_i_section,
     table_ii_section,
     timing_section,
+    verdict_section,
 )
 from nerfaug.report.view_uncertainty import view_uncertainty_section
 
 
 def build_report(results: Results, figures: Figures, paper: PaperTables) -> list[Block]:
-    blocks = header_section(results) + summary_section(results)
+    blocks = header_section(results)
+    blocks = blocks[:1] + verdict_section(results) + blocks[1:] + summary_section(results)
     for scene in results.scenes:
         blocks += scene_section(results, scene, figures.boxplots.get(scene))
     blocks += table_i_section(results, paper) + table_ii_section(results, paper)

@@ -328,6 +328,7 @@ def training_curves_figure(results: Results):
 
 
 LOSS_STYLES = {"rgb": "-", "distortion": "--", "interlevel": ":"}
+LOSS_GREYS = ("0.1", "0.4", "0.6")
 
 
 def _draw_losses(ax, named: dict[str, list], add_at) -> None:
@@ -337,7 +338,8 @@ def _draw_losses(ax, named: dict[str, list], add_at) -> None:
     for i, name in enumerate(order):
         series = named[name]
         grid, median, q1, q3 = _median_curve(series)
-        colour = f"C{i}"
+        # Greys, told apart by line style: a method's colour here would claim a curve that pools them all.
+        colour = LOSS_GREYS[i % len(LOSS_GREYS)]
         ax.plot(grid, median, color=colour, linestyle=LOSS_STYLES.get(name, "-"), label=name, linewidth=1.4)
         ax.fill_between(grid, q1, q3, color=colour, alpha=0.15, linewidth=0)
     ax.set_yscale("log")
@@ -345,7 +347,7 @@ def _draw_losses(ax, named: dict[str, list], add_at) -> None:
     ax.set_xlabel("step")
     if add_at is not None:
         ax.axvline(add_at, color="0.3", linestyle="--", linewidth=1)
-    ax.legend(fontsize=8, frameon=False)
+    ax.legend(fontsize=8, frameon=False, title="every method's runs pooled", title_fontsize=8)
     ax.grid(alpha=0.3)
 
 

@@ -257,6 +257,49 @@ def scene_section(results: Results, scene: str, boxplots: Path | None) -> list[B
     return blocks
 
 
+def _comparison_words(x, y, ours: str, baseline: str, n_comparisons: int) -> str:
+    """ours against one baseline in plain words, computed: "ours vs uniform: +0.30 dB median
+    PSNR, 95% CI -0.47 to +0.67, not supported (p x 3 = 0.41; differences under about 0.57 dB,
+    half the CI's width, are beyond this run)"."""
+    c = compare(x, y, n_comparisons, higher_is_better=True)
+    d = bootstrap_median_difference(x, y)
+    text = f"{ours} vs {baseline}: {d['difference']:+.2f} dB median PSNR"
+    text += ", 95% CI n/a" if math.isnan(d["low"]) else f", 95% CI {d['low']:+.2f} to {d['high']:+.2f}"
+    tested = f"p = {p_value(c['p_value'])}"
+    if n_comparisons > 1:
+        tested = f"p x {n_comparisons} = {p_value(c['p_bonferroni'])}"
+    if c["significant"]:
+        return f"{text}, {'better' if c['better'] else 'worse'}: supported ({tested})"
+    if c["too_small"]:
+        return f"{text}, not supported: too few trials to support any difference ({c['n_ours']} vs {c['n_baseline']})"
+    if math.isnan(d["low"]):
+        return f"{text}, not supported ({tested})"
+    # Half the interval's width: the smallest difference this run's spread lets it see.
+    seen = (d["high"] - d["low"]) / 2
+    beyond = f"differences under about {seen:.2f} dB, half the CI's width, are beyond this run"
+    return f"{text}, not supported ({tested}; {beyond})"
+
+
+def verdict_section(results: Results) -> list[Block]:
+    """The report's first line: the engine and what comparing ours with each baseline found on
+    each scene (median PSNR), computed from the runs, in plain words."""
+    engine = results.config.get("engine", "?")
+    ours, parts = results.ours, []
+    for scene in results.scenes:
+        x = results.values(scene, ours, "psnr") if ours else []
+        found = [
+            _comparison_words(x, y, ours, baseline, max(1, len(results.baselines)))
+            for baseline in results.baselines
+            if x and (y := results.values(scene, baseline, "psnr"))
+        ]
+        if found:
+            where = f"on {scene}, " if len(results.scenes) > 1 else ""
+            parts.append(where + "; ".join(found))
+    if not parts:
+        return [Paragraph(f"**Verdict** (engine {engine}): no comparison: no runs of both {ours} and a baseline.")]
+    return [Paragraph(f"**Verdict** (engine {engine}): " + "; ".join(parts) + ".")]
+
+
 def summary_section(results: Results) -> list[Block]:
     """One line per scene: the difference of median PSNR to each baseline in dB, with its CI."""
     ours, items = results.ours, []
@@ -459,7 +502,9 @@ def figure_sections(results: Results, figures: Figures) -> list[Block]:
                 "Each method's scores over the candidate views (its first trial), seen from above: "
                 "the centre is straight above the object, the rim the horizon; bright = uncertain "
                 "(min-max normalised per panel). Triangles: the initial views; stars: the views "
-                "the method chose."
+                "the method chose. Grey: no candidate lies there, so nothing was scored (a pool of "
+                "captured views seldom holds one from straight above), or, over a whole panel, a "
+                "method such as uniform that gives every candidate the same score."
             )
         )
     for scene, paths in figures.maps.items():
