@@ -249,7 +249,8 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     if split is None:
         split, why = default_split(data)
     if start is None:
-        print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}", flush=True)
+        count = len(load_dataset(data, split, lazy=True))
+        print(f"training on {count} view{'s' * (count != 1)}: {why}", flush=True)
     try:
         with warning_lines(), as_options():
             session = CaptureSession.create(
