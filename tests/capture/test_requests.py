@@ -207,7 +207,9 @@ def test_a_session_json_saved_before_digests_still_loads():
 def test_the_settings_a_session_was_made_with():
     state = SessionState.from_dict(json.loads(OLD_SESSION.read_text()), OLD_SESSION)
     ours = state.settings()
-    assert ours == SessionSettings(engine="test", seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0), estimate_up=False)
+    assert ours == SessionSettings(
+        engine="test", seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0), estimate_up=False
+    )
     asked = SessionSettings(engine="cpu", seed=7, centre=(0, 0, 0), radius=None, estimate_up=True)
     assert asked.differences(ours, {"engine", "seed", "centre", "radius", "up", "estimate_up"}) == [
         ("engine", "cpu", "test"),

@@ -176,7 +176,7 @@ def test_every_help_speaks_the_users_words_and_each_option_name_means_one_thing(
         for word in INTERNAL:
             assert word not in text, (command, word)
     # --engine is a NeRF engine preset wherever it appears, with the same names.
-    engines = {c: re.search(r"--engine \{([^}]*)\}", t) for c, t in helps.items() if "--engine " in t}
+    engines = {c: re.search(r"--engine \{([^}]*)\}", t) for c, t in helps.items() if "--engine {" in t}
     assert {"run", "train"} <= set(engines)
     assert len({m.group(1) for m in engines.values()}) == 1
     # --preset is an experiment's protocol (run, study), never an engine preset.
@@ -192,6 +192,7 @@ EVERY_COMMAND = [
     "study",
     "report",
     "methods",
+    "engines",
     "propose",
     "export",
     "eval",
@@ -284,3 +285,80 @@ def test_an_engine_preset_is_offered_without_none_and_a_typo_gets_the_closest_na
     error = " ".join(capsys.readouterr().err.replace("│", " ").split())
     assert "'None'" not in error and "None," not in error
     assert "unknown engine preset 'papr'; did you mean 'paper'? choose one of: paper, cpu, nerfacto-cpu, test" in error
+
+
+ENGINE_HELP = "--engine.GROUP.SETTING VALUE (e.g. --engine.field.hidden-dim 32); `nerfaug engines` lists them."
+
+
+@pytest.mark.parametrize("command", ["train", "run", "study", "serve"])
+def test_an_engine_commands_help_names_the_engine_settings_in_one_line_and_lists_none(capsys, monkeypatch, command):
+    text = help_text([command], capsys, monkeypatch)
+    assert ENGINE_HELP in text, text
+    options = [line for line in text.splitlines() if line.strip("│ ").startswith("--engine.")]
+    assert options == [], options
+    if command in ("train", "run"):
+        assert re.search(r"--engine \{", text)  # the engine's name stays an option of its own
+
+
+def engines_text(capsys, monkeypatch) -> str:
+    monkeypatch.setenv("COLUMNS", "400")
+    main(["engines"])
+    return capsys.readouterr().out
+
+
+def test_nerfaug_engines_lists_every_engine_and_every_setting_with_its_help(capsys, monkeypatch):
+    from nerfaug.nerf.config import FLAT_NAMES, PRESETS
+
+    text = engines_text(capsys, monkeypatch)
+    assert all(name in text.splitlines()[0] for name in PRESETS)
+    listed = set(re.findall(r"(--engine\.[\w.-]+) ", text))
+    assert listed == {"--engine." + ".".join(path).replace("_", "-") for path in FLAT_NAMES.values()}
+    assert "--engine.field.hidden-dim INT" in text and "density MLP width" in text
+
+
+def test_every_setting_nerfaug_engines_lists_is_accepted_wherever_it_stands(capsys, monkeypatch):
+    """Each listed setting, given the paper engine's own value, reads back as that value, with the
+    command's other arguments before, between and after the settings left to the command."""
+    from nerfaug.cli.engine_options import engine_settings_given, split_engine_options
+    from nerfaug.nerf.config import FLAT_NAMES, PRESETS
+
+    paper, words, others, expected = PRESETS["paper"].flat(), [], [], {}
+    for at, (flat, path) in enumerate(FLAT_NAMES.items()):
+        value = paper[flat]
+        many = isinstance(value, tuple)
+        words += ["--engine." + ".".join(path).replace("_", "-"), *(str(v) for v in (value if many else [value]))]
+        expected[flat] = value
+        # After it, now and then, an option of the command, or a positional word (not after a list,
+        # which takes every word up to the next option, as the parser always has).
+        after = ["--steps", str(at)] if at % 3 == 0 else [f"WORD{at}"] if at % 3 == 1 and not many else []
+        words, others = words + after, others + after
+    settings, rest = split_engine_options(["DATA", *words])
+    assert rest == ["DATA", *others]
+    assert engine_settings_given(settings, "nerfaug train") == expected
+
+
+def test_split_engine_options_takes_one_value_or_a_list_and_leaves_the_rest_in_order():
+    from nerfaug.cli.engine_options import split_engine_options
+
+    args = ["--engine.field.hidden-dim=32", "DATA", "--engine.optimiser.lr", "-0.5", "--engine", "paper"]
+    assert split_engine_options(args) == (
+        ["--engine.field.hidden-dim=32", "--engine.optimiser.lr", "-0.5"],
+        ["DATA", "--engine", "paper"],
+    )
+    listed = ["--engine.sampler.proposal.samples", "64", "32", "--out", "RUN"]
+    assert split_engine_options(listed) == (listed[:3], ["--out", "RUN"])
+    assert split_engine_options(["--engine.no.such", "3", "DATA"]) == (["--engine.no.such", "3"], ["DATA"])
+    after = ["--", "--engine.field.hidden-dim", "3"]  # positional words
+    assert split_engine_options(after) == ([], after)
+
+
+@pytest.mark.parametrize("command", ["train", "run", "study", "serve"])
+def test_an_engine_commands_help_builds_neither_the_settings_form_nor_a_validator(command):
+    """What made `--help` slow, kept out of it: the engine settings' form (its help reads every
+    setting's docstring) and pydantic's validator of the engine; each is built when a command runs."""
+    done = help_in_a_fresh_process(
+        [command],
+        "(sys.modules.get('nerfaug.nerf.engine_form') is not None, "
+        "__import__('nerfaug.schema').schema.adapter.cache_info().currsize)",
+    )
+    assert done.stdout.strip().splitlines()[-1] == "(False, 0)", done.stdout[-300:]

@@ -13,13 +13,13 @@ import tyro
 from nerfaug.nerf.config import (
     FLAT_NAMES,
     PRESETS,
-    EngineSettings,
     NerfConfig,
     ProposalConfig,
     SceneConfig,
     parse_variant,
     variant_name,
 )
+from nerfaug.nerf.engine_form import EngineSettings
 
 OLD_SESSION = Path(__file__).parents[1] / "capture" / "data" / "session_v1.json"
 

@@ -6,6 +6,7 @@ nerfaug run --preset quick --out results/quick  the paper's experiment, then its
 nerfaug report results/quick                    (re)write report.md and report.html
 nerfaug study --out results/study               which method wins where, on which engine
 nerfaug methods                                 list the view-selection methods
+nerfaug engines                                 list the NeRF engines and their settings
 nerfaug train DATA --out RUN --steps N          active capture: train on what you have (until step N),
 nerfaug propose RUN --n 6 --out poses.json      ask where to look next,
 nerfaug add RUN --images DIR --poses poses.json add what you captured, and go on training
@@ -20,6 +21,8 @@ nerfaug serve --root SESSIONS                   the same over HTTP, for a robot 
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import importlib
 import inspect
 import os
@@ -32,6 +35,7 @@ from dataclasses import dataclass
 
 import tyro
 
+from nerfaug.cli.engine_options import ENGINE_COMMANDS, engine_settings_given, split_engine_options
 from nerfaug.errors import NerfaugError
 from nerfaug.registry import unknown
 
@@ -44,6 +48,7 @@ COMMANDS = {
     "run": "nerfaug.cli.run:Run",
     "report": "nerfaug.cli.run:report",
     "methods": "nerfaug.cli.run:methods",
+    "engines": "nerfaug.cli.engine_options:engines",
     "study": "nerfaug.cli.study:Study",
     "train": "nerfaug.cli.train:train",
     "propose": "nerfaug.cli.session:propose",
@@ -211,9 +216,16 @@ def _dispatch(argv: list[str]) -> None:
         return
     if argv and argv[0] in COMMANDS:  # only this command's module is imported
         _check_renamed(argv)
-        target = command(argv[0])
-        parsed = parse(target, argv[1:], f"nerfaug {argv[0]}")
+        target, prog, args = command(argv[0]), f"nerfaug {argv[0]}", argv[1:]
+        if argv[0] in ENGINE_COMMANDS:  # --engine.GROUP.SETTING: read apart (`nerfaug.cli.engine_options`)
+            settings, args = split_engine_options(args)
+            given = {} if wants_help(argv) else engine_settings_given(settings, prog)
+            if not isinstance(target, type):
+                target = functools.partial(target, engine_settings=given)
+        parsed = parse(target, args, prog)
         if isinstance(target, type):  # a command's options as a dataclass: run them
+            if argv[0] in ENGINE_COMMANDS:
+                parsed = dataclasses.replace(parsed, engine_settings=given)
             parsed()
         return
     if argv and argv[0] not in ("-h", "--help"):

@@ -17,7 +17,6 @@ import tyro
 
 from nerfaug.cli.option_names import engine_variant
 from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig, PresetName
-from nerfaug.nerf.config import EngineOptions, EngineSettings
 from nerfaug.registry import Presets
 
 DEFAULT_PRESET = "quick"
@@ -37,6 +36,9 @@ class Run:
     The protocol's options start from the preset's values (`nerfaug run --preset paper --help`
     shows the paper's); those given change them.
 
+    Any setting of the engine is an option too, over the engine's own value:
+    --engine.GROUP.SETTING VALUE (e.g. --engine.field.hidden-dim 32); `nerfaug engines` lists them.
+
     Args:
         out: results folder.
         preset: the experiment's protocol, which the other options change: quick (lego at 100x100
@@ -51,9 +53,9 @@ class Run:
         force: move the runs already in --out aside (into OUT/superseded/, nothing is deleted) and
             redo every run; needed when OUT's sweep.json is missing or its settings differ.
         report: write report.md / report.html at the end.
-        engine_settings: any setting of the engine, over those of --engine (e.g.
-            --engine.field.hidden-dim 32): the runs' engine is then the variant that changes them
-            ("cpu+hidden_dim=32"), recorded and fingerprinted as such.
+        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
+            these options, `nerfaug.cli.engine_options`): the runs' engine is then the variant
+            that changes them ("cpu+hidden_dim=32"), recorded and fingerprinted as such.
     """
 
     PRESETS: ClassVar[Presets[ExperimentConfig]] = PROTOCOL_PRESETS
@@ -69,7 +71,7 @@ class Run:
     address: Address = None
     force: bool = False
     report: bool = True
-    engine_settings: EngineOptions = field(default_factory=EngineSettings)
+    engine_settings: tyro.conf.Suppress[dict] = field(default_factory=dict)
 
     @classmethod
     def from_preset(cls, name: str) -> Run:
@@ -80,7 +82,7 @@ class Run:
         from nerfaug.cli import run_work  # torch: here, so that `nerfaug run --help` loads none
 
         protocol = self.protocol
-        if given := self.engine_settings.given():
+        if given := self.engine_settings:
             protocol = protocol.replace(engine=engine_variant(protocol.engine, given))
         run_work.run(
             protocol,

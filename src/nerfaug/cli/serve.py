@@ -15,6 +15,8 @@ import sys
 from pathlib import Path
 from typing import Annotated
 
+import tyro
+
 from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
     check_checkpoint_every,
@@ -23,7 +25,7 @@ from nerfaug.capture.requests import (
 )
 from nerfaug.cli.option_names import as_options, engine_refusal
 from nerfaug.device_choice import Device
-from nerfaug.nerf.config import PRESETS, EngineOptions, EngineSettings, variant_name
+from nerfaug.nerf.config import PRESETS, variant_name
 
 TOKEN_ENV = "NERFAUG_TOKEN"
 
@@ -47,7 +49,7 @@ def serve(
     checkpoint_every: float = CHECKPOINT_EVERY_S,
     threads: int = 1,
     max_upload_mb: float = 25.0,
-    engine_settings: EngineOptions = EngineSettings(),  # noqa: B008 -- read-only: nothing given
+    engine_settings: tyro.conf.Suppress[dict | None] = None,
 ) -> None:
     """Serve capture sessions over HTTP (JSON): create sessions, add captures, train in the
     background, propose reachable views, and uncertainty images of any pose. The API and its
@@ -55,6 +57,9 @@ def serve(
 
     Each session is a folder under --root that `nerfaug train/propose/add ROOT/ID` also open.
     Stopped or killed, the service resumes every session, and its training, from its last save.
+
+    Any setting of the engine is an option too, over the engine's own value:
+    --engine.GROUP.SETTING VALUE (e.g. --engine.field.hidden-dim 32); `nerfaug engines` lists them.
 
     Args:
         root: the folder holding the sessions (and datasets sessions may start from).
@@ -66,12 +71,13 @@ def serve(
         checkpoint_every: save a training session after this many seconds (and when a job ends).
         threads: torch threads for training.
         max_upload_mb: the largest image file accepted, in MB.
-        engine_settings: any engine setting (e.g. --engine.field.hidden-dim 32), over those of the
-            engine each new session asks for: its engine is then the variant that changes them.
+        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
+            these options), over those of the engine each new session asks for: its engine is then
+            the variant that changes them.
     """
     token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
     _check_serve(root, host, port, token, checkpoint_every, threads, max_upload_mb)
-    engine = engine_settings.given()
+    engine = engine_settings or {}
     _check_engine_settings(engine)
     from nerfaug.cli import serve_work  # torch: here, so that `nerfaug serve --help` loads none
 

@@ -13,7 +13,6 @@ import tyro
 
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig
 from nerfaug.experiment.study_spec import DEFAULT_PRESET, StudySpec
-from nerfaug.nerf.config import EngineOptions, EngineSettings
 from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
 
@@ -33,6 +32,9 @@ class Study(StudySpec):
     with a bootstrap 95% CI and a Wilcoxon signed-rank test, per engine a test with one value per
     seed, PSNR/SSIM/LPIPS, and the coverage of the chosen views.
 
+    Any setting of the engine is an option too, over the engine's own value:
+    --engine.GROUP.SETTING VALUE (e.g. --engine.field.hidden-dim 32); `nerfaug engines` lists them.
+
     Args:
         workers: concurrent runs.
         force: discard existing runs and redo them.
@@ -47,8 +49,9 @@ class Study(StudySpec):
         selection: options of the selection methods (every one is part of the runs' fingerprint;
             left at the preset's, they change nothing); a method's own settings (e.g.
             ours-authors') apply over them.
-        engine_settings: any engine setting, over those of every engine the study runs (e.g.
-            --engine.field.hidden-dim 32): each engine is then the variant that changes it.
+        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
+            these options), over those of every engine the study runs: each engine is then the
+            variant that changes them.
     """
 
     PRESETS: ClassVar[Presets[ExperimentConfig]] = STUDY_PRESETS
@@ -60,7 +63,7 @@ class Study(StudySpec):
     hypotheses: Literal["auto", "procedural", "real", "gpu", "none"] = "auto"
     budget_s: BudgetSeconds = None
     selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
-    engine_settings: EngineOptions = field(default_factory=EngineSettings)
+    engine_settings: tyro.conf.Suppress[dict] = field(default_factory=dict)
 
     @classmethod
     def from_preset(cls, name: str) -> Study:
@@ -81,5 +84,5 @@ class Study(StudySpec):
             results_doc=self.results_doc,
             hypotheses=self.hypotheses,
             budget_s=self.budget_s,
-            engine_settings=self.engine_settings.given(),
+            engine_settings=self.engine_settings,
         )

@@ -29,7 +29,6 @@ from nerfaug.capture.requests import (
 )
 from nerfaug.cli.option_names import as_options, checked, engine_variant
 from nerfaug.device_choice import Device
-from nerfaug.nerf.config import EngineOptions, EngineSettings
 from nerfaug.training_log import Logger, LoggerUnavailable, require
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
@@ -54,10 +53,10 @@ def _check_training(steps: int, checkpoint_every: float, logger: Logger) -> None
         raise SystemExit(str(error)) from None
 
 
-def with_engine_settings(settings: GivenSettings, engine: EngineSettings) -> GivenSettings:
-    """`settings` whose engine is --engine (or the default) with the --engine.GROUP.SETTING given
-    changed: one engine name, a variant such as "paper+hidden_dim=32", which the session records."""
-    given = engine.given()
+def with_engine_settings(settings: GivenSettings, given: dict | None) -> GivenSettings:
+    """`settings` whose engine is --engine (or the default) with the --engine.GROUP.SETTING `given`
+    (flat name -> value) changed: one engine name, a variant such as "paper+hidden_dim=32", which
+    the session records."""
     if not given:
         return settings  # the engine's name is checked with the other settings (`checked`)
     # Before anything is read: an unknown setting, or a value out of its bounds, is one line naming it.
@@ -78,7 +77,7 @@ def train(
     initial: Annotated[int | None, replaced_by("every view of the split", "INT")] = None,
     layout: int = 0,
     logger: Logger = "none",
-    engine_settings: EngineOptions = EngineSettings(),  # noqa: B008 -- read-only: nothing given
+    engine_settings: tyro.conf.Suppress[dict | None] = None,
 ) -> None:
     """Train a capture session until step --steps: start it on a dataset, resume it, or train it further.
 
@@ -87,6 +86,9 @@ def train(
     again (after Ctrl-C, a crash or a kill) and it resumes from the last save, saying from which
     step; once the session is at step N it only says so. `nerfaug train RUN --steps N` trains an
     existing session until step N: give a larger N to train further.
+
+    Any setting of the engine is an option too, over the engine's own value:
+    --engine.GROUP.SETTING VALUE (e.g. --engine.field.hidden-dim 32); `nerfaug engines` lists them.
 
     Args:
         path: a dataset folder (Blender: transforms_{split}.json; nerfstudio: transforms.json, lens
@@ -108,9 +110,9 @@ def train(
         logger: "tensorboard": also write each loss as TensorBoard scalars into RUN/tensorboard
             while training (`tensorboard --logdir RUN/tensorboard`; needs `pip install
             'nerfaug[tensorboard]'`).
-        engine_settings: any setting of the engine, over those of --engine (e.g.
-            --engine.field.hidden-dim 32); the session's engine is then named by the settings it
-            changes ("nerfacto-cpu+hidden_dim=32").
+        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
+            these options, `nerfaug.cli.engine_options`): the session's engine is then named by
+            the settings it changes ("nerfacto-cpu+hidden_dim=32").
     """
     _check_training(steps, checkpoint_every, logger)
     settings = with_engine_settings(settings, engine_settings)

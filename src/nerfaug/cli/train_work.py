@@ -18,10 +18,11 @@ from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
 from nerfaug.capture.requests import SessionSettings, check_threads
 from nerfaug.capture.runfolder import SESSION_FILE
-from nerfaug.capture.session import CaptureSession, pole_settings
-from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint
+from nerfaug.capture.session import CaptureSession
+from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint, pole_settings
 from nerfaug.cli.option_names import as_options, option
 from nerfaug.data import find_split, load_dataset
+from nerfaug.data.world_frame import TooFewCameras
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.health import EmptyModelWarning
@@ -254,11 +255,19 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     if split is None:
         split, why = default_split(data)
     if start is None:
-        print(f"training on {len(load_dataset(data, split, lazy=True))} views: {why}; {_engine(settings)}", flush=True)
-    with warning_lines(), as_options():
-        session = CaptureSession.create(
-            data, out, settings, split=split, device=device_name(device), progress=True, start=start
-        )
+        count = len(load_dataset(data, split, lazy=True))
+        print(f"training on {count} view{'s' * (count != 1)}: {why}; {_engine(settings)}", flush=True)
+    try:
+        with warning_lines(), as_options():
+            session = CaptureSession.create(
+                data, out, settings, split=split, device=device_name(device), progress=True, start=start
+            )
+    except TooFewCameras as error:
+        listing = find_split(data, split).listing
+        raise ValueError(
+            f"{listing}: {error.count} view{'s' * (error.count != 1)}, and estimating the hemisphere's centre needs "
+            "at least 2: capture at least 2 views, or give --centre X Y Z and --radius R"
+        ) from None
     if start is not None:  # said once the start is found possible (a refused one says only why)
         count = session.state.start["of"]
         print(

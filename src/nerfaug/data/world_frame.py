@@ -27,6 +27,17 @@ from nerfaug.hemisphere import BLENDER_RADIUS, angles_from_pose
 ENGINE_RADIUS = BLENDER_RADIUS
 
 
+class TooFewCameras(ValueError):
+    """Fewer cameras than `estimate_centre` needs (2); `count` is how many there are."""
+
+    def __init__(self, count: int):
+        self.count = count
+        super().__init__(
+            f"estimating the hemisphere's centre needs at least 2 cameras, got {count}: capture at least 2 views, "
+            "or give the centre and radius"
+        )
+
+
 def estimate_centre(camera_to_world: Tensor) -> Tensor:
     """The point closest, in least squares, to every camera's optical axis.
 
@@ -40,8 +51,8 @@ def estimate_centre(camera_to_world: Tensor) -> Tensor:
         Tensor with shape (3,), float64, world space.
 
     Raises:
-        ValueError: fewer than two cameras, or optical axes (nearly) parallel, so no single point
-            is looked at.
+        TooFewCameras: fewer than two cameras.
+        ValueError: optical axes (nearly) parallel, so no single point is looked at.
 
     Example:
         >>> from nerfaug.hemisphere import half_hemisphere_poses
@@ -50,7 +61,7 @@ def estimate_centre(camera_to_world: Tensor) -> Tensor:
     """
     poses = torch.as_tensor(camera_to_world).double().reshape(-1, 4, 4)
     if poses.shape[0] < 2:
-        raise ValueError(f"estimating the centre needs at least 2 cameras, got {poses.shape[0]}")
+        raise TooFewCameras(poses.shape[0])
     origins = poses[:, :3, 3]
     directions = -poses[:, :3, 2]
     directions = directions / directions.norm(dim=-1, keepdim=True)

@@ -63,11 +63,16 @@ def split_captured(camera_to_world: Tensor, n_test: int, n_initial: int, layout:
     The test views (at most one in `CAPTURED_TEST_SHARE`, and `n_test`) are chosen before, and
     regardless of, the layout, so every layout is scored on the same views.
     """
+    views = len(camera_to_world)
+    count = min(n_test, views // CAPTURED_TEST_SHARE)
+    if count < 1:  # said before the hemisphere is estimated, which needs 2 of them
+        raise ValueError(
+            f"a captured set of {views} view{'s' * (views != 1)} is too small to keep test views apart (one in "
+            f"{CAPTURED_TEST_SHARE}): capture at least {CAPTURED_TEST_SHARE} views, more for the initial and "
+            "candidate views"
+        )
     hemisphere = estimate_hemisphere(camera_to_world, up="estimate")
     engine = hemisphere.to_engine(camera_to_world)
-    count = min(n_test, len(engine) // CAPTURED_TEST_SHARE)
-    if count < 1:
-        raise ValueError(f"a captured set of {len(engine)} views is too small to keep test views apart")
     test = sorted(farthest_directions(directions_of(engine), count))
     rest = [i for i in range(len(engine)) if i not in set(test)]
     azimuth, _, _ = angles_from_pose(engine)

@@ -26,9 +26,8 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Annotated, Any, ClassVar, Literal, get_args, get_origin, get_type_hints
+from typing import Annotated, Any, ClassVar, Literal, get_type_hints
 
-import tyro
 from annotated_types import Ge, Gt, Le, Lt, MinLen
 
 from nerfaug.registry import Presets, lookup, unknown
@@ -455,7 +454,13 @@ PRESETS: Presets[NerfConfig] = Presets(
 
 # A named variant is a preset with some settings changed. Each is pinned by digest like the
 # presets (tests/nerf/test_presets.py); the study compares a variant with its base cell by cell.
-PRESETS["nerfacto-cpu-last-sample"] = PRESETS["nerfacto-cpu"].with_settings(background_mode="last_sample")
+# Changed by `replace`, not `with_settings`, whose check builds the settings' validator at import
+# (a quarter of a command's `--help`); each preset is checked by reading it back
+# (tests/nerf/test_config.py).
+_NERFACTO = PRESETS["nerfacto-cpu"]
+PRESETS["nerfacto-cpu-last-sample"] = dataclasses.replace(
+    _NERFACTO, renderer=dataclasses.replace(_NERFACTO.renderer, background_mode="last_sample")
+)
 
 VARIANT_SEPARATOR = "+"
 
@@ -546,55 +551,3 @@ def variant_name(engine: str, settings: dict[str, Any]) -> str:
 
 EnginePreset = PRESETS.name_type()
 """The preset names as a type, for a CLI (tyro) to offer and check."""
-
-
-def _given_form(cls: type, path: tuple[str, ...] = ()) -> type:
-    """A frozen dataclass with `cls`'s fields, each leaf None unless given, for tyro to read.
-
-    Hand-written because tyro's own ways to override a preset's fields (subcommands per preset,
-    `tyro.extras.overridable_config_cli`) choose the preset by a positional subcommand, and every
-    command here takes it as `--engine NAME`: the form below lets `--engine.field.hidden-dim 32`
-    sit beside `--engine NAME` in any order and on any command, tyro parsing and checking each value.
-    """
-    from tyro._docstrings import get_field_docstring  # the settings' docstrings as their help
-
-    hints, form = get_type_hints(cls), []
-    for f in fields(cls):
-        kind = hints[f.name]
-        if is_dataclass(kind):
-            sub = _given_form(kind, (*path, f.name))
-            form.append((f.name, sub, field(default_factory=sub)))
-            continue
-        help_text = " ".join((get_field_docstring(cls, f.name, ()) or "").split())
-        marks = tyro.conf.arg(help=help_text, metavar=_metavar(kind), help_behavior_hint="(default: the engine's)")
-        form.append((f.name, Annotated[kind | None, marks], None))  # type: ignore[valid-type]
-    namespace = {"__doc__": cls.__doc__}
-    if not path:
-        namespace["given"] = _given_settings
-    return dataclasses.make_dataclass(f"Given{cls.__name__}", form, frozen=True, namespace=namespace)
-
-
-def _metavar(kind: Any) -> str:
-    """How `--help` writes a value of type `kind`: INT, FLOAT, STR, {a,b}, INT [INT ...]."""
-    if kind is bool:
-        return "{True,False}"
-    if get_origin(kind) is Literal:
-        return "{" + ",".join(get_args(kind)) + "}"
-    if get_origin(kind) is tuple:
-        one = _metavar(get_args(kind)[0])
-        return f"{one} [{one} ...]"
-    return {int: "INT", float: "FLOAT"}.get(kind, "STR")
-
-
-def _given_settings(form: Any) -> dict[str, Any]:
-    """flat name -> value of every setting given in `form` (an `EngineSettings`)."""
-    return {flat: value for flat, path in FLAT_NAMES.items() if (value := _get(form, path)) is not None}
-
-
-EngineSettings = _given_form(NerfConfig)
-"""The engine's settings as options of a command (`--engine.field.hidden-dim 32`), each None unless
-given; `EngineSettings().given()` are those given, by flat name, for `variant_name`."""
-
-EngineOptions = Annotated[EngineSettings, tyro.conf.arg(name="engine")]  # type: ignore[valid-type]
-"""`EngineSettings` as a command's options, named under --engine (beside `--engine NAME`), the same
-on every command that trains (train, run, study, serve)."""

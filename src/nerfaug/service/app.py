@@ -45,9 +45,18 @@ from nerfaug.capture.requests import Poses
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.uncertainty_images import figure_bytes, npz_bytes
 from nerfaug.errors import NerfaugError
-from nerfaug.schema import UNKNOWN_FIELD, RequestError
+from nerfaug.schema import UNKNOWN_FIELD
 from nerfaug.service import models
-from nerfaug.service.errors import ServiceError, bad_input, field_line, headers_of, public_text, status_of
+from nerfaug.service.errors import (
+    ServiceError,
+    bad_input,
+    field_line,
+    headers_of,
+    meant,
+    problems_line,
+    public_text,
+    status_of,
+)
 from nerfaug.service.hub import SessionHub
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
 from nerfaug.service.uploads import form_json, read_uploads
@@ -72,7 +81,7 @@ async def known_fields_only(request: Request) -> None:
         known |= _names(taken, "body_params")
     for name in sent:
         if name not in known:
-            raise bad_input(field_line(name, UNKNOWN_FIELD))
+            raise bad_input(field_line(name, UNKNOWN_FIELD + meant(name, sorted(known))))
 
 
 def _names(dependant, kind: str) -> set[str]:
@@ -84,19 +93,10 @@ def _names(dependant, kind: str) -> set[str]:
 router = APIRouter(dependencies=[Depends(known_fields_only)])
 
 
-def validation_line(errors: list[dict]) -> str:
-    """Pydantic's errors as one line: the first error's field, message and value."""
-    first = RequestError.of(errors[0])
-    more = len(errors) - 1
-    return field_line(first.argument, first.problem, first.value) + (
-        f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
-    )
-
-
 def _answer(request: Request, error: Exception) -> JSONResponse:
     """A library error as its HTTP status and one line (`status_of`)."""
     if isinstance(error, ValidationError):
-        return JSONResponse({"detail": validation_line(error.errors())}, 422)
+        return JSONResponse({"detail": problems_line(error.errors())}, 422)
     status, message = status_of(error)
     return JSONResponse({"detail": message}, status, headers=headers_of(error))
 
@@ -348,7 +348,18 @@ def _guard(app: FastAPI, token: str | None) -> None:
 
 
 async def _invalid(request: Request, error: RequestValidationError) -> JSONResponse:
-    return JSONResponse({"detail": validation_line(list(error.errors()))}, 422)
+    """Every problem of a request FastAPI refused, in one line naming each field (`problems_line`);
+    an unknown field of a JSON body with the field of its model it may have meant."""
+    return JSONResponse({"detail": problems_line(list(error.errors()), _body_kind(request))}, 422)
+
+
+def _body_kind(request: Request):
+    """The model of the route's JSON body, as its errors locate fields ("body", field, ...); None
+    when it has none, or several (their errors also name the parameter)."""
+    route = request.scope.get("route")
+    body = getattr(getattr(route, "dependant", None), "body_params", [])
+    embedded = getattr(route, "_embed_body_fields", True)
+    return body[0].field_info.annotation if len(body) == 1 and not embedded else None
 
 
 async def _http_error(request: Request, error: HTTPException) -> JSONResponse:

@@ -4,8 +4,14 @@ file on the server holds)."""
 
 from __future__ import annotations
 
+import dataclasses
+import difflib
 import re
+import types
+import typing
 from pathlib import Path
+
+from pydantic import BaseModel
 
 from nerfaug.capture.lock import SessionBusy
 from nerfaug.capture.pool import TrainingFull
@@ -14,6 +20,10 @@ from nerfaug.capture.state import SessionError
 from nerfaug.data import DatasetError
 from nerfaug.errors import FolderRefused
 from nerfaug.health import EmptyModel
+from nerfaug.schema import UNKNOWN_FIELD, field_path, problem_text
+
+# How many of a request's problems one answer spells out; beyond them, a count and their fields.
+SHOWN_PROBLEMS = 5
 
 
 class ServiceError(Exception):
@@ -35,6 +45,119 @@ def field_line(field: str, problem: str, value=None) -> str:
     """A refused value as the service says it, in one line: `n: must be >= 1 (got 0)`."""
     text = f"{field or 'request'}: {problem}" + ("" if value is None else f" (got {str(value)[:80]!r})")
     return " ".join(text.split())
+
+
+def problems_line(errors: list[dict], kind=None, field: str = "") -> str:
+    """Every problem pydantic found in a request, as one line: the fields it has no place for first
+    (each with the field meant, by spelling, or the fields it has), then the rest in pydantic's
+    order; past `SHOWN_PROBLEMS`, their count and fields.
+
+    Args:
+        errors: pydantic's errors (`ValidationError.errors()`), locations as FastAPI or pydantic give them.
+        kind: the request's class (a pydantic model or a dataclass), to name the fields an unknown one
+            may have meant; None: unknown fields are named without.
+        field: where the request sits in what the client sent ("settings", a form field), prefixed
+            to each field.
+
+    Example:
+        >>> from pydantic import BaseModel, ConfigDict, TypeAdapter, ValidationError
+        >>> class Train(BaseModel):
+        ...     model_config = ConfigDict(extra="forbid")
+        ...     steps: int
+        >>> try:
+        ...     TypeAdapter(Train).validate_python({"step": 500})
+        ... except ValidationError as error:
+        ...     print(problems_line(error.errors(), Train))
+        step: unknown field: not one of this request's (did you mean steps?); steps: Field required
+    """
+    lines, listed = [], set()  # listed: the requests whose fields an answer named already
+    for error in sorted(errors, key=lambda e: not _unknown(e)):  # stable: pydantic's order otherwise
+        loc = tuple(part for part in error.get("loc", ()) if part not in _TRANSPORT)
+        name, problem = field_path((field, *loc) if field else loc), problem_text(error)
+        if _unknown(error):  # its value says nothing; the field meant does
+            parent = loc[:-1]
+            guess = "" if problem != UNKNOWN_FIELD else meant(str(loc[-1]), fields_of(kind, parent), parent in listed)
+            listed.add(parent)
+            lines.append((name, field_line(name, problem + guess)))
+        else:
+            value = None if error.get("type") == "missing" else error.get("input")
+            lines.append((name, field_line(name, problem, value)))
+    shown = [line for _, line in lines[:SHOWN_PROBLEMS]]
+    rest = [name or "request" for name, _ in lines[SHOWN_PROBLEMS:]]
+    named = ", ".join(rest[:_NAMED]) + (", ..." if len(rest) > _NAMED else "")
+    return "; ".join(shown) + (f"; and {len(rest)} more problem{'s' * (len(rest) > 1)} ({named})" if rest else "")
+
+
+# FastAPI's names for where a field was sent: not part of the field's name.
+_TRANSPORT = ("body", "query", "path", "form")
+# How many fields of the problems not spelled out an answer names.
+_NAMED = 10
+
+
+def _unknown(error: dict) -> bool:
+    """Whether pydantic's `error` is a field the request has no place for."""
+    return error.get("type") in ("extra_forbidden", "unexpected_keyword_argument")
+
+
+def meant(name: str, known: list[str] | None, listed: bool = False) -> str:
+    """What an unknown field `name` may have meant among the `known` fields: the closest by spelling,
+    else all of them unless `listed` already (nothing when the request's fields are not known)."""
+    close = difflib.get_close_matches(name, known or [], n=2)
+    if close:
+        return f" (did you mean {' or '.join(close)}?)"
+    return f" (its fields: {', '.join(known)})" if known and not listed else ""
+
+
+def fields_of(kind, loc: tuple = ()) -> list[str] | None:
+    """The fields of the request at `loc` inside the request class `kind` (a pydantic model or a
+    dataclass; through optional, annotated, list and dict types), in their order; None where no
+    request class is there.
+
+    Example:
+        >>> from nerfaug.capture.proposal_request import ProposalRequest
+        >>> fields_of(ProposalRequest, ("constraints",))[:3]
+        ['elevation', 'azimuth', 'radius']
+    """
+    for part in loc:
+        kind = _inner(kind, part)
+    found = [list(own) for member in _members(kind) if (own := _fields(member)) is not None]
+    return found[0] if found else None
+
+
+def _members(kind) -> list:
+    """The classes a type may be: itself, or those of an `Annotated`'s type or of a union's members."""
+    if typing.get_origin(kind) is typing.Annotated:
+        return _members(typing.get_args(kind)[0])
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):
+        return [member for arg in typing.get_args(kind) for member in _members(arg)]
+    return [kind]
+
+
+def _fields(kind) -> dict | None:
+    """A request class's fields and their types (None for any other type)."""
+    if isinstance(kind, type) and issubclass(kind, BaseModel):
+        return {name: info.annotation for name, info in kind.model_fields.items()}
+    if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+        try:
+            hints = typing.get_type_hints(kind, include_extras=True)
+        except (NameError, TypeError):  # an annotation not resolvable here: its fields' names alone
+            hints = {}
+        return {f.name: hints.get(f.name) for f in dataclasses.fields(kind)}
+    return None
+
+
+def _inner(kind, part):
+    """The type at `part` (a field's name, a list's index or a dict's key) inside `kind`."""
+    for member in _members(kind):
+        own = _fields(member)
+        if own is not None and part in own:
+            return own[part]
+        origin, args = typing.get_origin(member), typing.get_args(member)
+        if isinstance(part, int) and origin in (list, tuple) and args:
+            return args[0]
+        if origin is dict and len(args) == 2:
+            return args[1]
+    return None
 
 
 def status_of(error: BaseException) -> tuple[int, str]:

@@ -13,10 +13,11 @@ import json
 from pathlib import PurePath
 
 from PIL import Image
+from pydantic import ValidationError
 
 from nerfaug.capture.images import ImageFile, check_file_name
-from nerfaug.capture.requests import validated
-from nerfaug.service.errors import ServiceError, bad_input
+from nerfaug.schema import adapter
+from nerfaug.service.errors import ServiceError, bad_input, problems_line
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MAX_IMAGE_PIXELS, MEGABYTE
 
 # The formats an upload may be, by what Pillow reads in its header, and the suffixes that name them
@@ -89,9 +90,12 @@ def read_uploads(files: list, limit_bytes: int) -> list[ImageFile]:
 
 def form_json(text: str, field: str, kind):
     """A form field holding JSON, read as `kind` (a schema); 422 naming the field (`poses[1]`)
-    when it is not JSON or not of that kind."""
+    when it is not JSON, or naming each refused field (`problems_line`) when it is not of that kind."""
     try:
         value = json.loads(text)
     except (json.JSONDecodeError, TypeError) as error:
         raise bad_input(f"{field}: not valid JSON ({getattr(error, 'msg', error)})") from None
-    return validated(kind, value, field)
+    try:
+        return adapter(kind).validate_python(value)
+    except ValidationError as error:
+        raise bad_input(problems_line(error.errors(), kind, field)) from None
