@@ -104,18 +104,6 @@ def initial_in_half(camera_to_world: Tensor, n: int, half: Half, eligible: list[
     return chosen
 
 
-def initial_views(camera_to_world: Tensor, n: int, layout: int, layouts: int) -> list[int]:
-    """The `n` initial views of layout `layout` (of `layouts`) among all of `camera_to_world`
-    ((m, 4, 4), in the engine frame): a sparse start from a dataset, as the experiments start.
-
-    Raises:
-        ValueError: fewer than `n` views lie in the layout's half.
-    """
-    azimuth, _, _ = angles_from_pose(camera_to_world)
-    half = layout_halves(azimuth, layouts)[layout % layouts]
-    return initial_in_half(camera_to_world, n, half, list(range(len(camera_to_world))))
-
-
 def farthest_directions(directions: Tensor, count: int) -> list[int]:
     """`count` indices of `directions` (n, 3) spread over the sphere by farthest-point sampling
     on the angle between them, starting from index 0 (deterministic)."""

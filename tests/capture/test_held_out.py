@@ -4,6 +4,7 @@ apart, out of the pool, and `eval` scores those."""
 
 import json
 import math
+import shutil
 
 import pytest
 import torch
@@ -173,3 +174,14 @@ def test_a_set_with_a_test_split_keeps_scoring_it(tmp_path, capsys):
 def test_the_kept_share_and_its_bound_are_the_studys():
     assert [held_out_count(n) for n in (3, 4, 16, 135, 199, 200, 1000)] == [0, 1, 4, 33, 49, 50, 50]
     assert ExperimentConfig().n_test == HELD_OUT_MOST
+
+
+def test_eval_without_data_names_the_option_when_the_starting_folder_is_gone(tmp_path, capsys):
+    data, run = llff_fixture(tmp_path / "data", n=N, masks=False), tmp_path / "run"
+    train_sparse(data, run)
+    shutil.rmtree(data)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as refused:
+        main(["eval", str(run), "--no-lpips", "--device", "cpu"])
+    assert refused.value.code == 2
+    assert capsys.readouterr().err.strip().endswith(f"the dataset {run} started from is gone; name one with --data")

@@ -16,6 +16,7 @@ from nerfaug.capture.proposal_request import ProposalRequest
 from nerfaug.capture.simulate import render_proposals as simulated_capture
 from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train_work import configure, open_session, warning_lines
+from nerfaug.errors import DatasetError
 from nerfaug.health import Health
 
 
@@ -57,7 +58,10 @@ def evaluate(
     apart, or the split `split` of `data` (default: the dataset it started from), written to `out`."""
     configure(threads)
     session = open_session(run, device)
-    data = Path(session.state.source.data_dir) if data is None else data
+    if data is None:
+        data = Path(session.state.source.data_dir)
+        if not data.is_dir():  # e.g. a session made from uploaded images, whose folder was temporary
+            raise DatasetError(data, f"the dataset {run} started from is gone; name one with --data")
     if out is not None:
         check_evaluation_out(out, data)
     views, chosen = session.test_views(data, split)
