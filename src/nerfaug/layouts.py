@@ -1,7 +1,9 @@
 """The initial views' layouts: the half of the hemisphere (of the views' azimuths about +z) a sparse
 start takes its views from, the paper's "one half of the hemisphere", turned from layout to layout;
 used alike by the experiments (`nerfaug.experiment.scene_views`) and a capture session's sparse
-start (`nerfaug train DATA --initial N`)."""
+start (`nerfaug train DATA --initial N`). Both also keep the same views of a set without a test
+split apart for testing (`split_views`): at most one in `HELD_OUT_SHARE`, spread over all
+directions, chosen before and regardless of the layout."""
 
 from __future__ import annotations
 
@@ -16,6 +18,16 @@ from nerfaug.hemisphere import angles_from_pose, half_hemisphere_poses, in_azimu
 LEGACY_HALF_START = math.pi / 2
 """Where the first layout's half starts when the views go all the way round (as the rendered
 scenes' `initial` split, `half_hemisphere_poses`' default)."""
+
+
+HELD_OUT_SHARE = 4
+"""A set without a test split keeps at most one view in this many apart for testing, so most
+remain candidates."""
+
+HELD_OUT_MOST = 50
+"""The most views a set without a test split keeps apart for testing: the study's `n_test`
+(`ExperimentConfig`'s default, which a test holds equal; not imported there, which stays free of
+torch), also a sparse-started session's."""
 
 
 @dataclass(frozen=True)
@@ -92,13 +104,54 @@ def initial_in_half(camera_to_world: Tensor, n: int, half: Half, eligible: list[
     return chosen
 
 
-def initial_views(camera_to_world: Tensor, n: int, layout: int, layouts: int) -> list[int]:
-    """The `n` initial views of layout `layout` (of `layouts`) among all of `camera_to_world`
-    ((m, 4, 4), in the engine frame): a sparse start from a dataset, as the experiments start.
+def farthest_directions(directions: Tensor, count: int) -> list[int]:
+    """`count` indices of `directions` (n, 3) spread over the sphere by farthest-point sampling
+    on the angle between them, starting from index 0 (deterministic)."""
+    if count < 1:
+        return []
+    chosen = [0]
+    nearest = directions @ directions[0]  # cosine to the nearest chosen direction, per view
+    while len(chosen) < min(count, len(directions)):
+        nearest[chosen] = math.inf
+        pick = int(nearest.argmin())
+        chosen.append(pick)
+        nearest = torch.maximum(nearest, directions @ directions[pick])
+    return chosen
+
+
+def held_out_count(views: int, most: int = HELD_OUT_MOST) -> int:
+    """How many of `views` views a set without a test split keeps apart: one in `HELD_OUT_SHARE`,
+    at most `most` (0 for fewer than `HELD_OUT_SHARE` views)."""
+    return min(most, views // HELD_OUT_SHARE)
+
+
+@dataclass(frozen=True)
+class ViewSplit:
+    """Indices into a set's views: kept apart for testing, the initial views, the candidates; and
+    the half the initial views lie on."""
+
+    held_out: list[int]
+    initial: list[int]
+    pool: list[int]
+    half: Half
+
+
+def split_views(camera_to_world: Tensor, held_out: int, n_initial: int, layout: int, layouts: int) -> ViewSplit:
+    """Held-out, initial and candidate views of a set (`camera_to_world` (n, 4, 4), in the engine
+    frame: the origin is the point the cameras look at).
+
+    The `held_out` views (0: none) are spread over all directions (`farthest_directions`) and
+    chosen before, and regardless of, the layout, so every layout is scored on the same views; the
+    initial views are layout `layout` (of `layouts`) of the others (`initial_in_half`), the rest
+    the pool.
 
     Raises:
-        ValueError: fewer than `n` views lie in the layout's half.
+        ValueError: fewer than `n_initial` of the others lie in the layout's half.
     """
+    kept = sorted(farthest_directions(directions_of(camera_to_world), held_out))
+    rest = [i for i in range(len(camera_to_world)) if i not in set(kept)]
     azimuth, _, _ = angles_from_pose(camera_to_world)
-    half = layout_halves(azimuth, layouts)[layout % layouts]
-    return initial_in_half(camera_to_world, n, half, list(range(len(camera_to_world))))
+    half = layout_halves(azimuth[rest], layouts)[layout % layouts]
+    initial = initial_in_half(camera_to_world, n_initial, half, rest)
+    pool = [i for i in rest if i not in set(initial)]
+    return ViewSplit(kept, initial, pool, half)

@@ -46,12 +46,12 @@ def test_train_starts_from_a_few_views_on_one_half_and_proposes_from_the_rest(tm
     assert capsys.readouterr().out.startswith("training on 4 of the 16 views of split 'train'")
     state = json.loads((run / "session.json").read_text())
     pool = json.loads((run / state["pool"]).read_text())["frames"]
-    started = state["start"]["names"]
-    assert state["start"] == {"initial": 4, "layout": 0, "of": 16, "names": started}
-    assert len(started) == 4 and len(pool) == 12
-    assert {Path(n).stem for n in started} | {Path(f["file_path"]).stem for f in pool} == {
-        f"r_{i}" for i in range(VIEWS)
-    }
+    started, kept = state["start"]["names"], state["start"]["held_out"]
+    # No test split: a quarter of the views is kept apart for testing, neither initial nor candidates.
+    assert state["start"] == {"initial": 4, "layout": 0, "of": 16, "names": started, "held_out": kept}
+    assert len(started) == 4 and len(kept) == 4 and len(pool) == 8
+    named = [Path(n).stem for n in started + kept] + [Path(f["file_path"]).stem for f in pool]
+    assert sorted(named) == sorted(f"r_{i}" for i in range(VIEWS))
     # One half: every initial view within 180 degrees of azimuth, counted from the half's start (90).
     assert bool((((azimuths_deg(run) - 90) % 360) < 180 + 1e-3).all())
 
@@ -63,7 +63,7 @@ def test_train_starts_from_a_few_views_on_one_half_and_proposes_from_the_rest(tm
     main(["add", str(run), "--images", str(data / "train"), "--poses", str(poses), "--steps", "0"])
     session = CaptureSession.open(run)
     assert len(session.cameras) == 6
-    again = session.propose(session_request(n=10), map=False)  # the 10 pool views not yet added
+    again = session.propose(session_request(n=6), map=False)  # the 6 pool views not yet added
     assert sorted(again.names) == sorted(set(Path(f["file_path"]).stem for f in pool) - set(chosen))
 
 
@@ -99,8 +99,12 @@ def test_a_captured_set_starts_sparse_too(tmp_path):
     )
     assert len(session.cameras) == 3
     pool = json.loads((tmp_path / "run" / "pool.json").read_text())["frames"]
-    assert len(pool) == 9 and all(Path(f["file_path"]).stem.startswith("IMG_") for f in pool)
+    # 3 of the 12 kept apart for testing (no test split), 3 initial: 6 candidates.
+    assert len(session.state.start["held_out"]) == 3
+    assert len(pool) == 6 and all(Path(f["file_path"]).stem.startswith("IMG_") for f in pool)
     with pytest.raises(
-        RequestError, match=r"initial 12: only 6 views lie in the half .*\(azimuths [\d.]+ to [\d.]+ degrees\)"
+        RequestError,
+        match=r"initial 12: only \d views lie in the half .*\(azimuths [\d.]+ to [\d.]+ degrees\); 12 are needed "
+        r"\(of 12 views of .*poses_bounds.npy, 3 of them held out for testing\)",
     ):
         CaptureSession.create(data, tmp_path / "all", SessionSettings(engine="test"), start=SparseStart(initial=12))

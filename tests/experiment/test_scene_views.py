@@ -12,13 +12,9 @@ from nerfaug.data import Views, write_blender_split, write_nerfstudio
 from nerfaug.data.views import spread_over_frames
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.protocol import load_scene_data
-from nerfaug.experiment.scene_views import (
-    Half,
-    farthest_directions,
-    layout_halves,
-    split_captured,
-)
+from nerfaug.experiment.scene_views import split_captured
 from nerfaug.hemisphere import angles_from_pose, pose_from_angles, sample_uniform_poses
+from nerfaug.layouts import Half, farthest_directions, layout_halves
 
 
 def widest_gap_deg(azimuth) -> float:

@@ -70,3 +70,24 @@ def test_public_text_makes_paths_relative_to_the_root_and_hides_the_others():
     shown = public_text(text, root)
     assert shown == "from s1/dataset/transforms.json, weights alexnet.ckpt, see https://x.org/a/b"
     assert public_text("the root /srv/sessions", root) == "the root ."
+
+
+def test_the_service_scores_the_views_a_sparse_start_kept_apart(tmp_path):
+    """A session started sparse from a set without a test split is scored on the views it kept apart,
+    as `nerfaug eval` scores it, by default and when the split it started from is named."""
+    from nerfaug.capture import CaptureSession, SessionSettings
+    from nerfaug.capture.requests import SparseStart
+
+    root = tmp_path / "root"
+    tiny_dataset(root / "data", n=12)  # a train split only: 3 views kept apart
+    settings = SessionSettings(engine="test", seed=1)
+    kept = CaptureSession.create(root / "data", root / "s", settings, start=SparseStart(initial=3)).state.start
+    with TestClient(create_app(SessionHub(root))) as client:
+        answer = client.post("/sessions/s/evaluate", json={"dataset": "data", "lpips": False})
+        assert answer.status_code == 200, answer.text
+        scored = answer.json()
+        assert sorted(v["name"] for v in scored["per_view"]) == sorted(kept["held_out"]) and scored["views"] == 3
+        assert scored["trained_on"] == 0 and scored["split"] == "train" and scored["note"] is None
+        assert scored["scored"] == "the 3 views of data kept apart for testing when the session started"
+        whole = client.post("/sessions/s/evaluate", json={"dataset": "data", "split": "train", "lpips": False})
+        assert whole.json()["views"] == 3  # the split it started from: still the views kept apart

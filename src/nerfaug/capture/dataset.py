@@ -19,7 +19,7 @@ from nerfaug.data.frames import read_image
 from nerfaug.data.interface import DatasetSplit
 from nerfaug.data.views import Views
 from nerfaug.data.world_frame import Hemisphere
-from nerfaug.layouts import initial_views
+from nerfaug.layouts import held_out_count, split_views
 
 # A new frame's image name (file stem): no separators, no leading dot.
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
@@ -27,6 +27,10 @@ NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 # A dataset nerfaug rendered (`nerfaug scene render`) records its settings here; its initial
 # split holds the views taken as already captured, its train split the pool.
 RENDER_MANIFEST = "scene.json"
+
+# The key of a sparse start's record (`SessionState.start`) naming the views kept apart for testing;
+# a session started before views were kept apart has none.
+HELD_OUT_KEY = "held_out"
 
 
 def default_split(root: Path) -> tuple[str, str]:
@@ -97,20 +101,31 @@ def engine_views(dataset: DatasetSplit, start: int, downscale: int, background, 
 
 def sparse_start(source: DatasetSplit, views: Views, hemisphere: Hemisphere, start: SparseStart):
     """(`source` narrowed to a sparse start's initial views, their cameras, the candidate pool:
-    a transforms dict of the other views' world-frame poses and names, the start's record)."""
+    a transforms dict of the other views' world-frame poses and names, the start's record).
+
+    A set with a test split of its own is scored on it. Any other (a captured set's one listing,
+    a Blender folder with a train split only) keeps a spread quarter of its views (at most
+    `HELD_OUT_MOST`) apart first, as the experiments keep it (`split_views`): neither initial nor
+    a candidate, named in the record's "held_out" (`HELD_OUT_KEY`) for `nerfaug eval` to score."""
+    held_out = not has_split(source.root, "test")
     world = views.cameras.camera_to_world
+    count = held_out_count(len(views)) if held_out else 0
     try:
-        chosen = initial_views(hemisphere.to_engine(world), start.initial, start.layout, START_LAYOUTS)
+        split = split_views(hemisphere.to_engine(world), count, start.initial, start.layout, START_LAYOUTS)
     except ValueError as error:
-        raise RequestError("initial", start.initial, f"{error} (of {len(views)} views of {source.listing})") from None
-    if len(chosen) == len(views):
+        kept = f", {count} of them held out for testing" if count else ""
+        of = f"of {len(views)} views of {source.listing}{kept}"
+        raise RequestError("initial", start.initial, f"{error} ({of})") from None
+    if not split.pool:
         raise RequestError("initial", start.initial, f"must leave candidates: the dataset has {len(views)} views")
-    others = [i for i in range(len(views)) if i not in set(chosen)]
-    frames = [{"file_path": views.names[i], "transform_matrix": world[i].double().tolist()} for i in others]
+    frames = [{"file_path": views.names[i], "transform_matrix": world[i].double().tolist()} for i in split.pool]
     record = {
         "initial": start.initial,
         "layout": start.layout,
         "of": len(views),
-        "names": [views.names[i] for i in chosen],
+        "names": [views.names[i] for i in split.initial],
     }
+    if held_out:  # [] when the set is too small to keep any apart
+        record[HELD_OUT_KEY] = [views.names[i] for i in split.held_out]
+    chosen = split.initial
     return replace(source, only=tuple(chosen)), views.cameras[chosen], {"frames": frames}, record

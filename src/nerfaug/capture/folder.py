@@ -11,8 +11,8 @@ import torch
 
 from nerfaug.cameras import Cameras
 from nerfaug.capture import export, integrity
-from nerfaug.capture.dataset import engine_views
-from nerfaug.capture.evaluate import load_held_out
+from nerfaug.capture.dataset import HELD_OUT_KEY, engine_views
+from nerfaug.capture.evaluate import TestViews, choose_test_views, load_held_out, narrowed
 from nerfaug.capture.requests import Intrinsics, Split, validated
 from nerfaug.capture.runfolder import CHECKPOINT_FILE, DATASET_DIR, DATASET_SPLIT, SESSION_FILE
 from nerfaug.capture.state import AdditionRecord, ProposalRecord, SessionError, SessionState, SessionSummary
@@ -134,11 +134,27 @@ class SessionFolder:
             intrinsics=state.intrinsics,
         )
 
-    def held_out(self, data: str | Path, split: str = "test", max_views: int | None = None) -> Views:
-        """`split` of the dataset folder `data` (same scene and world frame) at the training
-        resolution, over the session's background: what `evaluate` scores."""
-        split = validated(Split, split, "split")
-        return load_held_out(data, split, self.state.downscale, self.state.background, max_views)
+    def default_test_split(self) -> str:
+        """The split `evaluate` scores when none is named: the one a sparse start kept views apart
+        from (its views kept apart are then scored), else "test"."""
+        start = self.state.start
+        return self.state.source.split if start and start.get(HELD_OUT_KEY) else "test"
+
+    def test_views(
+        self, data: str | Path, split: str | None = None, max_views: int | None = None
+    ) -> tuple[Views, TestViews]:
+        """The views of `split` (default: `default_test_split`) of the dataset folder `data` (same
+        scene and world frame) the session is scored on (`choose_test_views`: a sparse start's
+        views kept apart, where it kept some) at the training resolution, over the session's
+        background; and which they are, for the user."""
+        split = validated(Split, self.default_test_split() if split is None else split, "split")
+        views = load_held_out(data, split, self.state.downscale, self.state.background)
+        chosen = choose_test_views(self.state.start, self.state.source.split, Path(data), split, views.names)
+        return narrowed(views, chosen.names, max_views), chosen
+
+    def held_out(self, data: str | Path, split: str | None = None, max_views: int | None = None) -> Views:
+        """What `evaluate` scores: `test_views`' views."""
+        return self.test_views(data, split, max_views)[0]
 
     def export(self, out: str | Path, format: str = EXCHANGE_FORMAT, source_splits: bool = True) -> Path:
         """Write the grown dataset to `out` in `format` (a name in `nerfaug.data.FORMATS`) so other

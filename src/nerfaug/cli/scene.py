@@ -68,17 +68,17 @@ def scene_prepare(
         width: image width in pixels (any size up to the source's; area-averaged).
     """
     from nerfaug.data.prepare import PREPARED, prepare_dataset  # torch: here, so that --help loads none
-    from nerfaug.experiment.scene_views import CAPTURED_TEST_SHARE
     from nerfaug.jsonio import read_json
+    from nerfaug.layouts import HELD_OUT_SHARE
 
     path = prepare_dataset(source, out, width)
     print(f"dataset prepared in {path}")
     record = read_json(path / PREPARED)
     views = record["splits"]["train"]
-    if record["captured"] and views < CAPTURED_TEST_SHARE:  # prepared all the same: train may give the centre
+    if record["captured"] and views < HELD_OUT_SHARE:  # prepared all the same: train may give the centre
         print(
             f"warning: {source}: {views} view{'s' * (views != 1)}; `nerfaug run` and `study` need at least "
-            f"{CAPTURED_TEST_SHARE}, and `nerfaug train` at least 2 to estimate the centre (or --centre and "
+            f"{HELD_OUT_SHARE}, and `nerfaug train` at least 2 to estimate the centre (or --centre and "
             "--radius): capture more views",
             file=sys.stderr,
         )

@@ -7,7 +7,7 @@ are in `nerfaug.cli.train`.
     nerfaug add RUN --images DIR --poses poses.json --steps 1000
     nerfaug train RUN --steps 3000                 train an existing session until step 3000
     nerfaug export RUN --format nerfstudio --out DIR
-    nerfaug eval RUN --data DATASET --split test   PSNR/SSIM/LPIPS on held-out views
+    nerfaug eval RUN                               PSNR/SSIM/LPIPS on held-out views
 
 Here are their options and help; their work, which loads torch, is `nerfaug.cli.session_work`,
 imported when a command runs, so that `--help` answers at once.
@@ -85,21 +85,24 @@ def export(
 
 def evaluate(
     run: RunFolder,
-    data: Path,
-    split: str = "test",
+    data: Annotated[Path | None, replaced_by("the dataset the session started from", "PATH")] = None,
+    split: Annotated[str | None, replaced_by("its held-out views", "SPLIT")] = None,
     out: Annotated[Path | None, replaced_by("print only", "PATH")] = None,
     lpips: bool = True,
     device: Device = "auto",
     threads: int = THREADS,
 ) -> None:
     """Score the session's NeRF on held-out views: PSNR, SSIM and LPIPS of its renders against
-    a dataset split, at the session's training resolution (as nerfstudio's ns-eval). A view with
-    the pose of one the session trains on is marked in the JSON and counted in a warning.
+    them, at the session's training resolution (as nerfstudio's ns-eval). A session started with
+    --initial from a set without a test split (LLFF, DTU, nerfstudio) is scored on the views it kept
+    apart; any other on a dataset split. A view with the pose of one the session trains on is
+    marked in the JSON and counted in a warning.
 
     Args:
         run: the session's run folder.
-        data: a dataset folder of the same scene and world frame (e.g. the one the session started from).
-        split: the split to score ("test": a dataset `nerfaug scene render` wrote has 200 held-out views).
+        data: a dataset folder of the same scene and world frame (default: the one the session started from).
+        split: the split to score (default: the views the session's start kept apart, else "test": a
+            dataset `nerfaug scene render` wrote has 200 held-out views).
         out: write the metrics, mean and per view, to this JSON file.
         lpips: compute LPIPS (when its weights are installed; otherwise reported as n/a).
         device: where the NeRF renders.

@@ -16,6 +16,7 @@ from nerfaug.capture.proposal_request import DEFAULT_MIN_SEPARATION, ProposalReq
 from nerfaug.capture.simulate import render_proposals as simulated_capture
 from nerfaug.cli.option_names import as_options, checked
 from nerfaug.cli.train_work import configure, open_session, warning_lines
+from nerfaug.errors import DatasetError
 from nerfaug.health import Health
 
 # A proposed view closer than this to a training view (degrees about the hemisphere's centre) sees
@@ -67,28 +68,39 @@ def _metric(value, digits: int) -> str:
     return "n/a" if value is None else f"{value:.{digits}f}"
 
 
-def evaluate(run: Path, data: Path, split: str, out: Path | None, lpips: bool, device: str, threads: int) -> None:
-    """`nerfaug eval`: the session's NeRF scored on the split `split` of `data` (written to `out`)."""
-    if out is not None:
-        check_evaluation_out(out, data)
+def evaluate(
+    run: Path, data: Path | None, split: str | None, out: Path | None, lpips: bool, device: str, threads: int
+) -> None:
+    """`nerfaug eval`: the session's NeRF scored on its held-out views: those its sparse start kept
+    apart, or the split `split` of `data` (default: the dataset it started from), written to `out`."""
     configure(threads)
     session = open_session(run, device)
-    views = session.held_out(data, split)
+    if data is None:
+        data = Path(session.state.source.data_dir)
+        if not data.is_dir():  # e.g. a session made from uploaded images, whose folder was temporary
+            raise DatasetError(data, f"the dataset {run} started from is gone; name one with --data")
+    if out is not None:
+        check_evaluation_out(out, data)
+    views, chosen = session.test_views(data, split)
+    split = split or session.default_test_split()
+    if chosen.note is not None:
+        print(f"note: {chosen.note}", file=sys.stderr)
     result = session.evaluate(views, lpips="auto" if lpips else None, progress=True)
     m = result.mean
-    print(f"{run} (step {session.step}) on split '{split}' of {data}: {len(views)} views")
+    print(f"{run} (step {session.step}) on {chosen.says}: {len(views)} views")
+    if chosen.names is not None:
+        print(f"  views: {', '.join(views.names)}")
     print(f"  PSNR {_metric(m['psnr'], 2)} dB   SSIM {_metric(m['ssim'], 4)}   LPIPS {_metric(m['lpips'], 4)}")
     if m["lpips"] is None:
         print(f"  LPIPS {result.lpips_status}")
     if trained := trained_on_count(result):
         print(
             f"warning: {trained} of the {len(views)} views have the pose of a view the session trains on, so "
-            "they score how well it was fitted, not held-out views (a captured set keeps one listing: every "
-            "--split of it is all of it)",
+            "they score how well it was fitted, not held-out views",
             file=sys.stderr,
         )
     if out is not None:
-        write_evaluation(out, result, run, session.step, data, split)
+        write_evaluation(out, result, run, session.step, data, split, chosen.says)
         print(f"  written to {out}")
 
 

@@ -13,7 +13,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from nerfaug.capture.dataset import default_split
+from nerfaug.capture.dataset import HELD_OUT_KEY, default_split
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
 from nerfaug.capture.requests import SessionSettings, check_threads
@@ -22,6 +22,7 @@ from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint, pole_settings
 from nerfaug.cli.option_names import as_options, option
 from nerfaug.data import find_split, load_dataset
+from nerfaug.data.formats import has_split
 from nerfaug.data.world_frame import TooFewCameras
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
@@ -257,6 +258,12 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     if start is None:
         count = len(load_dataset(data, split, lazy=True))
         print(f"training on {count} view{'s' * (count != 1)}: {why}; {_engine(settings)}", flush=True)
+        if not has_split(data, "test"):
+            print(
+                f"no view is held out: {data} has no test split and the session trains on all of it "
+                "(--initial N keeps a spread quarter apart for `nerfaug eval`)",
+                flush=True,
+            )
     try:
         with warning_lines(), as_options():
             session = CaptureSession.create(
@@ -269,11 +276,12 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
             "at least 2: capture at least 2 views, or give --centre X Y Z and --radius R"
         ) from None
     if start is not None:  # said once the start is found possible (a refused one says only why)
-        count = session.state.start["of"]
+        count, kept = session.state.start["of"], session.state.start.get(HELD_OUT_KEY)
+        apart = "" if kept is None else _kept_apart(len(kept), count)
         print(
             f"training on {start.initial} of the {count} views of {why} (layout {start.layout}: one half of the "
-            f"object); the other {count - start.initial} are the candidates `nerfaug propose` chooses from; "
-            f"{_engine(settings)}",
+            f"object); {apart}the other {count - start.initial - len(kept or [])} are the candidates "
+            f"`nerfaug propose` chooses from; {_engine(settings)}",
             flush=True,
         )
     _lock(out, "train")
@@ -281,6 +289,13 @@ def _create(data: Path, out: Path, settings: SessionSettings, split: str | None,
     said = " (up: the cameras' mean up axis; --up X Y Z gives another)" if pole else ""
     print(f"session created in {out}: {session.summary().views} views; hemisphere {session.hemisphere}{said}")
     return session
+
+
+def _kept_apart(kept: int, count: int) -> str:
+    """The sparse start's line on the views a set without a test split kept apart for testing."""
+    if not kept:
+        return f"no view is held out for testing ({count} views are too few to keep a quarter apart); "
+    return f"{kept} views spread over all directions are held out for testing (`nerfaug eval` scores them); "
 
 
 def _finish(session, steps: int, every_s: float, logger: Logger = "none") -> None:

@@ -19,31 +19,12 @@ targets (`half_hemisphere_poses`), so a layout is the same for every trial and m
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-import torch
 from torch import Tensor
 
 from nerfaug.data.world_frame import estimate_hemisphere
-from nerfaug.hemisphere import angles_from_pose
-from nerfaug.layouts import Half, directions_of, initial_in_half, layout_halves
-
-CAPTURED_TEST_SHARE = 4
-"""A captured set keeps at most one view in this many for testing, so most remain candidates."""
-
-
-def farthest_directions(directions: Tensor, count: int) -> list[int]:
-    """`count` indices of `directions` (n, 3) spread over the sphere by farthest-point sampling
-    on the angle between them, starting from index 0 (deterministic)."""
-    chosen = [0]
-    nearest = directions @ directions[0]  # cosine to the nearest chosen direction, per view
-    while len(chosen) < min(count, len(directions)):
-        nearest[chosen] = math.inf
-        pick = int(nearest.argmin())
-        chosen.append(pick)
-        nearest = torch.maximum(nearest, directions @ directions[pick])
-    return chosen
+from nerfaug.layouts import HELD_OUT_SHARE, Half, held_out_count, split_views
 
 
 @dataclass(frozen=True)
@@ -60,23 +41,19 @@ class CapturedSplit:
 def split_captured(camera_to_world: Tensor, n_test: int, n_initial: int, layout: int, layouts: int) -> CapturedSplit:
     """Test, initial and candidate views of a captured set (`camera_to_world` (n, 4, 4), any frame).
 
-    The test views (at most one in `CAPTURED_TEST_SHARE`, and `n_test`) are chosen before, and
-    regardless of, the layout, so every layout is scored on the same views.
+    The test views (at most one in `HELD_OUT_SHARE`, and `n_test`) are chosen before, and
+    regardless of, the layout, so every layout is scored on the same views (`split_views`, as a
+    capture session's sparse start keeps them apart).
     """
     views = len(camera_to_world)
-    count = min(n_test, views // CAPTURED_TEST_SHARE)
+    count = held_out_count(views, n_test)
     if count < 1:  # said before the hemisphere is estimated, which needs 2 of them
         raise ValueError(
             f"a captured set of {views} view{'s' * (views != 1)} is too small to keep test views apart (one in "
-            f"{CAPTURED_TEST_SHARE}): capture at least {CAPTURED_TEST_SHARE} views, more for the initial and "
+            f"{HELD_OUT_SHARE}): capture at least {HELD_OUT_SHARE} views, more for the initial and "
             "candidate views"
         )
     hemisphere = estimate_hemisphere(camera_to_world, up="estimate")
     engine = hemisphere.to_engine(camera_to_world)
-    test = sorted(farthest_directions(directions_of(engine), count))
-    rest = [i for i in range(len(engine)) if i not in set(test)]
-    azimuth, _, _ = angles_from_pose(engine)
-    half = layout_halves(azimuth[rest], layouts)[layout % layouts]
-    initial = initial_in_half(engine, n_initial, half, rest)
-    pool = [i for i in rest if i not in set(initial)]
-    return CapturedSplit(test, initial, pool, hemisphere.to_dict(), half)
+    split = split_views(engine, count, n_initial, layout, layouts)
+    return CapturedSplit(split.held_out, split.initial, split.pool, hemisphere.to_dict(), split.half)

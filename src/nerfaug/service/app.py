@@ -241,15 +241,19 @@ async def uncertainty(session_id: str, request: models.UncertaintyRequest, hub: 
 async def evaluate(session_id: str, request: models.EvaluateRequest, hub: Hub):
     """The session's NeRF scored on a held-out split at its training resolution (`nerfaug eval`)."""
     hub.folder(session_id)
-    data = hub.dataset_path(request.dataset, request.split)
+    data = hub.dataset_path(request.dataset, request.split)  # a split named: its listing checked now
 
     def score(session):
-        views = session.held_out(data, request.split, request.max_views)
+        split = request.split or session.default_test_split()
+        hub.dataset_path(request.dataset, split)  # its listing, checked before it is read
+        views, chosen = session.test_views(data, split, request.max_views)
         result = session.evaluate(views, lpips="auto" if request.lpips else None)
-        status = public_text(result.lpips_status, hub.root.resolve())  # no server path in the answer
+        root = hub.root.resolve()  # no server path in the answer
+        status, scored = public_text(result.lpips_status, root), public_text(chosen.says, root)
         found = {"views": len(views), **result.mean, "lpips_status": status, "per_view": result.per_view}
         found["trained_on"] = trained_on_count(result)
-        return {"step": session.step, "dataset": request.dataset, "split": request.split, **found}
+        found["scored"], found["note"] = scored, None if chosen.note is None else public_text(chosen.note, root)
+        return {"step": session.step, "dataset": request.dataset, "split": split, **found}
 
     return await done(hub.submit(session_id, score))
 

@@ -86,7 +86,11 @@ class EvaluateRequest(BaseModel):
     model_config = REQUEST
 
     dataset: Dataset
-    split: Split = Field("test", description="the split to score")
+    split: Split | None = Field(
+        None,
+        description="the split to score (default: the views the session's sparse start kept apart for testing, "
+        "where it kept some; else test)",
+    )
     max_views: int | None = Field(
         None,
         ge=1,
@@ -117,6 +121,10 @@ class Evaluation(BaseModel):
     trained_on: int = Field(
         0, description="views whose pose the session trains on: they score the fit, not held-out views (see per_view)"
     )
+    scored: str = Field(
+        "", description="which views were scored: a split, or the views a sparse start kept apart (named in per_view)"
+    )
+    note: str | None = Field(None, description="why views the session trains on may be among them (one line)")
     per_view: list[dict]
 
 
