@@ -133,3 +133,36 @@ def test_the_time_estimate_covers_every_rounds_scoring_and_curve():
     )
     line = size_line("nerfaug run", {("nerfacto-cpu", "fisher"): 1}, 0, "1 scene", eight, 1)
     assert "2000 steps each, 4 initial views + 8 rounds of 1;" in line
+
+
+def test_run_and_study_take_the_schedule_on_the_command_line(monkeypatch, toy_data, tmp_path):
+    import nerfaug.cli.run_work as run_work
+    import nerfaug.experiment.study as study_module
+    from nerfaug.cli import main
+    from nerfaug.experiment.study_spec import StudySpec
+
+    taken = []
+    monkeypatch.setattr(run_work, "run", lambda protocol, out, **_: taken.append(protocol))
+    schedule = ["--n-initial", "4", "--n-new", "1", "--add-at-step", "20", "--rounds", "3", "--round-every", "10"]
+    main(["run", "--preset", "tiny", "--out", str(tmp_path / "r"), *schedule])
+    (protocol,) = taken
+    assert (protocol.n_initial, protocol.n_new, protocol.add_at_step, protocol.rounds, protocol.round_every) == (
+        4,
+        1,
+        20,
+        3,
+        10,
+    )
+
+    monkeypatch.setattr(study_module, "prepare_datasets", lambda *args, **kwargs: {})
+    spec = StudySpec(
+        out=tmp_path / "s", engines=("test",), scenes=(str(toy_data),), methods=("uniform",), trials=1, device="cpu",
+        preset="tiny", resolution=SIZE, n_initial=3, n_new=1, add_at_step=20, rounds=3, round_every=10,
+    )  # fmt: skip
+    config = study_module.make_plan(spec, spec.command(), progress=False).config
+    assert (config.n_initial, config.n_new, config.add_at_step, config.rounds, config.round_every) == (3, 1, 20, 3, 10)
+    assert spec.command()[-10:] == [
+        "--n-initial", "3", "--n-new", "1", "--add-at-step", "20", "--rounds", "3", "--round-every", "10",
+    ]  # fmt: skip
+    # A study of one round plans as it did: none of the schedule's options in its command.
+    assert "--rounds" not in StudySpec(preset="tiny").command()
