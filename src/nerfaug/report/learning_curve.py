@@ -94,7 +94,7 @@ def plot_learning_curves(results: Results, path: Path) -> Path | None:
                 marker="o",
                 markersize=3.5,
                 linewidth=1.5,
-                label=f"{method} ({len(runs)})",
+                label=f"{method} ({len(runs)} runs)",
             )
             ax.fill_between(views, q1, q3, color=colours[method], alpha=0.15, linewidth=0)
         ax.set_xlabel("views in the model")
@@ -112,7 +112,7 @@ def plot_learning_curves(results: Results, path: Path) -> Path | None:
         fontsize=8,
         frameon=False,
     )
-    figure.suptitle("Learning curves: test PSNR after each round, median over trials (runs), IQR shaded", fontsize=11)
+    figure.suptitle("Learning curves: test PSNR after each round, median over trials, IQR shaded", fontsize=11)
     return save_figure(figure, path)
 
 
@@ -157,7 +157,11 @@ def learning_curve_section(results: Results, figure: Path | None) -> list[Block]
         ),
     ]
     if figure is not None:
-        blocks.append(Figure(figure, "Test PSNR against views in the model, median over trials, IQR shaded"))
+        caption = (
+            "Test PSNR against views in the model, before the first round and after each, median over trials, "
+            "IQR shaded; the last point is after training to the last step, on every test view"
+        )
+        blocks.append(Figure(figure, caption))
     for scene, table in tables:
         blocks += [Heading(f"{scene}: area under the learning curve", level=3), table]
     return blocks
