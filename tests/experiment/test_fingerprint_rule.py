@@ -122,10 +122,14 @@ def test_every_protocol_field_is_fingerprinted_unless_declared_not_to_be():
     names = {f.name for f in dataclasses.fields(ExperimentConfig)}
     assert NOT_FINGERPRINTED <= names
     record = base.fingerprinted()
-    for name in sorted(names - NOT_FINGERPRINTED - {"device", "batch", "selection"}):
+    for name in sorted(names - NOT_FINGERPRINTED - {"device", "batch", "selection", "round_every"}):
         value = OTHER_VALUES[name] if name in OTHER_VALUES else getattr(base, name) + 1
         changed = base.replace(**{name: value}).fingerprinted()
         assert fingerprint(changed) != fingerprint(record), name
+    # The spacing of rounds counts where there is more than one round; with one it changes nothing.
+    assert base.replace(round_every=50).fingerprinted() == record
+    rounds = base.replace(rounds=3)
+    assert fingerprint(rounds.replace(round_every=50).fingerprinted()) != fingerprint(rounds.fingerprinted())
     # What a run saves beside its numbers, and which runs a sweep makes, are not.
     for name, value in (("hemisphere_map", False), ("view_uncertainty", False), ("save_renders", 0), ("trials", 9)):
         assert name in NOT_FINGERPRINTED

@@ -14,6 +14,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from nerfaug.experiment.schedule import CURVE_VIEWS, curve_evaluations
+
 if TYPE_CHECKING:
     from nerfaug.experiment.config import ExperimentConfig
 
@@ -80,12 +82,16 @@ def costs(engine: str, device: str) -> Costs:
 def run_seconds(engine: str, scoring: str, config: ExperimentConfig) -> float:
     """About how long one run of `config` takes with `engine`, its method scoring the candidates
     with the estimator `scoring` ("none" for uniform): training, selection, evaluation, the
-    uncertainty figures when `config.view_uncertainty`, and the rest."""
+    uncertainty figures when `config.view_uncertainty`, and the rest. With rounds
+    (`experiment.schedule`): a selection each round (each over the whole pool: the views taken
+    are few) and the learning curve's test views before each but the last."""
     c = costs(engine, config.device)
+    view = c.view * (config.resolution / 100) ** 2
     seconds = (
         config.steps * c.step
-        + c.scoring.get(scoring, 0.0) * config.pool / 100
-        + config.n_test * c.view * (config.resolution / 100) ** 2
+        + c.scoring.get(scoring, 0.0) * config.pool / 100 * config.rounds
+        + config.n_test * view
+        + curve_evaluations(config) * min(CURVE_VIEWS, config.n_test) * view
         + c.finish
     )
     return seconds + (c.figures if config.view_uncertainty else 0.0)
@@ -162,8 +168,12 @@ def size_line(
     side = config.resolution
     names = sorted({engine for engine, _ in runs}) or [config.engine]  # said: `nerfaug train`'s default differs
     engines = " and ".join(names)
+    # The schedule, where it is not the paper's one round.
+    rounds = ""
+    if config.rounds > 1:
+        rounds = f", {config.n_initial} initial views + {config.rounds} rounds of {config.n_new}"
     line = (
-        f"{what}: {to_do + finished} runs ({shape}{done}), {side}x{side} pixels, {config.steps} steps each "
+        f"{what}: {to_do + finished} runs ({shape}{done}), {side}x{side} pixels, {config.steps} steps each{rounds} "
         f"with the {engines} engine{'s' if len(names) > 1 else ''}; {to_do} to run: {when}"
     )
     if render is not None and render[0]:

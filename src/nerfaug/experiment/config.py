@@ -50,7 +50,8 @@ class ExperimentConfig:
 
     Per (scene, method, trial): train on the fixed initial views (the same for every trial of a
     scene), at `add_at_step` ask the method for `n_new` views among the candidates, add the
-    oracle's images of them, train to `steps`, evaluate on the test split. Trials differ only by
+    oracle's images of them (with `rounds` > 1: again every `round_every` steps, each round chosen
+    with the model trained on the views so far), train to `steps`, evaluate on the test split. Trials differ only by
     seed (initialisation, ray sampling, and the selector's randomness).
 
     Its fields are the options of `nerfaug run` (tyro reads each field's docstring as its help,
@@ -78,6 +79,12 @@ class ExperimentConfig:
     """views each method adds."""
     n_initial: int = 6
     """initial training views, all on one half of the hemisphere."""
+    # The field's active-learning protocol (FisherRF's: few initial views, one added a round,
+    # training between rounds) is e.g. --n-initial 4 --n-new 1 --rounds 8 (`experiment.schedule`).
+    rounds: int = 1
+    """rounds of selection, each adding n_new views chosen with the model trained so far (1: the paper's protocol)."""
+    round_every: int = 100
+    """training steps between two rounds (the first at add_at_step); unused with one round."""
     pool: int = 300
     """candidate views of a built-in scene, uniform over the hemisphere."""
     # The paper evaluates all 200 test views. A captured set without a test split keeps n_test of
@@ -144,6 +151,8 @@ class ExperimentConfig:
         record["engine_version"] = BATCH_ENGINE_VERSION if self.batched() else None
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         defaults = defaults_of(type(self)) | {"engine_version": None}
+        if self.rounds == 1:  # one round: `round_every` changes nothing, so it splits no results
+            record["round_every"] = defaults["round_every"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
         return surviving(record, defaults) | engine_record(NerfConfig.preset(self.engine))
 
@@ -153,6 +162,8 @@ class ExperimentConfig:
         run's numbers beyond rounding; only this choice is fingerprinted."""
         if self.batch != 0:
             return self.batch > 1
+        if self.rounds > 1:  # a trial batch adds views in one round only: auto trains such runs alone
+            return False
         from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
 
         return device_kind(self.device) == "cuda" and batch_support(NerfConfig.preset(self.engine)) is None

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import importlib.metadata
 import inspect
@@ -21,6 +22,7 @@ from nerfaug.device import configure_process, describe_device
 from nerfaug.evaluation import evaluate_views, load_lpips
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.layout import ResultsFolder
+from nerfaug.experiment.rounds import Rounds
 from nerfaug.experiment.runfolder import (
     FILES,
     write_config,
@@ -31,6 +33,7 @@ from nerfaug.experiment.runfolder import (
     write_view_uncertainty,
 )
 from nerfaug.experiment.scene_views import split_captured
+from nerfaug.experiment.schedule import round_steps
 from nerfaug.experiment.store import (
     RunKey,
     code_version,
@@ -287,31 +290,44 @@ def start_run(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     return RunStart(key, folder, config.seed + key.trial, data, config.engine_config(key.scene))
 
 
-def choose_views(run: RunStart, trained, config: ExperimentConfig, timing: dict) -> tuple[object, list[int], Views]:
-    """The method's views for `run` at the add step, from `trained` (a `Trainer` or a batch's
-    `TrainedRun`), and the oracle's images of them; times both phases into `timing`.
+def choose_views(
+    run: RunStart,
+    trained,
+    config: ExperimentConfig,
+    timing: dict,
+    candidates: list[int] | None = None,
+    generator: torch.Generator | None = None,
+) -> tuple[object, list[int], Views]:
+    """The method's views for `run` at a round's step, from `trained` (a `Trainer` or a batch's
+    `TrainedRun`: the views it trains on now are those the method conditions on), and the
+    oracle's images of them; adds the seconds of both phases to `timing`.
+
+    Args:
+        candidates: the pool indices still to choose from (None: the whole pool).
+        generator: the run's random source for its rounds (None: a new one seeded with the run's seed).
 
     Returns:
-        the `Selection`, the chosen pool indices, and the new views.
+        the `Selection` (its indices into `candidates`), the chosen pool indices, and the new views.
     """
     start = time.perf_counter()
-    generator = torch.Generator().manual_seed(run.seed)
+    generator = generator if generator is not None else torch.Generator().manual_seed(run.seed)
+    candidates = candidates if candidates is not None else list(range(len(run.data.pool)))
     selection = select_views(
         run.key.method,
         trained.model,
         trained.train_views.cameras,
-        run.data.pool.cameras,
+        run.data.pool.cameras[candidates],
         config.n_new,
         generator,
         config.selection,
     )
-    timing["selection"] = time.perf_counter() - start
+    timing["selection"] = timing.get("selection", 0.0) + time.perf_counter() - start
     start = time.perf_counter()
-    chosen = [int(i) for i in selection.indices]
+    chosen = [candidates[int(i)] for i in selection.indices]
     # The experiment's oracle is its pool: asked for the chosen poses, it answers with the pool's
     # images of them, as a robot's camera would with new ones (`nerfaug.oracle`).
     new_views = PoolOracle(run.data.pool).capture(run.data.pool.cameras.camera_to_world[chosen])
-    timing["oracle"] = time.perf_counter() - start
+    timing["oracle"] = timing.get("oracle", 0.0) + time.perf_counter() - start
     return selection, chosen, new_views
 
 
@@ -331,17 +347,37 @@ def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Pa
     )
     timing["setup"] = time.perf_counter() - start
 
+    steps = round_steps(config)
     start = time.perf_counter()
-    train_with_progress(trainer, config.add_at_step, run.folder)
+    train_with_progress(trainer, steps[0], run.folder)
     timing["train_before"] = time.perf_counter() - start
 
-    selection, chosen, new_views = choose_views(run, trainer, config, timing)
-    trainer.add_views(new_views)
+    # One random source for all rounds: the first round draws as a run of one round always did.
+    generator = torch.Generator().manual_seed(run.seed)
+    rounds = Rounds(len(run.data.pool), len(run.data.initial))
+    for index, step in enumerate(steps):
+        if index:
+            train_after(trainer, step, run.folder, timing)
+        if config.rounds > 1:  # the curve's point before this round
+            rounds.measure(trainer.model, run.data.test, step, cached_lpips(), timing)
+        spent: dict[str, float] = {}
+        selection, chosen, new_views = choose_views(run, trainer, config, spent, rounds.remaining(), generator)
+        trainer.add_views(new_views)
+        rounds.add(step, selection, chosen, [run.data.pool.names[i] for i in chosen], spent)
+        for phase, seconds in spent.items():
+            timing[phase] = timing.get(phase, 0.0) + seconds
 
+    train_after(trainer, config.steps, run.folder, timing)
+    # The first round's scores over the whole pool, with every view chosen in any round.
+    selection = dataclasses.replace(rounds.first, indices=torch.tensor(rounds.chosen, dtype=torch.long))
+    return finish_run(run, trainer, config, selection, rounds.chosen, timing, progress, rounds=rounds)
+
+
+def train_after(trainer, until_step: int, folder: Path, timing: dict) -> None:
+    """Training after the first round, to `until_step`, its seconds added to `timing["train_after"]`."""
     start = time.perf_counter()
-    train_with_progress(trainer, config.steps, run.folder)
-    timing["train_after"] = time.perf_counter() - start
-    return finish_run(run, trainer, config, selection, chosen, timing, progress)
+    train_with_progress(trainer, until_step, folder)
+    timing["train_after"] = timing.get("train_after", 0.0) + time.perf_counter() - start
 
 
 def finish_run(
@@ -353,12 +389,14 @@ def finish_run(
     timing: dict,
     progress: bool = False,
     batch: dict | None = None,
+    rounds: Rounds | None = None,
 ) -> dict:
     """Evaluate a trained run on its test views and write its folder, result.json last.
 
     Args:
         trained: a `Trainer`, or a trial batch's `TrainedRun` (model, train_views, history, device).
         batch: for a run of a trial batch, {"size", "engine_version"}, kept in its record.
+        rounds: the run's rounds; with more than one, the record keeps each (`Rounds.record`).
 
     Returns the result record (also in result.json).
     """
@@ -433,6 +471,8 @@ def finish_run(
     }
     if batch is not None:
         result["engine_version"], result["batch_size"] = batch["engine_version"], batch["size"]
+    if rounds is not None:
+        result.update(rounds.record(evaluation.mean, len(data.test), config.steps))
     write_result(folder, result)
     return result
 
@@ -453,6 +493,8 @@ def run_trial_batch(
     Returns:
         Per key, its result record, or the exception it failed with.
     """
+    if config.rounds > 1:  # the sweep refuses it before any run (`schedule.check_schedule`)
+        raise ValueError(f"--rounds {config.rounds}: trial batches add views in one round only")
     configure_process(threads=config.threads_per_run)
     outcomes: dict[RunKey, dict | BaseException] = {}
     timings: dict[RunKey, dict] = {}

@@ -366,6 +366,9 @@ def make_plan(spec: StudySpec, command: list[str], progress: bool = True) -> Stu
         layouts=spec.layouts,
         steps=spec.steps,
         batch=spec.batch,
+        rounds=spec.rounds,
+        round_every=spec.round_every,
+        **spec.schedule_changes(),
     )
     scenes = tuple(spec.scenes) if spec.scenes else PROCEDURAL_SCENES
     # Every setting checked before any dataset is rendered (a bad --trials costs nothing).

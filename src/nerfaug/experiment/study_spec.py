@@ -49,6 +49,7 @@ Trials = Annotated[
         "for p < 0.05 to be reachable)",
     ),
 ]
+PresetInt = Annotated[int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's)")]
 Table = Annotated[
     Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint=f"(default: {StudyFolder(Path('OUT')).table})")
 ]
@@ -69,6 +70,12 @@ class StudySpec:
         layouts: initial layouts: trial k starts from layout k mod LAYOUTS, the half the initial
             views come from turned by 1/LAYOUTS of the way round each time.
         steps: training steps per run (the preset's unless given).
+        n_initial: initial training views (the preset's unless given).
+        n_new: views each round adds (the preset's unless given).
+        add_at_step: the training step of the first round (the preset's unless given).
+        rounds: rounds of selection, each chosen with the model trained on the views so far (1:
+            the paper's protocol, one round).
+        round_every: training steps between two rounds; unused with one round.
         device: where the runs train, select and evaluate.
         preset: the study's protocol, which --steps and --selection.* change: study (the paper's
             at 100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
@@ -86,10 +93,19 @@ class StudySpec:
     resolution: int = 100
     layouts: int = 1
     steps: int = STUDY_PRESETS[DEFAULT_PRESET].steps
+    n_initial: PresetInt = None
+    n_new: PresetInt = None
+    add_at_step: PresetInt = None
+    rounds: int = 1
+    round_every: int = STUDY_PRESETS[DEFAULT_PRESET].round_every
     device: Device = "auto"
     preset: StudyPreset = DEFAULT_PRESET
     table: Table = None
     batch: int = 0
+
+    def schedule_changes(self) -> dict[str, int]:
+        """The schedule's settings given over the preset's (n_initial, n_new, add_at_step)."""
+        return {k: v for k in ("n_initial", "n_new", "add_at_step") if (v := getattr(self, k)) is not None}
 
     def command(self) -> list[str]:
         """The command line that plans this study again (--steps only where it is not the preset's)."""
@@ -107,6 +123,11 @@ class StudySpec:
             ("--preset", self.preset),
             ("--layouts", self.layouts if self.layouts != 1 else None),
             ("--batch", self.batch if self.batch != 0 else None),
+            ("--n-initial", self.n_initial),
+            ("--n-new", self.n_new),
+            ("--add-at-step", self.add_at_step),
+            ("--rounds", self.rounds if self.rounds != 1 else None),
+            ("--round-every", self.round_every if self.rounds != 1 else None),
         ):
             if value is not None:
                 command += [flag, str(value)]

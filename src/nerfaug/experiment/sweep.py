@@ -29,6 +29,7 @@ from nerfaug.experiment.config import ExperimentConfig, check_workers
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, run_trial_batch, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.scene_views import split_captured
+from nerfaug.experiment.schedule import check_pool, check_schedule
 from nerfaug.experiment.store import (
     IncompatibleResults,
     RunKey,
@@ -155,15 +156,7 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         reason = batch_support(NerfConfig.preset(config.engine))
         _need(reason is None, "batch", config.batch, f"engine {config.engine!r}: {reason}")
     _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
-    _need(config.add_at_step >= 0, "add_at_step", config.add_at_step, "must be >= 0")
-    _need(
-        config.steps > config.add_at_step,
-        "steps",
-        config.steps,
-        f"must be greater than the step at which views are added ({config.add_at_step}), or the added views "
-        "are never trained on",
-    )
-    _need(config.pool >= config.n_new, "pool", config.pool, f"the pool must hold the {config.n_new} views to add")
+    check_schedule(config)  # the steps, the rounds and the pool they draw on
     datasets: dict[str, dict] = {}
     for scene in config.scenes:
         name, folder = scene_name(scene), scene_folder(scene)
@@ -177,6 +170,8 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
             f"built-in scenes are rendered at most {BUILTIN_MAX_RESOLUTION} px across; for more, render one with "
             "`nerfaug scene render SCENE --res N --out DIR` and pass --data DIR",
         )
+        if folder is None:  # a user dataset's own pool is checked with it
+            check_pool(config, config.pool, "the built-in scenes' pool (--pool)")
         datasets[name] = (
             {"builtin": scene, "digest": builtin_dataset_digest(scene, config)}
             if folder is None
@@ -232,7 +227,7 @@ def _check_user_dataset(folder: Path, config: ExperimentConfig) -> dict:
             f"{config.n_new} new ones",
         )
         initial, pool = config.n_initial, len(train) - config.n_initial
-    _need(pool >= config.n_new, "n_new", config.n_new, f"the candidate pool of {folder} holds only {pool} views")
+    check_pool(config, pool, str(folder))
     _need(
         len(test) >= config.n_test,
         "n_test",
@@ -260,7 +255,7 @@ def _check_captured_set(split, views, config: ExperimentConfig) -> dict:
     except ValueError as error:
         raise ValueError(f"{split.listing}: {error}") from None
     pool = min(len(s.pool) for s in splits)
-    _need(pool >= config.n_new, "n_new", config.n_new, f"the candidate pool of {split.listing} holds only {pool} views")
+    check_pool(config, pool, str(split.listing))
     return {
         "content": dataset_content_digest(split.root, ("train",)),
         "initial": config.n_initial,

@@ -4,7 +4,8 @@ ablation tables and figures, run times and the runs left out, as `report.md` and
 
 Rooms: `collect` (reading the results folder), `document` (blocks, Markdown, HTML, number
 formats), `figures` (the PNGs), `sections` (what the report says), `view_uncertainty` (a test
-view's error and uncertainty images, AUSE), `study` (the multi-engine study's summary).
+view's error and uncertainty images, AUSE), `learning_curve` (runs in rounds: test PSNR against
+views), `study` (the multi-engine study's summary).
 
 Only runs whose result.json is valid for the sweep's fingerprint (`store.read_result`) are
 aggregated; every other run folder is listed with the reason, never silently counted.
@@ -26,6 +27,7 @@ from nerfaug.report.collect import (
 )
 from nerfaug.report.document import Block, to_html, to_markdown
 from nerfaug.report.figures import Figures, history_series, make_figures
+from nerfaug.report.learning_curve import learning_curve_section, plot_learning_curves
 from nerfaug.report.sections import (
     PaperTables,
     figure_sections,
@@ -41,11 +43,15 @@ from nerfaug.report.sections import (
 from nerfaug.report.view_uncertainty import view_uncertainty_section
 
 
-def build_report(results: Results, figures: Figures, paper: PaperTables) -> list[Block]:
+def build_report(
+    results: Results, figures: Figures, paper: PaperTables, learning_curves: Path | None = None
+) -> list[Block]:
+    """The report's blocks; `learning_curves`: the figure of the runs' learning curves, if drawn."""
     blocks = header_section(results)
     blocks = blocks[:1] + verdict_section(results) + blocks[1:] + summary_section(results)
     for scene in results.scenes:
         blocks += scene_section(results, scene, figures.boxplots.get(scene))
+    blocks += learning_curve_section(results, learning_curves)
     blocks += table_i_section(results, paper) + table_ii_section(results, paper)
     blocks += figure_sections(results, figures) + view_uncertainty_section(results, figures.view_uncertainty)
     blocks += timing_section(results, paper) + problems_section(results)
@@ -69,12 +75,13 @@ def write_report(results_dir: Path, paper: PaperTables) -> list[Path]:
     """
     results = collect_results(results_dir)
     figures = make_figures(results)
-    blocks = build_report(results, figures, paper)
+    curves = plot_learning_curves(results, ResultsFolder(results.root).figures / "learning_curves.png")
+    blocks = build_report(results, figures, paper, curves)
     root = results.root
     markdown, page = ResultsFolder(root).report
     atomic_write_bytes(markdown, to_markdown(blocks, root).encode())
     atomic_write_bytes(page, to_html(blocks, f"nerfaug report: {root.name}").encode())
-    return [markdown, page] + figures.paths()
+    return [markdown, page] + figures.paths() + ([curves] if curves else [])
 
 
 __all__ = [
