@@ -521,8 +521,8 @@ def _variant_text(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, tuple):
-        return ",".join(str(v) for v in value)
-    return str(value)
+        return ",".join(_variant_text(v) for v in value)
+    return str(value).replace("e+", "e")  # 1e+30 as 1e30: "+" separates a variant's changes
 
 
 def variant_name(engine: str, settings: dict[str, Any]) -> str:
