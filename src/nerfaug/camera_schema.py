@@ -43,6 +43,7 @@ if TYPE_CHECKING:
 MIN_FOV_DEGREES = 0.1
 MAX_FOV_DEGREES = 170.0
 MIN_FOV, MAX_FOV = math.radians(MIN_FOV_DEGREES), math.radians(MAX_FOV_DEGREES)
+FOV_DIGITS = 1e-9  # relative: a bound's angle in radians, rounded where a listing writes it
 MAX_IMAGE_SIDE = 65536
 ROTATION_TOLERANCE = 1e-3  # Blender exports are float32: this accepts their round-off, not a scale or shear
 MAX_CONDITION = 1e12
@@ -62,13 +63,15 @@ def check_field_of_view(angle, path: str | Path, field: str) -> float:
     DatasetError naming `path` and `field`."""
     usable = isinstance(angle, numbers.Real) and not isinstance(angle, bool)
     try:
-        usable = usable and MIN_FOV < float(angle) < MAX_FOV
+        # The bounds themselves are lenses' (README: 0.1 to 170 degrees), as written in radians
+        # to a listing's last digits.
+        usable = usable and MIN_FOV * (1 - FOV_DIGITS) <= float(angle) <= MAX_FOV * (1 + FOV_DIGITS)
     except OverflowError:  # an integer beyond float range
         usable = False
     if not usable:
         raise DatasetError(
             path,
-            f"{field} must be a number in ({MIN_FOV:.4g}, {MAX_FOV:.4g}) radians "
+            f"{field} must be a number in [{MIN_FOV:.4g}, {MAX_FOV:.4g}] radians "
             f"({MIN_FOV_DEGREES:g} to {MAX_FOV_DEGREES:g} degrees: the fields of view of real lenses)",
             field=field,
             value=angle,
