@@ -124,3 +124,21 @@ def session_file_of_format_1_naming_an_unknown_engine(tmp, bases):
 @case
 def session_file_of_format_1_naming_another_engine_than_its_settings(tmp, bases):
     return _broken_session(tmp, bases, lambda data: _format_1(data, "cpu"), "'engine'", "'engine_config'", "'cpu'")
+
+
+@case
+def train_a_blender_camera_1e5_scene_radii_away(tmp, bases):
+    """Blender listings give no scene scale: the scene is the one the cameras frame."""
+    data = copy_dataset(tmp, bases)
+
+    def far(listing):
+        matrix = listing["frames"][3]["transform_matrix"]
+        for row in matrix[:3]:
+            row[3] *= 1e5
+
+    edit_json(data / "transforms_train.json", far)
+    return Case(
+        train_on(data, tmp).argv,
+        [data, tmp],
+        says=("transforms_train.json", "frames[3].transform_matrix", "scene radii"),
+    )
