@@ -64,6 +64,7 @@ from nerfaug.capture.runfolder import (
     PROPOSALS_DIR,
     RUN_KIND,
     SESSION_FILE,
+    UNFINISHED_FILE,
     check_new_run,
     remove_unfinished,
 )
@@ -217,9 +218,12 @@ class CaptureSession(SessionFolder):
         existed = run_dir.exists()
         owned.mark(run_dir, RUN_KIND)
         try:
+            (run_dir / UNFINISHED_FILE).touch()  # until session.json is written (`check_new_run`)
             if pool is not None:
                 atomic_write_json(run_dir / POOL_FILE, pool)
-            return cls._build(run_dir, source, state, config, device, progress)
+            session = cls._build(run_dir, source, state, config, device, progress)
+            (run_dir / UNFINISHED_FILE).unlink()
+            return session
         except BaseException:
             remove_unfinished(run_dir, existed)
             raise
@@ -320,7 +324,9 @@ class CaptureSession(SessionFolder):
                 f"{self.dataset_split().listing} lists {len(frames)} frames but the checkpoint was "
                 f"trained on {in_model}: the dataset was edited outside the session"
             )
-        if len(frames) > in_model:  # added after the last save: train on them too
+        if len(frames) > in_model:  # added after the last save: train on them too, each in a record
+            if (record := add.unrecorded_addition(state, frames[in_model:], trainer.step)) is not None:
+                state.additions.append(record)
             trainer.add_views(self.engine_views(in_model))
             added = integrity.capture_digests(self.dataset_split(), frames[in_model:], start=in_model)
             state.integrity.captures.update({k: v for k, v in added.items() if k not in state.integrity.captures})
