@@ -44,3 +44,12 @@ def test_an_engine_that_cannot_train_here_is_a_422_naming_the_setting(served, en
     assert "engine" in text and all(s in text for s in says), text
     after = sorted(p.name for p in root.iterdir()) if root.exists() else []
     assert after == before
+
+
+def test_a_training_job_that_diverges_is_the_settings_fault_not_an_internal_error():
+    from nerfaug.nerf.trainer import TrainingDiverged
+    from nerfaug.service.errors import status_of
+
+    status, text = status_of(TrainingDiverged(1, float("nan")))
+    assert status == 422 and "internal error" not in text
+    assert text.startswith("training diverged at step 1: loss = nan") and "engine settings" in text
