@@ -15,9 +15,10 @@ lens someone owns):
 - A projection (IDR's `world_mat`) is judged scale-free: P and s P are one camera, so it is
   singular only when its condition number passes `MAX_CONDITION`; a similarity (IDR's
   `scale_mat`) is a rotation times one positive scale, whatever that scale is.
-- Where a format gives the scene's scale (IDR's unit sphere), cameras lie at most
-  `MAX_DISTANCE_IN_SCENE_RADII` radii from the scene's centre: from farther, the object spans
-  less than a tenth of the narrowest field of view above.
+- Cameras lie at most `MAX_DISTANCE_IN_SCENE_RADII` radii from the scene's centre: from farther,
+  the object spans less than a tenth of the narrowest field of view above. Where a format gives
+  the scene's scale (IDR's unit sphere) that is the scene; elsewhere it is the one the cameras
+  frame (`check_camera_spread`).
 - A lens's undistorted image draws on at least `MIN_PHOTO_PIXELS_PER_PIXEL` of a photo pixel
   (area) at every pixel: a pinhole view of a fisheye's 80-degree edge draws on about 0.08 (the
   least a real lens needs), while k1 = -999 or p1 = 500 would leave each pixel a millionth of one.
@@ -43,6 +44,7 @@ if TYPE_CHECKING:
 MIN_FOV_DEGREES = 0.1
 MAX_FOV_DEGREES = 170.0
 MIN_FOV, MAX_FOV = math.radians(MIN_FOV_DEGREES), math.radians(MAX_FOV_DEGREES)
+FOV_DIGITS = 1e-9  # relative: a bound's angle in radians, rounded where a listing writes it
 MAX_IMAGE_SIDE = 65536
 ROTATION_TOLERANCE = 1e-3  # Blender exports are float32: this accepts their round-off, not a scale or shear
 MAX_CONDITION = 1e12
@@ -62,13 +64,15 @@ def check_field_of_view(angle, path: str | Path, field: str) -> float:
     DatasetError naming `path` and `field`."""
     usable = isinstance(angle, numbers.Real) and not isinstance(angle, bool)
     try:
-        usable = usable and MIN_FOV < float(angle) < MAX_FOV
+        # The bounds themselves are lenses' (README: 0.1 to 170 degrees), as written in radians
+        # to a listing's last digits.
+        usable = usable and MIN_FOV * (1 - FOV_DIGITS) <= float(angle) <= MAX_FOV * (1 + FOV_DIGITS)
     except OverflowError:  # an integer beyond float range
         usable = False
     if not usable:
         raise DatasetError(
             path,
-            f"{field} must be a number in ({MIN_FOV:.4g}, {MAX_FOV:.4g}) radians "
+            f"{field} must be a number in [{MIN_FOV:.4g}, {MAX_FOV:.4g}] radians "
             f"({MIN_FOV_DEGREES:g} to {MAX_FOV_DEGREES:g} degrees: the fields of view of real lenses)",
             field=field,
             value=angle,
@@ -216,6 +220,33 @@ def check_scene_distance(distance: float, path: str | Path, field: str) -> None:
             f"{MAX_DISTANCE_IN_SCENE_RADII:g} the object spans less than a tenth of the narrowest lens's view",
             field=field,
             value=distance,
+        )
+
+
+def check_camera_spread(positions, path: str | Path, field_of) -> None:
+    """Where a format gives no scene scale, the scene is the one the cameras frame: its centre their
+    median position, its radius their median distance from it (a hemisphere's cameras lie about
+    one radius out). Refuse a camera beyond `MAX_DISTANCE_IN_SCENE_RADII` such radii, naming the
+    field `field_of(i)` of the i-th camera (a unit mix-up or a broken export, never a capture).
+
+    Args:
+        positions: (n, 3) camera centres, world space; fewer than 3 are not judged.
+    """
+    import numpy as np
+
+    points = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(points) < 3:
+        return
+    distances = np.linalg.norm(points - np.median(points, axis=0), axis=1)
+    radius, farthest = float(np.median(distances)), int(np.argmax(distances))
+    if radius > 0 and not distances[farthest] <= MAX_DISTANCE_IN_SCENE_RADII * radius:
+        raise DatasetError(
+            path,
+            f"puts the camera {distances[farthest] / radius:.4g} scene radii from the centre the cameras frame "
+            f"(its radius: the cameras' median distance, {radius:.4g}); from beyond {MAX_DISTANCE_IN_SCENE_RADII:g} "
+            "the object spans less than a tenth of the narrowest lens's view",
+            field=field_of(farthest),
+            value=points[farthest].tolist(),
         )
 
 

@@ -103,10 +103,10 @@ def test_train_checks_every_session_setting_before_reading_the_data(capsys, tmp_
 def test_serve_names_the_engines_its_settings_do_not_fit(capsys):
     from nerfaug.cli.serve import _check_engine_settings
 
-    _check_engine_settings({"proposal_samples": (8,)})  # the occupancy engines take it; the proposal ones cannot
+    _check_engine_settings({"plane_resolutions": (32,)})  # the K-planes engines read it; the hash-grid ones do not
     err = capsys.readouterr().err
     assert err.startswith("warning: a session asking for the engine paper, nerfacto-cpu, nerfacto-cpu-last-sample ")
-    assert "proposal_samples (8,)" in err and "cpu," not in err.replace("nerfacto-cpu,", "")
+    assert "--engine.field.planes.resolutions 32: not used" in err and "cpu," not in err.replace("nerfacto-cpu,", "")
 
 
 def test_a_setting_is_refused_as_the_option_on_run_and_study(capsys, tmp_path):

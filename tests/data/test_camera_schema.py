@@ -226,3 +226,16 @@ def test_every_reader_and_the_service_use_the_one_schema():
     users = ["data/frames.py", "data/blender.py", "data/nerfstudio.py", "data/llff.py", "data/idr.py", "data/lens.py"]
     for user in [*users, "capture/requests.py"]:
         assert "camera_schema" in (package / user).read_text(), user
+
+
+@pytest.mark.parametrize("degrees", [0.1, 170.0])
+def test_the_field_of_view_bounds_themselves_are_lenses(tmp_path, degrees):
+    # The README's range, 0.1 to 170 degrees, holds its ends, as a listing writes them in radians.
+    for angle in (math.radians(degrees), float(f"{math.radians(degrees):.12g}")):
+        assert camera_schema.check_field_of_view(angle, tmp_path / "t.json", "camera_angle_x") == angle
+
+
+@pytest.mark.parametrize("degrees", [0.0999, 170.01])
+def test_a_field_of_view_just_beyond_the_bounds_is_refused(tmp_path, degrees):
+    with pytest.raises(DatasetError, match="camera_angle_x"):
+        camera_schema.check_field_of_view(math.radians(degrees), tmp_path / "t.json", "camera_angle_x")

@@ -1,5 +1,6 @@
 """The bad inputs' registry and what their areas share; the cases themselves are in
-`cases_datasets.py`, `cases_capture.py`, `cases_sessions.py` and `cases_experiments.py` (`all_cases()`
+`cases_datasets.py`, `cases_capture.py`, `cases_sessions.py`, `cases_settings.py` and
+`cases_experiments.py` (`all_cases()`
 collects them).
 
 Each case builds what it needs in a fresh folder and says what `nerfaug` must answer.
@@ -70,5 +71,6 @@ def all_cases() -> dict:
     import cases_datasets  # noqa: F401
     import cases_experiments  # noqa: F401
     import cases_sessions  # noqa: F401
+    import cases_settings  # noqa: F401
 
     return CASES

@@ -57,15 +57,15 @@ def test_the_services_engine_settings_change_the_engine_of_each_session_it_creat
 
     hub = SessionHub(tmp_path, engine_settings={"hidden_dim": 48})
     plain = SessionHub(tmp_path)
-    fitting_occupancy = SessionHub(tmp_path, engine_settings={"proposal_samples": (8,)})
+    fitting_occupancy = SessionHub(tmp_path, engine_settings={"plane_resolutions": (32,)})  # K-planes engines only
     try:
         request = FromDataset(id="s", dataset="data", engine="cpu")
         assert hub.settings_of(request).engine == "cpu+hidden_dim=48"
         assert hub.settings_of(FromDataset(id="s", dataset="data")).engine == "nerfacto-cpu+hidden_dim=48"
         assert plain.settings_of(request) is request
         status, message, _ = refusal(lambda: fitting_occupancy.settings_of(FromDataset(id="s", dataset="data")))
-        assert status == 422 and message.startswith("engine: refuses this service's engine settings: proposal_samples")
-        assert fitting_occupancy.settings_of(request).engine == "cpu+proposal_samples=8"
+        assert status == 422 and message.startswith("engine: refuses this service's engine settings: field.planes")
+        assert fitting_occupancy.settings_of(request).engine == "cpu+plane_resolutions=32"
     finally:
         hub.shutdown()
         plain.shutdown()

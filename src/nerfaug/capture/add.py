@@ -17,7 +17,7 @@ from nerfaug.capture.dataset import NAME
 from nerfaug.capture.images import as_array, check_capture, collect_images, stored_bytes
 from nerfaug.capture.integrity import sha256_bytes
 from nerfaug.capture.proposal import Proposal, read_poses
-from nerfaug.capture.state import DuplicateViews
+from nerfaug.capture.state import AdditionRecord, DuplicateViews, SessionState, now
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import check_pose
 from nerfaug.data.interface import DatasetSplit, NewFrame, unique_stem
@@ -167,3 +167,18 @@ def warn_repeated_poses(frames: list, poses: torch.Tensor, names: Sequence[str],
             lines.append(f"{source}: new view {names[i]} has the same pose as {labels[j]} (the same view added twice)")
             warnings.warn(lines[-1], DuplicateViews, stacklevel=4)
     return lines
+
+
+def unrecorded_addition(state: SessionState, frames: list, step: int) -> AdditionRecord | None:
+    """The record of views the dataset lists beyond the model's last save that no addition
+    records (an `add` stopped after writing its listing and before saving), or None: each view a
+    session trains on is one of its records, so they are recorded as found, at `step`."""
+    recorded = {name for record in state.additions for name in record.names}
+    names = [stem for f in frames if (stem := Path(str(f["file_path"])).stem) not in recorded]
+    if not names:
+        return None
+    matched = [p.number for p in state.proposals if set(names) <= set(p.names)]
+    found = "recorded when the session was next opened: the command that added them stopped before saving"
+    return AdditionRecord(
+        step=step, names=names, proposal=matched[-1] if matched else None, created=now(), warnings=[found]
+    )

@@ -17,11 +17,23 @@ from nerfaug.capture.model import SessionModel
 from nerfaug.capture.proposal import Proposal, proposal_seed, read_poses
 from nerfaug.capture.proposal_request import ViewConstraints
 from nerfaug.capture.state import ProposalRecord, now
+from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import check_pose
 from nerfaug.data.world_frame import ENGINE_RADIUS
 from nerfaug.maps import plot_hemisphere_map
 from nerfaug.selection import Selection, hemisphere_candidates, matching_poses
 from nerfaug.selection.candidates import with_poses
+
+
+def _refuse_twice_named(path, names: list[str]) -> None:
+    """A pool names each view once: a name twice would be proposed twice, and `add` takes one image
+    for both."""
+    first: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in first:
+            twice = f"names the view {name!r} twice (frames[{first[name]}] too)"
+            raise DatasetError(path, twice, field=f"frames[{i}].file_path", value=name)
+        first[name] = i
 
 
 def describe_candidates(candidates, pool: bool = False) -> str:
@@ -53,6 +65,7 @@ def named_candidates(
     names = None
     if candidates is None and model.pool is not None:
         poses, names = read_poses(model.pool)
+        _refuse_twice_named(model.pool, names)
         given = with_poses(template, poses)
     elif candidates is None:
         engine = hemisphere_candidates(

@@ -45,7 +45,8 @@ from tyro.constructors import PrimitiveConstructorSpec
 from nerfaug import camera_schema
 from nerfaug.camera_schema import MAX_IMAGE_SIDE
 from nerfaug.errors import DatasetError
-from nerfaug.nerf.config import PRESETS, parse_variant
+from nerfaug.nerf.config import PRESETS
+from nerfaug.nerf.footprint import check_engine_fits
 from nerfaug.registry import check_name
 from nerfaug.schema import SCHEMA, RequestError, Schema, adapter, problem_text, validated
 
@@ -334,8 +335,8 @@ DEFAULT_SESSION_ENGINE = "nerfacto-cpu"
 
 
 def _engine_name(name: str) -> str:
-    try:  # an unknown preset or setting, or a badly typed value: refused by name
-        parse_variant(name)
+    try:  # an unknown preset or setting, a badly typed value, or a run too large here: refused by name
+        check_engine_fits(name)
     except ValueError as error:  # the refusal names the field and value before the reason
         raise ValueError(str(error).removeprefix(f"engine {name!r}: ")) from None
     return name

@@ -21,6 +21,18 @@ POOL_FILE = "pool.json"
 RUN_KIND, DATASET_KIND, EXPORT_KIND = "capture-session", "capture-dataset", "capture-export"
 # The split the run's dataset copy holds the views in, whatever the source's split was.
 DATASET_SPLIT = "train"
+# Present while a new session is being created, until its session.json is first written: a folder
+# holding it and no session.json was never a session (a creation was stopped, e.g. killed).
+UNFINISHED_FILE = ".creating"
+# What a stopped creation may have written (`owned.foreign_files` patterns): anything else is a user's.
+UNFINISHED_HOLDS = (
+    UNFINISHED_FILE,
+    POOL_FILE,
+    CHECKPOINT_FILE,
+    ".lock",
+    f"{DATASET_DIR}/{owned.MARKER}",
+    *(f"{DATASET_DIR}/*.{kind}" for kind in ("json", "npy", "npz", "png", "jpg", "jpeg", "exr")),
+)
 
 
 def check_new_run(data_dir: Path, run_dir: Path) -> None:
@@ -46,6 +58,9 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
     if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
         what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
         raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder for --out")
+    if (run_dir / UNFINISHED_FILE).is_file():
+        _remove_stopped_creation(run_dir)
+        return
     left = sorted(p.name for p in run_dir.iterdir() if p.name != owned.MARKER) if run_dir.is_dir() else []
     if left:
         raise FolderRefused(
@@ -53,6 +68,20 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
             f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
             f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
         )
+
+
+def _remove_stopped_creation(run_dir: Path) -> None:
+    """Remove what a stopped creation left in `run_dir` (never a session: no session.json was
+    written), so that the same command creates it anew; refuse when it holds a file nerfaug did
+    not write there."""
+    foreign = owned.foreign_files(run_dir, UNFINISHED_HOLDS)
+    if foreign:
+        raise FolderRefused(
+            f"{run_dir}: left by the creation of a session that was stopped before its {SESSION_FILE} was "
+            f"written, and it holds {foreign[0]}, which nerfaug did not write, so nothing there is changed; "
+            "move that file out and run the command again, or choose a new folder for --out"
+        )
+    remove_unfinished(run_dir, existed=True)
 
 
 def remove_unfinished(run_dir: Path, existed: bool) -> None:

@@ -9,9 +9,8 @@ A session lives in a run folder:
       session.json          state (`SessionState`): step, seed, engine, intrinsics, hemisphere, proposals, additions
       checkpoint.pt         the trainer (`Trainer.save_checkpoint`): model, optimiser, RNG, views
       dataset/              the dataset as it has grown, as the train split of a registered format
-                              (`nerfaug.data.FORMATS`): Blender (`transforms_train.json` + `train/*.png`)
-                              when one camera_angle_x describes its cameras, else the source's own
-                              (nerfstudio: `transforms.json` + `images/*`)
+                              (`nerfaug.data.FORMATS`): Blender when one camera_angle_x describes its
+                              cameras, else the source's own (nerfstudio: `transforms.json` + `images/*`)
       proposals/            proposal_000.json (poses + every candidate's score), proposal_000.png (map)
 
 Poses given to and returned by a session are in the dataset's world frame; the NeRF is trained in
@@ -65,6 +64,7 @@ from nerfaug.capture.runfolder import (
     PROPOSALS_DIR,
     RUN_KIND,
     SESSION_FILE,
+    UNFINISHED_FILE,
     check_new_run,
     remove_unfinished,
 )
@@ -215,9 +215,12 @@ class CaptureSession(SessionFolder):
         existed = run_dir.exists()
         owned.mark(run_dir, RUN_KIND)
         try:
+            (run_dir / UNFINISHED_FILE).touch()  # until session.json is written (`check_new_run`)
             if pool is not None:
                 atomic_write_json(run_dir / POOL_FILE, pool)
-            return cls._build(run_dir, source, state, config, device, progress)
+            session = cls._build(run_dir, source, state, config, device, progress)
+            (run_dir / UNFINISHED_FILE).unlink()
+            return session
         except BaseException:
             remove_unfinished(run_dir, existed)
             raise
@@ -321,7 +324,9 @@ class CaptureSession(SessionFolder):
                 f"{self.dataset_split().listing} lists {len(frames)} frames but the checkpoint was "
                 f"trained on {in_model}: the dataset was edited outside the session"
             )
-        if len(frames) > in_model:  # added after the last save: train on them too
+        if len(frames) > in_model:  # added after the last save: train on them too, each in a record
+            if (record := add.unrecorded_addition(state, frames[in_model:], trainer.step)) is not None:
+                state.additions.append(record)
             trainer.add_views(self.engine_views(in_model))
             added = integrity.capture_digests(self.dataset_split(), frames[in_model:], start=in_model)
             state.integrity.captures.update({k: v for k, v in added.items() if k not in state.integrity.captures})
@@ -585,9 +590,8 @@ class CaptureSession(SessionFolder):
     def uncertainty_maps(
         self, poses, width: int | None = None, fisher=True, fisher_width=FISHER_WIDTH, progress=False, names=None
     ) -> list[ViewMaps]:
-        """The render, depth, ray entropy and FisherRF images of world-frame `poses` (n, 4, 4);
-        see `nerfaug.capture.uncertainty_images.view_maps` (`progress` shows each view's images
-        as they are done, named by `names`)."""
+        """The render, depth, ray entropy and FisherRF images of world-frame `poses` (n, 4, 4):
+        `nerfaug.capture.uncertainty_images.view_maps` (`progress`: each view's, named by `names`)."""
         return view_maps(self.session_model(), poses, width, fisher, fisher_width, progress, names)
 
     def evaluate(self, views: Views, lpips="auto", progress: bool = False) -> EvaluationResult:

@@ -39,11 +39,14 @@ from nerfaug.data.formats import FORMATS, plainest_format
 from nerfaug.data.interface import DatasetSplit, Format
 from nerfaug.data.world_frame import Hemisphere, pole_is_estimated
 from nerfaug.errors import NerfaugError
+from nerfaug.nerf.config import NerfConfig, parse_variant
 
 if TYPE_CHECKING:  # cameras bring torch; the state is read without it
     from nerfaug.cameras import Cameras
 
 SESSION_FORMAT = 2
+# The engine a session records for a `NerfConfig` given as is (not by a name).
+CUSTOM_ENGINE = "custom"
 
 
 class SessionError(NerfaugError, RuntimeError):
@@ -230,18 +233,46 @@ class SessionState(Stored):
     def _format_1(cls, data):
         """A format-1 file's keys as format 2 names them: "preset" -> "engine" (the name), "engine"
         -> "engine_config" (the settings)."""
-        if isinstance(data, dict) and data.get("format") == 1:
+        if isinstance(data, dict) and data.get("format") == 1 and not isinstance(data.get("format"), bool):
             data = {**data, "format": SESSION_FORMAT}
             data["engine_config"] = data.pop("engine", None)
             data["engine"] = data.pop("preset", None)
         return data
 
-    @field_validator("format")
+    @field_validator("format", mode="before")
     @classmethod
-    def _supported(cls, value: int) -> int:
+    def _supported(cls, value) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):  # `true` is no format number
+            raise ValueError(f"must be a format number ({SESSION_FORMAT})")
         if value != SESSION_FORMAT:
             raise ValueError(f"unsupported session format; this nerfaug reads format {SESSION_FORMAT}")
         return value
+
+    @field_validator("engine")
+    @classmethod
+    def _known_engine(cls, value: str) -> str:
+        if value != CUSTOM_ENGINE:
+            parse_variant(value)  # an unknown engine or setting: refused, naming them
+        return value
+
+    @model_validator(mode="after")
+    def _engine_is_its_settings(self):
+        """The engine's name and its recorded settings agree: a name over another engine's
+        settings would be trained as the one and reported as the other."""
+        if self.engine == CUSTOM_ENGINE:
+            return self
+        try:
+            recorded = NerfConfig.from_dict(self.engine_config)
+        except ValueError as error:
+            raise ValueError(f"engine_config: {error}") from None
+        named = NerfConfig.preset(self.engine)
+        if recorded != named:
+            differ = ", ".join(sorted(k for k, v in recorded.flat().items() if named.flat()[k] != v)[:3])
+            raise ValueError(
+                f"fields 'engine' and 'engine_config' disagree: engine {self.engine!r} is not the engine "
+                f"engine_config holds (they differ in {differ})"
+            )
+        return self
 
     def to_dict(self) -> dict:
         """The JSON object written to session.json (the historic key layout)."""
@@ -299,8 +330,9 @@ class SessionState(Stored):
         except ValidationError as error:
             wrong = RequestError.of(error)
             where = f"{path}, field '{wrong.argument}'" if wrong.argument else str(path)
+            got = f" (got {repr(wrong.value)[:120]})" if wrong.argument else ""  # not the whole file
             raise SessionError(
-                f"{where}: {wrong.problem} (got {repr(wrong.value)[:120]}); the file was edited or damaged: "
+                f"{where}: {wrong.problem}{got}; the file was edited or damaged: "
                 "restore it, or start a new session with `nerfaug train DATA --out NEW_RUN`"
             ) from None
 

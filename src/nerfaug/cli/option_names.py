@@ -10,6 +10,7 @@ import dataclasses
 
 from nerfaug.capture.requests import RequestError, words
 from nerfaug.nerf.config import variant_name
+from nerfaug.nerf.footprint import check_engine_fits
 
 
 def option(field: str) -> str:
@@ -47,8 +48,9 @@ def engine_refusal(error: ValueError) -> str:
 
 def engine_variant(engine: str, settings: dict) -> str:
     """`variant_name(engine, settings)`: the engine with the --engine.GROUP.SETTING given changed,
-    one line naming the option (SystemExit) when a setting is refused."""
+    one line naming the option (SystemExit) when a setting is refused or makes a run too large
+    for this machine's memory (`check_engine_fits`)."""
     try:
-        return variant_name(engine, settings)
+        return check_engine_fits(variant_name(engine, settings))
     except ValueError as error:
         raise SystemExit(engine_refusal(error)) from None

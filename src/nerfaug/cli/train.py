@@ -11,6 +11,7 @@ runs, so that `nerfaug train --help` answers at once.
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
@@ -27,8 +28,10 @@ from nerfaug.capture.requests import (
     given_form,
     replaced_by,
 )
+from nerfaug.capture.runfolder import SESSION_FILE
 from nerfaug.cli.option_names import as_options, checked, engine_variant
 from nerfaug.device_choice import Device
+from nerfaug.nerf.config import parse_variant
 from nerfaug.training_log import Logger, LoggerUnavailable, require
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
@@ -53,14 +56,27 @@ def _check_training(steps: int, checkpoint_every: float, logger: Logger) -> None
         raise SystemExit(str(error)) from None
 
 
-def with_engine_settings(settings: GivenSettings, given: dict | None) -> GivenSettings:
-    """`settings` whose engine is --engine (or the default) with the --engine.GROUP.SETTING `given`
-    (flat name -> value) changed: one engine name, a variant such as "paper+hidden_dim=32", which
-    the session records."""
+def with_engine_settings(settings: GivenSettings, given: dict | None, path: Path | None = None) -> GivenSettings:
+    """`settings` whose engine is --engine (or else the engine of the session in `path`, or the
+    default) with the --engine.GROUP.SETTING `given` (flat name -> value) changed: one engine
+    name, a variant such as "paper+hidden_dim=32", which the session records."""
     if not given:
         return settings  # the engine's name is checked with the other settings (`checked`)
-    # Before anything is read: an unknown setting, or a value out of its bounds, is one line naming it.
-    return replace(settings, engine=engine_variant(settings.engine or SessionSettings().engine, given))
+    base = settings.engine or (_recorded_engine(path) if path is not None else None) or SessionSettings().engine
+    # Before the session is opened: an unknown setting, or a value out of its bounds, is one line naming it.
+    return replace(settings, engine=engine_variant(base, given))
+
+
+def _recorded_engine(run: Path) -> str | None:
+    """The engine a session in `run` records (format 2: "engine"; 1: "preset"), or None where there
+    is none to read (opening the session then says what is wrong)."""
+    try:
+        data = json.loads((run / SESSION_FILE).read_text())
+        name = data.get("engine" if data.get("format") == 2 else "preset")
+        parse_variant(name)  # an unknown one: not this command's to name
+    except (OSError, ValueError, AttributeError):
+        return None
+    return name
 
 
 def train(
@@ -75,7 +91,7 @@ def train(
     checkpoint_every: float = CHECKPOINT_EVERY_S,
     threads: int = THREADS,
     initial: Annotated[int | None, replaced_by("every view of the split", "INT")] = None,
-    layout: int = 0,
+    layout: Annotated[int | None, replaced_by("0, with --initial", "INT")] = None,
     logger: Logger = "none",
     engine_settings: tyro.conf.Suppress[dict | None] = None,
 ) -> None:
@@ -115,12 +131,14 @@ def train(
             the settings it changes ("nerfacto-cpu+hidden_dim=32").
     """
     _check_training(steps, checkpoint_every, logger)
-    settings = with_engine_settings(settings, engine_settings)
+    settings = with_engine_settings(settings, engine_settings, path)
     checked_settings = checked(settings.filled())  # the one check of each session setting, before anything is read
     start = None
+    if initial is None and layout is not None:  # a layout places a sparse start's views: alone it means nothing
+        raise ValueError(f"--layout {layout}: places the views of a sparse start; give --initial N with it")
     if initial is not None:
         with as_options():
-            start = SparseStart(initial=initial, layout=layout).checked()
+            start = SparseStart(initial=initial, layout=layout or 0).checked()
     from nerfaug.cli import train_work  # torch: here, so that `nerfaug train --help` loads none
 
     train_work.train(

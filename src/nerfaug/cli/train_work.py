@@ -16,8 +16,8 @@ from pathlib import Path
 from nerfaug.capture.dataset import HELD_OUT_KEY, default_split
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
-from nerfaug.capture.requests import SessionSettings, check_threads
-from nerfaug.capture.runfolder import SESSION_FILE
+from nerfaug.capture.requests import SessionSettings, check_threads, words
+from nerfaug.capture.runfolder import SESSION_FILE, remove_unfinished
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint, pole_settings
 from nerfaug.cli.option_names import as_options, option
@@ -27,6 +27,8 @@ from nerfaug.data.world_frame import TooFewCameras
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.health import EmptyModelWarning
+from nerfaug.nerf.config import FLAT_NAMES, parse_variant
+from nerfaug.nerf.trainer import TrainingDiverged
 from nerfaug.selection.selectors import DirectDraw, UniformFill
 from nerfaug.training_log import Logger, LoggerUnavailable, open_log
 
@@ -50,10 +52,33 @@ def train(
     configure(threads)
     run, data, compared = _which_session(path, out, given, steps)
     if run is None:
-        _finish(_create(path, out, settings, split, device, start), steps, checkpoint_every, logger)
+        existed = out.exists()
+        session = _create(path, out, settings, split, device, start)
+        try:
+            _finish(session, steps, checkpoint_every, logger)
+        except TrainingDiverged as error:  # nothing of a session that cannot train is kept
+            remove_unfinished(out, existed)
+            raise ValueError(f"{diverged(error, session.state.engine)}; {out} was not kept") from None
     elif not _at_step(run, data, settings, split, compared, steps):
         session = open_session(run, device, changing="train")
-        _train_further(session, steps, checkpoint_every, resuming=data is not None, logger=logger)
+        try:
+            _train_further(session, steps, checkpoint_every, resuming=data is not None, logger=logger)
+        except TrainingDiverged as error:  # the last save, made before the loss was lost, is kept
+            kept = f"the session saved at step {session.saved_step} is kept"
+            raise ValueError(f"{run}: {diverged(error, session.state.engine)}; {kept}") from None
+
+
+def diverged(error: TrainingDiverged, engine: str) -> str:
+    """A divergence as the fault of the engine's settings, naming them as options: "training
+    diverged at step 1 (loss nan) with --engine test --engine.optimiser.field-lr 1e30: ..."."""
+    base, changes = parse_variant(engine)
+    named = " ".join(f"--engine.{'.'.join(FLAT_NAMES[f]).replace('_', '-')} {words(v)}" for f, v in changes.items())
+    fix = "change them" if changes else "choose another engine or --seed"
+    given = f"--engine {base} {named}".strip()
+    return (
+        f"training diverged at step {error.step} (loss {error.loss}) with {given}: "
+        f"these settings do not train on this data ({fix}, e.g. a smaller learning rate)"
+    )
 
 
 def add(

@@ -305,6 +305,7 @@ def load_frames(
     masks: Sequence[Path] | None = None,
     warp_of: Callable[[int], Callable[[np.ndarray], np.ndarray] | None] | None = None,
     camera_field: Callable[[int], camera_schema.FieldNames] = lambda i: f"frames[{i}]",
+    pose_field: Callable[[int], str] = lambda i: f"frames[{i}].transform_matrix",
 ) -> Views:
     """The views a listing's `frames` list describes, for any format.
 
@@ -323,6 +324,8 @@ def load_frames(
         camera_field: where the listing gives frame i's camera, as errors name it: one name, or
             a function of "fx", "fy", "cx", "cy", "width", "height"; every camera is held to
             `nerfaug.camera_schema.check_pinhole`.
+        pose_field: where the listing gives frame i's pose, as errors name it; the poses are held
+            to `nerfaug.camera_schema.check_camera_spread`.
     """
     background = torch.as_tensor(background, dtype=torch.float32)
     poses, paths, names = [], [], []
@@ -335,6 +338,7 @@ def load_frames(
         poses.append(check_pose(matrix, json_path, f"{field}.transform_matrix"))
         paths.append(resolve_image(root, file_path, json_path, f"{field}.file_path"))
         names.append(file_path)
+    camera_schema.check_camera_spread([pose[:3, 3].tolist() for pose in poses], json_path, pose_field)
     if masks is not None:  # each refused before any is opened, as an image is
         masks = [resolve_mask(root, mask, json_path, f"frames[{i}].mask") for i, mask in enumerate(masks)]
 

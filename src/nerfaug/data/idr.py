@@ -163,6 +163,7 @@ class IdrFormat(CapturedSetFormat):
             intrinsics_of,
             masks or None,
             camera_field=lambda i: f"world_mat_{i}",
+            pose_field=lambda i: f"world_mat_{i}",
         )
 
     def has_masks(self, root: Path) -> bool:

@@ -182,7 +182,16 @@ class LlffFormat(CapturedSetFormat):
             return None, (focal * scale, focal * scale, width / 2.0, height / 2.0)
 
         return load_frames(
-            root, path, frames, background, downscale, lazy, intrinsics_of, masks, camera_field=lambda i: f"row {i}"
+            root,
+            path,
+            frames,
+            background,
+            downscale,
+            lazy,
+            intrinsics_of,
+            masks,
+            camera_field=lambda i: f"row {i}",
+            pose_field=lambda i: f"row {i}",
         )
 
     def has_masks(self, root: Path) -> bool:

@@ -26,25 +26,20 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Annotated, Any, ClassVar, Literal, get_type_hints
+from typing import Any, ClassVar, Literal, get_type_hints
 
-from annotated_types import Ge, Gt, Le, Lt, MinLen
-
+from nerfaug.nerf.bounds import Count, Counts, Fraction, Log2Size, NonNegative, Positive, Share, SHLevels, Steps, unused
+from nerfaug.nerf.bounds import get as _get
 from nerfaug.registry import Presets, lookup, unknown
-from nerfaug.schema import validated
+from nerfaug.schema import RequestError, validated
 
 # What rays that pass through the scene see (`RendererConfig.background_mode`); the last two need
 # no background colour from the caller.
 BACKGROUND_MODES = ("fixed", "last_sample", "last_composited")
 
 
-# Each setting's bounds, declared with its type and checked once, by pydantic, wherever settings
-# are changed (`with_settings`, `from_dict`): a width of 0 or a negative learning rate is refused
-# as one line naming the setting, never trained. Count: a size or number of things; Counts: one
-# or more of them (per tri-plane, per proposal network); Steps: training steps (0: none).
-Count, Steps = Annotated[int, Ge(1)], Annotated[int, Ge(0)]
-Positive, NonNegative = Annotated[float, Gt(0)], Annotated[float, Ge(0)]
-Counts = Annotated[tuple[Count, ...], MinLen(1)]
+# Each setting's bounds are its type (`nerfaug.nerf.bounds`), checked by pydantic wherever settings
+# change; every float is finite.
 
 
 def _flat(name: str) -> dict:
@@ -56,9 +51,9 @@ def _flat(name: str) -> dict:
 class SceneConfig:
     """The scene's bounds."""
 
-    near: float = 2.0
+    near: NonNegative = 2.0
     """samples lie in [near, far] along each ray (Blender: 2 and 6)."""
-    far: float = 6.0
+    far: Positive = 6.0
     """the far end of every ray."""
     box_half_size: Positive = 1.5
     """the scene is the axis-aligned box [-h, h]^3; density is 0 outside."""
@@ -77,7 +72,7 @@ class HashGridConfig:
     """grid levels."""
     features_per_level: Count = 2
     """features per level."""
-    log2_table_size: Annotated[int, Ge(1), Le(30)] = 19
+    log2_table_size: Log2Size = 19
     """log2 of the hash table's entries per level."""
     base_resolution: Count = 16
     """the coarsest grid resolution."""
@@ -114,7 +109,7 @@ class FieldConfig:
     """colour MLP width."""
     color_layers: Count = 2
     """colour MLP hidden layers."""
-    sh_levels: Annotated[int, Ge(1), Le(4)] = 4
+    sh_levels: SHLevels = 4
     """spherical-harmonics levels of the direction encoding (4 -> 16 terms)."""
     density_activation: Literal["trunc_exp", "softplus"] = "trunc_exp"
     """"trunc_exp" (nerfacto) or "softplus"."""
@@ -133,11 +128,11 @@ class OccupancyConfig:
     """training steps between updates of the grid."""
     warmup_steps: Steps = 256
     """steps during which every cell counts as occupied."""
-    ema_decay: Annotated[float, Ge(0), Lt(1)] = 0.95
+    ema_decay: Fraction = 0.95
     """EMA decay of the cells' opacities."""
     threshold: NonNegative = 0.01
     """opacity below which a cell is empty."""
-    update_fraction: Annotated[float, Gt(0), Le(1)] = 0.25
+    update_fraction: Share = 0.25
     """fraction of all cells probed at random per update (besides the occupied ones)."""
 
 
@@ -159,7 +154,7 @@ class ProposalConfig:
     """hash levels of each proposal network."""
     max_resolutions: Counts = (128, 256)
     """finest hash resolution of each proposal network."""
-    log2_table_size: Annotated[int, Ge(1), Le(30)] = 17
+    log2_table_size: Log2Size = 17
     """log2 of the proposal networks' hash table size."""
     hidden_dim: Count = 16
     """proposal MLP width."""
@@ -186,7 +181,7 @@ class SamplerConfig:
     (nerfacto's proposal networks)."""
     num_samples: Count = 48
     """colour samples per ray."""
-    transmittance_eps: Annotated[float, Ge(0), Lt(1)] = 1e-4
+    transmittance_eps: Fraction = 1e-4
     """colour is not evaluated where the transmittance is below this."""
     occupancy: OccupancyConfig = OccupancyConfig()
     """the occupancy grid (sampler "occupancy")."""
@@ -369,12 +364,6 @@ FLAT_NAMES: dict[str, tuple[str, ...]] = _leaves(NerfConfig)
 "levels"). The flat names are those of fingerprints, variants and files written before nesting."""
 
 
-def _get(config: Any, path: tuple[str, ...]) -> Any:
-    for name in path:
-        config = getattr(config, name)
-    return config
-
-
 def _build(cls: type, data: dict, where: str) -> Any:
     """A nested config from nested plain data (missing settings keep their defaults)."""
     hints, known = get_type_hints(cls), {f.name for f in fields(cls)}
@@ -515,11 +504,20 @@ def parse_variant(name: str) -> tuple[str, dict]:
             raise ValueError(f"engine {name!r}: {part!r} is not FIELD=VALUE")
         changes[field_name] = _setting(preset, field_name, text, f"engine {name!r}")
     if changes:
-        try:
-            preset.with_settings(**changes)  # the components' own checks (e.g. background_mode's values)
+        try:  # the components' own checks (e.g. background_mode's values), and what the engine reads
+            _used(preset.with_settings(**changes), changes)
         except ValueError as error:
             raise ValueError(f"engine {name!r}: {error}") from None
     return base, changes
+
+
+def _used(config: NerfConfig, changes: dict) -> NerfConfig:
+    """`config`, once every setting of `changes` (flat names) is one it reads (else a RequestError
+    naming it: a change the engine never reads would name a new engine that trains as the old)."""
+    for flat, value in changes.items():
+        if why := unused(config, FLAT_NAMES[flat]):
+            raise RequestError(".".join(FLAT_NAMES[flat]), value, why)
+    return config
 
 
 def _variant_text(value: Any) -> str:
@@ -527,8 +525,8 @@ def _variant_text(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, tuple):
-        return ",".join(str(v) for v in value)
-    return str(value)
+        return ",".join(_variant_text(v) for v in value)
+    return str(value).replace("e+", "e")  # 1e+30 as 1e30: "+" separates a variant's changes
 
 
 def variant_name(engine: str, settings: dict[str, Any]) -> str:
@@ -542,7 +540,7 @@ def variant_name(engine: str, settings: dict[str, Any]) -> str:
     base, changes = parse_variant(engine)
     changes |= {flat: tuple(value) if isinstance(value, list) else value for flat, value in settings.items()}
     preset = PRESETS[base]
-    preset.with_settings(**changes)  # an unknown setting, or one a component refuses: refused here
+    _used(preset.with_settings(**changes), changes)  # an unknown, refused or unread setting: refused here
     changes = {flat: value for flat, value in changes.items() if _get(preset, FLAT_NAMES[flat]) != value}
     name = VARIANT_SEPARATOR.join([base, *(f"{k}={_variant_text(v)}" for k, v in changes.items())])
     parse_variant(name)  # the name reads back, before any run is named by it

@@ -20,6 +20,7 @@ from nerfaug.capture.state import SessionError
 from nerfaug.data import DatasetError
 from nerfaug.errors import FolderRefused
 from nerfaug.health import EmptyModel
+from nerfaug.nerf.trainer import TrainingDiverged
 from nerfaug.schema import UNKNOWN_FIELD, field_path, problem_text
 
 # How many of a request's problems one answer spells out; beyond them, a count and their fields.
@@ -182,6 +183,8 @@ def status_of(error: BaseException) -> tuple[int, str]:
         text = " ".join(f"{error.path}{field}: {error.problem}".split())
     if isinstance(error, TrainingFull):
         return 503, text
+    if isinstance(error, TrainingDiverged):  # the engine's settings' fault, not the service's
+        return 422, f"{text}: the session's engine settings do not train on this data (e.g. a learning rate too large)"
     if isinstance(error, (FolderRefused, SessionError, SessionBusy, EmptyModel)):
         return 409, text
     if isinstance(error, (DatasetError, ValueError)):
