@@ -32,7 +32,7 @@ ROUNDING_TESTS := tests/nerf/test_batch.py tests/nerf/test_recorded_numbers.py t
 
 test-rounding: $(STAMP)
 	@for kernels in default avx2; do for threads in 1 2; do \
-		echo "rounding-sensitive tests: ATEN_CPU_CAPABILITY=$$kernels, $$threads torch threads"; \
+		echo "rounding-sensitive tests with ATEN_CPU_CAPABILITY=$$kernels NERFAUG_TEST_THREADS=$$threads"; \
 		ATEN_CPU_CAPABILITY=$$kernels NERFAUG_TEST_THREADS=$$threads \
 			$(BIN)/python -m pytest -q -p no:cacheprovider -m rounding $(ROUNDING_TESTS) || exit 1; \
 	done; done
