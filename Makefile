@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint test-fast bench bench-gpu-pack bench-gpu clean
+.PHONY: demo test test-rounding lint test-fast bench bench-gpu-pack bench-gpu clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,8 +19,23 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/nerfaug run --preset quick --out results/quick
 
+# A line per test file as it starts (not -q's dots alone), and the 20 slowest tests named at the end.
 test: $(STAMP) lint
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest --durations=20
+
+# The tests marked `rounding` compare numbers that a CPU's rounding moves (a batch against runs
+# alone, compiled against not, numbers recorded on one CPU): run again under torch's default
+# (unvectorised) and AVX2 kernels, each with 1 and 2 threads, so that a test that passes only by
+# this CPU's rounding fails here, not on a user's. tests/test_rounding_marker.py keeps the list whole.
+ROUNDING_TESTS := tests/nerf/test_batch.py tests/nerf/test_recorded_numbers.py tests/nerf/test_registry.py \
+	tests/nerf/test_trainer.py
+
+test-rounding: $(STAMP)
+	@for kernels in default avx2; do for threads in 1 2; do \
+		echo "rounding-sensitive tests with ATEN_CPU_CAPABILITY=$$kernels NERFAUG_TEST_THREADS=$$threads"; \
+		ATEN_CPU_CAPABILITY=$$kernels NERFAUG_TEST_THREADS=$$threads \
+			$(BIN)/python -m pytest -q -p no:cacheprovider -m rounding $(ROUNDING_TESTS) || exit 1; \
+	done; done
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -6,7 +6,19 @@ import pytest
 import torch
 
 os.environ.setdefault("MPLBACKEND", "Agg")
-torch.set_num_threads(1)  # CI has 2 cores; tests also run beside other processes
+
+
+def _test_threads() -> int:
+    """Torch's intra-op thread count for the tests: 1 (CI has 2 cores; tests also run beside other
+    processes), or NERFAUG_TEST_THREADS, with which `make test-rounding` runs the tests marked
+    `rounding` under 2 threads too (a reduction split over threads sums in another order)."""
+    text = os.environ.get("NERFAUG_TEST_THREADS", "1")
+    if not text.isdigit() or int(text) < 1:
+        raise pytest.UsageError(f"NERFAUG_TEST_THREADS: expected a whole number >= 1, got {text!r}")
+    return int(text)
+
+
+torch.set_num_threads(_test_threads())
 
 
 @pytest.fixture

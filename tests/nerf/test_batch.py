@@ -13,6 +13,10 @@ from nerfaug.nerf.encoding import HashEncoding, KPlanesEncoding
 from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.trainer import Trainer, seeded_model
 
+# Each test here compares a batch with runs alone: other arithmetic, whose rounding the CPU's
+# kernels and thread count move (`make test-rounding` runs them under several).
+pytestmark = pytest.mark.rounding
+
 # A small nerfacto-like engine (hash grid, proposal sampler), cheap enough for unit tests.
 SMALL = NerfConfig.preset(
     "nerfacto-cpu",
@@ -242,12 +246,19 @@ def test_engines_without_the_proposal_sampler_are_refused_by_name():
 def test_the_batched_engine_is_equivalent_to_runs_alone_by_paired_seeds(sphere_views):
     """The acceptance rule of a new engine version, at test size: over paired seeds, the mean
     difference of held-out PSNR inside +-0.2 dB by a TOST at alpha 0.05, and no seed more than
-    1 dB apart (the full check, at the study's size, is BENCHMARKS.md's "Trial batches")."""
+    0.02 dB apart (the full check, at the study's size, is BENCHMARKS.md's "Trial batches").
+
+    60 steps, before training turns chaotic: measured on an AMD EPYC (AVX2 and the default
+    kernels), a run batched and alone differ by at most 1e-6 dB up to step 80, 1e-5 at 100 and
+    2e-3 at 120; at 150 steps rounding alone moved a seed by 0.2 to 0.6 dB (one CPU's kernels
+    against another's), which is what made this test fail on an AVX-512 Xeon. Here 0.02 dB is four
+    orders above the rounding and ten times below the seeds' spread, so a run that trained with
+    another run's seed, views or random numbers still fails."""
     from nerfaug.equivalence import paired_equivalence
 
     train = sphere_views([0.0, 1.2, 2.4, 3.6, 4.8], [0.9, 1.1, 0.8, 1.2, 1.0], size=16)
     held_out = sphere_views([0.6, 1.8, 3.0, 4.2], [1.0, 0.9, 1.1, 0.8], size=16)
-    seeds = list(range(6))
+    seeds, steps = list(range(6)), 60
 
     def held_out_psnr(model) -> float:
         errors = [
@@ -257,20 +268,21 @@ def test_the_batched_engine_is_equivalent_to_runs_alone_by_paired_seeds(sphere_v
         return -10.0 * math.log10(sum(errors) / len(errors))
 
     batch = BatchTrainer([train] * len(seeds), SMALL, seeds, progress=False)
-    batch.train(150)
+    batch.train(steps)
     together = [held_out_psnr(batch.run_model(k)) for k in range(len(seeds))]
     alone = []
     for seed in seeds:
         trainer = Trainer(train, SMALL, seed=seed, progress=False)
-        trainer.train(150)
+        trainer.train(steps)
         alone.append(held_out_psnr(trainer.model))
     result = paired_equivalence(together, alone, bound=0.2)
     assert result["equivalent"], result
-    assert result["max_abs_difference"] <= 1.0, result
-    # The runs learned something (an empty field would make every seed equal, and the test vacuous).
+    assert result["max_abs_difference"] <= 0.02, result
+    # The runs learned something (an empty field would make every seed equal, and the test
+    # vacuous): 12.9 to 13.1 dB at step 60 against 10.3 dB for a blank image.
     blank = -10.0 * math.log10(float((held_out.images - 1.0).square().mean()))
-    assert min(alone) > blank + 3.0
-    assert max(alone) - min(alone) > 0.05  # the seeds differ: pairing by seed is what is tested
+    assert min(alone) > blank + 2.0
+    assert max(alone) - min(alone) > 0.1  # the seeds differ (0.23 dB): pairing by seed is what is tested
 
 
 def test_a_runs_memory_estimate_grows_with_the_engine_and_shrinks_with_fused_kernels():

@@ -46,6 +46,7 @@ RECORDED = {
 }
 
 
+@pytest.mark.rounding
 @pytest.mark.parametrize("preset", list(RECORDED))
 def test_nerfacto_cpu_computes_the_numbers_recorded_before_its_speed_work(preset, engine_numbers):
     got, _ = engine_numbers(NerfConfig.preset(preset), 12)

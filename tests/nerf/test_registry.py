@@ -59,6 +59,7 @@ BEFORE = {
 # them by far more.
 
 
+@pytest.mark.rounding
 @pytest.mark.parametrize("case", list(BEFORE))
 def test_same_seed_gives_the_numbers_recorded_before_the_sampler_interface(case, engine_numbers):
     overrides, losses, weights_sum, rgb_sum = BEFORE[case]

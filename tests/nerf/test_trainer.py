@@ -165,9 +165,10 @@ def test_presets_and_config_round_trip():
     assert math.isclose(psnr_from_mse(0.01), 20.0)
 
 
+@pytest.mark.rounding
 def test_compiled_networks_train_like_the_pure_path(sphere_views):
     """`Trainer(compile=backend)` compiles the field and the sampler's networks in place: with the
-    "eager" backend (the same kernels) the losses equal the pure path's, and the state-dict keys
+    "eager" backend (the same kernels) the losses are the pure path's, and the state-dict keys
     (hence checkpoints) are unchanged."""
     views = sphere_views([0.0, 1.5, 3.0], [0.8, 0.9, 1.0], size=8)
     for preset in ("test", "nerfacto-cpu"):
@@ -179,7 +180,9 @@ def test_compiled_networks_train_like_the_pure_path(sphere_views):
         assert all(m._compiled_call_impl is not None for m in networks)  # really compiled
         assert pure.model.field._compiled_call_impl is None
         losses = [[t.train_step()["loss"] for _ in range(4)] for t in (pure, compiled)]
-        assert losses[0] == losses[1], preset
+        # Equal here; compiled code may order a sum otherwise on another CPU, and four steps cannot
+        # amplify a last-bit difference to 1e-5, while a wrong network moves the loss by percents.
+        assert losses[0] == pytest.approx(losses[1], rel=1e-5), preset
 
 
 def test_each_loss_is_kept_by_name_and_they_sum_to_the_loss(views):

@@ -8,7 +8,6 @@ for this configuration and redoes only missing, partial or corrupted runs.
 from __future__ import annotations
 
 import concurrent.futures as futures
-import multiprocessing
 import os
 import platform
 import sys
@@ -43,6 +42,7 @@ from nerfaug.experiment.store import (
     read_result,
     run_fingerprint,
 )
+from nerfaug.experiment.workers import worker_pool
 from nerfaug.nerf.config import NerfConfig, batch_support
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
@@ -500,10 +500,9 @@ def _execute_local(units, datasets, config, root, workers, progress, deadline=No
                     budget.end(0)
                 _collect(outcomes, results, failed, root, display)
             return results, failed, sum(len(unit) for unit in queue)
-        # Spawned workers: each run sets its own thread count; fork would inherit torch's pools.
-        # Units are handed out as workers free up, so that a deadline can stop the handing out.
-        context = multiprocessing.get_context("spawn")
-        with futures.ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        # Spawned workers that end with this process (`workers`). Units are handed out as workers
+        # free up, so that a deadline can stop the handing out.
+        with worker_pool(workers) as pool:
             pending = {}
             while queue or pending:
                 while queue and len(pending) < workers and (budget.allows() or not budget.longest):
