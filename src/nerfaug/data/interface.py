@@ -22,6 +22,7 @@ from typing import ClassVar
 
 import torch
 
+from nerfaug import runfiles
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import resolve_image, stored_image, write_image_and_mask
@@ -158,7 +159,8 @@ class Format(ABC):
         folder = self.image_folder(split)
         added = []
         for frame in new:
-            atomic_write_bytes(Path(root) / folder / f"{frame.stem}{frame.suffix}", frame.data)
+            # Into the dataset folder only (a session's dataset copy may hold a link out of it).
+            runfiles.write_bytes(root, Path(folder) / f"{frame.stem}{frame.suffix}", frame.data)
             added.append(
                 {
                     "file_path": self.file_path(folder, frame.stem, frame.suffix),
