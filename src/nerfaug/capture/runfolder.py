@@ -8,7 +8,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from nerfaug import owned
+from nerfaug import owned, runfiles
 from nerfaug.errors import FolderRefused
 
 SESSION_FILE = "session.json"
@@ -36,7 +36,7 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
     if data_dir == run_dir.resolve() or run_dir.resolve() in data_dir.parents:
         raise FolderRefused(
             f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
-            f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset"
+            f"{runfiles.shown(run_dir, DATASET_DIR)} and more, so choose a run folder outside the dataset"
         )
     if data_dir in run_dir.resolve().parents:
         raise FolderRefused(
@@ -51,7 +51,7 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
         raise FolderRefused(
             f"{run_dir}: a capture session without its {SESSION_FILE} (damaged or unfinished; it holds "
             f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
-            f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
+            f"{runfiles.shown(run_dir, SESSION_FILE)}, or choose a new folder for --out"
         )
 
 
