@@ -40,7 +40,7 @@ def path_in(run_dir: str | Path, name: str | Path) -> Path:
     """
     given = shown(run_dir, name)
     try:
-        return inside(run_dir, given, f"{Path(name).as_posix()} of the run folder")
+        return inside(run_dir, given, "this path")
     except PathRefused as error:
         raise PathRefused(
             given, f"{error.problem}; nothing is read or written through it: put the run's own file or folder back"

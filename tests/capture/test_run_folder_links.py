@@ -133,7 +133,7 @@ def test_captures_are_never_written_through_a_link_in_the_dataset_copy(run, tmp_
     shots.mkdir()
     shutil.copy(tmp_path / "data" / "train" / "r_0.png", shots / "new_view.png")
     pose = sample_uniform_poses(1, torch.Generator().manual_seed(9), radius=4.03)
-    with pytest.raises(PathRefused, match=r"new_view\.png of the run folder leads outside") as error:
+    with pytest.raises(PathRefused, match=r"new_view\.png: this path leads outside") as error:
         session.add_views(shots, pose)
     assert "\n" not in str(error.value) and str(outside) not in str(error.value)
     assert files_of(outside) == before
@@ -193,7 +193,7 @@ def test_an_experiment_runs_file_linked_outside_is_neither_read_nor_written(tmp_
     assert READERS[name](folder) is not None  # read while it is the run's own
     plant(folder, name, outside)
     before = files_of(outside)
-    with pytest.raises(PathRefused, match=f"{name}.* of the run folder leads outside {folder}, the folder"):
+    with pytest.raises(PathRefused, match=f"{name}.*: this path leads outside {folder}, the folder"):
         READERS[name](folder)
     if name in WRITERS:
         with pytest.raises(PathRefused, match="leads outside"):
