@@ -3,8 +3,8 @@ capture session's folder in place of one of its files or folders, leading to an 
 refused by the command in one line naming the file (exit 2), and nothing outside is read or
 written, nor anything of the session changed. Per file kind: the candidate pool, the proposals
 folder, the TensorBoard log, session.json, the checkpoint, the lock, the dataset copy (and its
-image folder, written by `add`); and an experiment run's files (result, selection, metrics,
-history, view arrays, renders).
+image folder, written by `add`), an earlier export's image folder; and an experiment run's files
+(result, selection, metrics, history, view arrays, renders).
 
 The session: 16 views of 8x8 pixels, a sparse start of 4 (so it has a pool), the "test" engine."""
 
@@ -138,6 +138,16 @@ def test_captures_are_never_written_through_a_link_in_the_dataset_copy(run, tmp_
     assert "\n" not in str(error.value) and str(outside) not in str(error.value)
     assert files_of(outside) == before
     assert len(json.loads((run / "dataset" / "transforms_train.json").read_text())["frames"]) == 4
+
+
+def test_an_export_is_never_written_through_a_link_in_an_earlier_export(run, tmp_path, capsys):
+    export, outside = tmp_path / "export", tmp_path / "outside"
+    main(["export", str(run), "--out", str(export)])
+    plant(export, "images", outside)  # an earlier export's images moved out, a link in their place
+    before = {p.name: (p.stat().st_ino, p.read_bytes()) for p in outside.rglob("*.png")}
+    assert len(before) == 4
+    refused(capsys, ["export", str(run), "--out", str(export)], export, "images", outside)
+    assert {p.name: (p.stat().st_ino, p.read_bytes()) for p in outside.rglob("*.png")} == before  # not even replaced
 
 
 # --- an experiment run's folder ------------------------------------------------------------------
