@@ -206,8 +206,78 @@ def test_no_module_over_600_lines(path):
 
 def test_light_modules_do_not_import_torch():
     code = (
-        "import sys; import nerfaug.jsonio, nerfaug.metrics, nerfaug.errors, nerfaug.owned; "
+        "import sys; import nerfaug.jsonio, nerfaug.metrics, nerfaug.errors, nerfaug.owned, nerfaug.runfiles; "
         "print('torch' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+# --- one way into a run folder ---------------------------------------------------------------------
+
+# The names of what a run folder holds (a session's, an experiment run's, the service's jobs,
+# nerfaug's marker), and the names a run folder goes by in the code.
+RUN_FILE_NAMES = {
+    "SESSION_FILE",
+    "CHECKPOINT_FILE",
+    "DATASET_DIR",
+    "PROPOSALS_DIR",
+    "POOL_FILE",
+    "LOCK_FILE",
+    "TENSORBOARD_FOLDER",
+    "RESULT_FILE",
+    "JOBS_DIR",
+    "MARKER",
+    "FILES",
+}
+RUN_FOLDER_NAMES = {"run_dir", "run", "run_folder"}
+
+
+def _dotted(node) -> str:
+    import ast
+
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        return f"{_dotted(node.value)}.{node.attr}"
+    return ""
+
+
+def paths_into_run_folders(source: str) -> list[int]:
+    """The lines of `source` that join a path into a run folder by hand (`run_dir / SESSION_FILE`,
+    `folder / FILES.result`, `self.run_dir / name`, `self.run_dir / self.state.pool`) instead of
+    asking `nerfaug.runfiles`, which holds every such path to the containment rule."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div)):
+            continue
+        left, right = _dotted(node.left).split("."), _dotted(node.right).split(".")
+        if right[0] in RUN_FILE_NAMES or right[-1] == "pool" or left[-1] in RUN_FOLDER_NAMES:
+            found.append(node.lineno)
+    return found
+
+
+def test_every_path_into_a_run_folder_is_made_by_runfiles():
+    """`grep` finds one way to open a file inside a run folder: `nerfaug.runfiles`."""
+    offending = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.name != "runfiles.py":
+            offending += [f"{path.relative_to(PACKAGE)}:{line}" for line in paths_into_run_folders(path.read_text())]
+    assert offending == [], f"paths into a run folder made by hand, not by nerfaug.runfiles: {offending}"
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        "data = (run_dir / SESSION_FILE).read_text()",
+        "atomic_write_json(Path(folder) / FILES.metrics, {})",
+        "torch.load(self.run_dir / 'extra.pt')",
+        "read_poses(self.run_dir / self.state.pool)",
+        "SummaryWriter(log_dir=str(run / TENSORBOARD_FOLDER))",
+    ],
+)
+def test_the_run_folder_guard_finds_a_path_made_by_hand(line):
+    assert paths_into_run_folders(f"def f():\n    {line}\n") == [2]
+    assert paths_into_run_folders("def f():\n    runfiles.read_text(run_dir, SESSION_FILE)\n") == []

@@ -21,8 +21,9 @@ from collections.abc import Sequence
 from fnmatch import fnmatchcase
 from pathlib import Path
 
+from nerfaug import runfiles
 from nerfaug.errors import FolderRefused
-from nerfaug.jsonio import TEMP_NAME, atomic_write_json
+from nerfaug.jsonio import TEMP_NAME
 
 MARKER = ".nerfaug"
 
@@ -32,15 +33,15 @@ def mark(folder: Path, kind: str) -> Path:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     created = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    atomic_write_json(folder / MARKER, {"kind": kind, "created": created})
+    runfiles.write_json(folder, MARKER, {"kind": kind, "created": created})
     return folder
 
 
 def marked(folder: Path, kind: str | None = None) -> bool:
     """Whether `folder` holds nerfaug's marker (of `kind`, when given)."""
     try:
-        data = json.loads((Path(folder) / MARKER).read_text())
-    except (OSError, ValueError):
+        data = json.loads(runfiles.read_text(folder, MARKER))
+    except (OSError, ValueError):  # PathRefused too: a marker leading outside the folder marks nothing
         return False
     return isinstance(data, dict) and (kind is None or data.get("kind") == kind)
 

@@ -14,6 +14,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Literal
 
+from nerfaug import runfiles
+
 Logger = Literal["none", "tensorboard"]
 """The loggers `--logger` takes."""
 
@@ -77,4 +79,4 @@ def open_log(logger: Logger, run_folder: Path) -> Callable[[Mapping], None] | No
     """
     if logger == "none":
         return None
-    return TensorBoardLog(Path(run_folder) / TENSORBOARD_FOLDER)
+    return TensorBoardLog(runfiles.folder(run_folder, TENSORBOARD_FOLDER))

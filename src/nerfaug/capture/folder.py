@@ -9,6 +9,7 @@ from pathlib import Path
 
 import torch
 
+from nerfaug import runfiles
 from nerfaug.cameras import Cameras
 from nerfaug.capture import export, integrity
 from nerfaug.capture.dataset import HELD_OUT_KEY, engine_views
@@ -60,7 +61,8 @@ class SessionFolder:
 
     @property
     def dataset_dir(self) -> Path:
-        return self.run_dir / DATASET_DIR
+        """The dataset copy's folder, resolved; `PathRefused` if it leads outside the run folder."""
+        return runfiles.path_in(self.run_dir, DATASET_DIR)
 
     @property
     def proposals(self) -> list[ProposalRecord]:
@@ -89,9 +91,13 @@ class SessionFolder:
     def dataset_split(self) -> DatasetSplit:
         """The grown dataset's split in its format; `PathRefused` if its listing leads outside the run folder."""
         dataset = DatasetSplit(self.dataset_dir, FORMATS[self.state.dataset.format], DATASET_SPLIT)
-        shown = dataset.listing.relative_to(self.run_dir).as_posix()
+        shown = dataset.listing.relative_to(self.dataset_dir.parent).as_posix()
         inside(
-            self.run_dir, dataset.listing, "the dataset's listing", listed_in=self.run_dir / SESSION_FILE, value=shown
+            self.run_dir,
+            dataset.listing,
+            "the dataset's listing",
+            listed_in=runfiles.shown(self.run_dir, SESSION_FILE),
+            value=shown,
         )
         return dataset
 
@@ -104,17 +110,23 @@ class SessionFolder:
         state = self.state
         return engine_views(self.dataset_split(), start, state.downscale, state.background, self.hemisphere)
 
-    def checkpoint(self) -> Path:
-        """The run folder's checkpoint, checked against the digest session.json records.
+    def checkpoint(self) -> bytes:
+        """The run folder's checkpoint (its bytes, read once: what is checked is what is loaded),
+        checked against the digest session.json records.
 
         Raises:
             SessionError: it is missing, or not this session's.
+            PathRefused: it leads outside the run folder.
         """
-        path = self.run_dir / CHECKPOINT_FILE
-        if not path.is_file():
+        path = runfiles.shown(self.run_dir, CHECKPOINT_FILE)
+        if not runfiles.exists(self.run_dir, CHECKPOINT_FILE):
             raise SessionError(f"{path}: checkpoint not found; the run folder is incomplete")
-        integrity.check_checkpoint(path, self.state.integrity)
-        return path
+        try:
+            data = runfiles.read_bytes(self.run_dir, CHECKPOINT_FILE)
+        except OSError as error:
+            raise SessionError(f"{path}: cannot read the checkpoint ({error.strerror or error})") from None
+        integrity.check_checkpoint(path, data, self.state.integrity)
+        return data
 
     def summary(self) -> SessionSummary:
         """What the session's files say of it (no losses: they are in the checkpoint)."""

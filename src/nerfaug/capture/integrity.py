@@ -45,15 +45,16 @@ def checkpoint_bytes(trainer) -> bytes:
     return buffer.getvalue()
 
 
-def check_checkpoint(path: Path, integrity: Integrity) -> None:
-    """Refuse a checkpoint the session did not write (no-op for sessions saved before digests were kept).
+def check_checkpoint(path: Path, data: bytes, integrity: Integrity) -> None:
+    """Refuse a checkpoint (`data`, the bytes of the file `path`) the session did not write (no-op
+    for sessions saved before digests were kept).
 
     Raises:
         SessionError: naming the checkpoint, its digest and the one session.json records.
     """
     if integrity.checkpoint is None:
         return
-    found = sha256_file(path)
+    found = sha256_bytes(data)
     if found not in (integrity.checkpoint, integrity.pending):
         raise SessionError(
             f"{path}: not this session's checkpoint (sha256 {found[:12]}..., session.json records "

@@ -23,6 +23,7 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 
+from nerfaug import runfiles
 from nerfaug.capture.state import now
 from nerfaug.errors import NerfaugError
 
@@ -66,8 +67,8 @@ class SessionLock:
 def holder_of(run_dir: Path) -> dict:
     """Who last took the session's lock ({} when unknown): pid, holder, since."""
     try:
-        data = json.loads((Path(run_dir) / LOCK_FILE).read_text())
-    except (OSError, ValueError):
+        data = json.loads(runfiles.read_text(run_dir, LOCK_FILE))
+    except (OSError, ValueError):  # PathRefused too: a lock file leading outside is never read
         return {}
     return data if isinstance(data, dict) else {}
 
@@ -84,7 +85,7 @@ def try_lock(run_dir: Path, holder: str) -> SessionLock | None:
     run_dir = Path(run_dir)
     if fcntl is None:
         return SessionLock(run_dir, None)
-    handle = open(run_dir / LOCK_FILE, "a+")  # noqa: SIM115 -- kept open while the lock is held
+    handle = runfiles.open_lock(run_dir, LOCK_FILE)  # kept open while the lock is held
     try:
         fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:

@@ -34,6 +34,7 @@ from typing import Literal
 
 from pydantic import BaseModel, Field, computed_field
 
+from nerfaug import runfiles
 from nerfaug.capture import lock as session_lock
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.requests import CHECKPOINT_EVERY_S, SESSION_ID, check_checkpoint_every, check_session_id
@@ -43,7 +44,6 @@ from nerfaug.capture.state import SessionSummary
 from nerfaug.containment import inside, is_inside
 from nerfaug.data.formats import find_split
 from nerfaug.errors import FolderRefused, NerfaugError
-from nerfaug.jsonio import atomic_write_json, read_json
 
 JOBS_DIR = Path(".service") / "jobs"
 MAX_TRAINING = 4  # sessions training at once (each a thread running torch)
@@ -215,7 +215,7 @@ class SessionPool:
         return sorted(
             p.name
             for p in self.root.iterdir()
-            if SESSION_ID.fullmatch(p.name) and is_inside(self.root, p) and (p / SESSION_FILE).is_file()
+            if SESSION_ID.fullmatch(p.name) and is_inside(self.root, p) and runfiles.exists(p, SESSION_FILE)
         )
 
     def require(self, session_id: str) -> None:
@@ -233,7 +233,7 @@ class SessionPool:
         with self._slots_lock:
             slot = self._slots.get(session_id)
             if slot is None:
-                if must_exist and not (folder / SESSION_FILE).is_file():
+                if must_exist and not runfiles.exists(folder, SESSION_FILE):
                     raise FileNotFoundError(f"session {session_id!r}: no such session under the service root")
                 slot = self._slots[session_id] = _Slot(session_id)
             return slot
@@ -262,7 +262,7 @@ class SessionPool:
         folder = self.folder(session_id)
         slot = self._slot(session_id, must_exist=False)
         with slot.lock:
-            if slot.session is not None or (folder / SESSION_FILE).exists():
+            if slot.session is not None or runfiles.exists(folder, SESSION_FILE):
                 raise FolderRefused(f"session {session_id!r}: already exists")
             try:
                 slot.session = create(folder)
@@ -346,11 +346,8 @@ class SessionPool:
             self._start(slot)
             return slot.job.model_copy()
 
-    def _job_file(self, session_id: str) -> Path:
-        return inside(self.root, self.root / JOBS_DIR / f"{session_id}.json", f"the job record of {session_id!r}")
-
     def _record(self, slot: _Slot) -> None:
-        atomic_write_json(self._job_file(slot.id), {"kind": "train", **slot.job.model_dump()})
+        runfiles.write_json(self.root, JOBS_DIR / f"{slot.id}.json", {"kind": "train", **slot.job.model_dump()})
 
     def _start(self, slot: _Slot) -> None:
         slot.thread = threading.Thread(target=self._train_worker, args=(slot,), name=f"train-{slot.id}", daemon=True)
@@ -385,11 +382,11 @@ class SessionPool:
     def resume(self) -> list[str]:
         """Restart the training jobs a stopped or killed pool (service) left running; returns their ids."""
         resumed = []
-        folder = self.root / JOBS_DIR
+        folder = runfiles.path_in(self.root, JOBS_DIR)
         for path in sorted(folder.glob("*.json")) if folder.is_dir() else []:
             session_id = path.stem
             try:
-                if self._resume(session_id, read_json(path)):
+                if self._resume(session_id, runfiles.read_json(folder, path.name)):
                     resumed.append(session_id)
             except Exception as error:  # noqa: BLE001 -- one bad session must not stop the others
                 slot = self._slot(session_id, must_exist=False)
@@ -398,7 +395,7 @@ class SessionPool:
 
     def _resume(self, session_id: str, record: dict) -> bool:
         """Restart the job `record` (a job file's content) when it was left running; whether it was."""
-        if record.get("state") != "running" or not (self.folder(session_id) / SESSION_FILE).is_file():
+        if record.get("state") != "running" or not runfiles.exists(self.folder(session_id), SESSION_FILE):
             return False
         slot = self._slot(session_id)
         with slot.lock:

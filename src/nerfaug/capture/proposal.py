@@ -14,7 +14,7 @@ import torch
 from torch import Tensor
 
 import nerfaug
-from nerfaug import owned
+from nerfaug import owned, runfiles
 from nerfaug.cameras import Cameras
 from nerfaug.capture.runfolder import RUN_KIND, SESSION_FILE
 from nerfaug.data import DatasetError
@@ -204,7 +204,7 @@ def session_folder_of(path: str | Path) -> Path | None:
     """The capture session's run folder `path` lies in (a folder holding session.json or marked as
     a run folder), or None."""
     for folder in Path(path).resolve().parents:
-        if (folder / SESSION_FILE).is_file() or owned.marked(folder, RUN_KIND):
+        if runfiles.exists(folder, SESSION_FILE) or owned.marked(folder, RUN_KIND):
             return folder
     return None
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from nerfaug import owned
+from nerfaug import owned, runfiles
 from nerfaug.errors import FolderRefused
 
 SESSION_FILE = "session.json"
@@ -48,7 +48,7 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
     if data_dir == run_dir.resolve() or run_dir.resolve() in data_dir.parents:
         raise FolderRefused(
             f"{run_dir}: the run folder holds the dataset {data_dir}; a session writes "
-            f"{run_dir / DATASET_DIR} and more, so choose a run folder outside the dataset"
+            f"{runfiles.shown(run_dir, DATASET_DIR)} and more, so choose a run folder outside the dataset"
         )
     if data_dir in run_dir.resolve().parents:
         raise FolderRefused(
@@ -58,7 +58,7 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
     if not owned.is_empty(run_dir) and not owned.marked(run_dir, RUN_KIND):
         what = "not a folder" if not run_dir.is_dir() else "not empty and not a nerfaug run folder"
         raise FolderRefused(f"{run_dir}: {what}, so nothing is written there; choose a new or empty folder for --out")
-    if (run_dir / UNFINISHED_FILE).is_file():
+    if runfiles.is_file(run_dir, UNFINISHED_FILE):
         _remove_stopped_creation(run_dir)
         return
     left = sorted(p.name for p in run_dir.iterdir() if p.name != owned.MARKER) if run_dir.is_dir() else []
@@ -66,7 +66,7 @@ def check_new_run(data_dir: Path, run_dir: Path) -> None:
         raise FolderRefused(
             f"{run_dir}: a capture session without its {SESSION_FILE} (damaged or unfinished; it holds "
             f"{', '.join(left[:4])}{', ...' if len(left) > 4 else ''}), so nothing there is changed; restore "
-            f"{run_dir / SESSION_FILE}, or choose a new folder for --out"
+            f"{runfiles.shown(run_dir, SESSION_FILE)}, or choose a new folder for --out"
         )
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import io
 import math
 import tempfile
 import warnings
@@ -32,7 +33,7 @@ from time import monotonic
 import torch
 from torch import Tensor
 
-from nerfaug import owned
+from nerfaug import owned, runfiles
 from nerfaug.cameras import Cameras
 from nerfaug.capture import add, choose, integrity
 from nerfaug.capture.dataset import default_split, duplicate_frames, sparse_start
@@ -87,7 +88,6 @@ from nerfaug.data.views import Views
 from nerfaug.data.world_frame import TILTED_POLE_DEGREES, estimate_hemisphere, pole_tilt_degrees
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.health import EmptyModel, EmptyModelWarning, Health, model_health
-from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.trainer import Trainer
 from nerfaug.progress import progress_bar
@@ -168,7 +168,7 @@ class CaptureSession(SessionFolder):
                 or lies inside it, or is a session folder that lost its session.json.
         """
         data_dir, run_dir = Path(data_dir).resolve(), Path(run_dir)
-        if (run_dir / SESSION_FILE).exists():
+        if runfiles.exists(run_dir, SESSION_FILE):
             raise SessionError(
                 f"{run_dir} already holds a capture session; open it with CaptureSession.open "
                 "(`nerfaug train RUN` trains it further)"
@@ -215,11 +215,11 @@ class CaptureSession(SessionFolder):
         existed = run_dir.exists()
         owned.mark(run_dir, RUN_KIND)
         try:
-            (run_dir / UNFINISHED_FILE).touch()  # until session.json is written (`check_new_run`)
+            runfiles.write_bytes(run_dir, UNFINISHED_FILE, b"")  # until session.json is written (`check_new_run`)
             if pool is not None:
-                atomic_write_json(run_dir / POOL_FILE, pool)
+                runfiles.write_json(run_dir, POOL_FILE, pool)
             session = cls._build(run_dir, source, state, config, device, progress)
-            (run_dir / UNFINISHED_FILE).unlink()
+            runfiles.path_in(run_dir, UNFINISHED_FILE).unlink()
             return session
         except BaseException:
             remove_unfinished(run_dir, existed)
@@ -230,7 +230,7 @@ class CaptureSession(SessionFolder):
         """`create`'s writing half, once everything is checked: the dataset copy, the NeRF, the save."""
         # The dataset folder is new: check_new_run refused a run folder holding anything.
         store = FORMATS[state.dataset.format]
-        dataset = DatasetSplit(run_dir / DATASET_DIR, store, DATASET_SPLIT)
+        dataset = DatasetSplit(runfiles.path_in(run_dir, DATASET_DIR), store, DATASET_SPLIT)
         owned.mark(dataset.root, DATASET_KIND)
         store.copy(source, dataset.root, DATASET_SPLIT)
         state.integrity.captures = integrity.capture_digests(dataset, dataset.frames())
@@ -293,9 +293,9 @@ class CaptureSession(SessionFolder):
                 that is missing, malformed or points outside the run folder.
         """
         folder = SessionFolder.open(run_dir)
-        checkpoint = folder.checkpoint()
+        data, checkpoint = folder.checkpoint(), runfiles.shown(run_dir, CHECKPOINT_FILE)
         try:
-            trainer = Trainer.load_checkpoint(checkpoint, device=device, progress=progress)
+            trainer = Trainer.load_checkpoint(io.BytesIO(data), device=device, progress=progress)
         except Exception as error:  # noqa: BLE001 -- torch.load and the state dicts raise many types
             reason = str(error).split(".")[0][:160]
             raise SessionError(
@@ -304,10 +304,10 @@ class CaptureSession(SessionFolder):
                 "NEW_RUN`"
             ) from None
         session = cls(folder.run_dir, folder.state, trainer)
-        session._catch_up(checkpoint)
+        session._catch_up(checkpoint, data)
         return session
 
-    def _catch_up(self, checkpoint: Path) -> None:
+    def _catch_up(self, checkpoint: Path, data: bytes) -> None:
         """After loading the checkpoint: check it against the dataset, and train on the views added
         after it was saved too."""
         state, trainer = self.state, self.trainer
@@ -316,9 +316,8 @@ class CaptureSession(SessionFolder):
         frames = self.frames()
         if state.integrity.checkpoint is None:
             integrity.check_unrecorded_checkpoint(checkpoint, trainer, state.seed, state.engine_config, frames)
-            # Accepted as found: its digest goes into session.json at the next save, even one that
-            # has no new model to write (else every open would warn again).
-            state.integrity.checkpoint = integrity.sha256_file(checkpoint)
+            # Accepted as found: its digest is saved at the next save, new model or not (else every open warns).
+            state.integrity.checkpoint = integrity.sha256_bytes(data)
         if len(frames) < in_model:
             raise SessionError(
                 f"{self.dataset_split().listing} lists {len(frames)} frames but the checkpoint was "
@@ -334,24 +333,21 @@ class CaptureSession(SessionFolder):
         state.step = trainer.step
 
     def save(self) -> Path:
-        """Write the checkpoint (when the model changed since the last save) and session.json.
-
-        Returns the run folder.
-        """
+        """Write the checkpoint (when the model changed since the last save) and session.json; the run folder."""
         current = (self.trainer.step, len(self.trainer.train_views))
         self.state.step = self.trainer.step
         self.state.views_in_model = len(self.trainer.train_views)
         self.state.saved = now()
-        if self._saved != current or not (self.run_dir / CHECKPOINT_FILE).exists():
+        if self._saved != current or not runfiles.exists(self.run_dir, CHECKPOINT_FILE):
             data = integrity.checkpoint_bytes(self.trainer)
             # The new digest is recorded before the file is replaced: killed between the two
             # writes, the session still recognises whichever checkpoint is on disk as its own.
             self.state.integrity.pending = integrity.sha256_bytes(data)
-            atomic_write_json(self.run_dir / SESSION_FILE, self.state.to_dict())
-            atomic_write_bytes(self.run_dir / CHECKPOINT_FILE, data)
+            runfiles.write_json(self.run_dir, SESSION_FILE, self.state.to_dict())
+            runfiles.write_bytes(self.run_dir, CHECKPOINT_FILE, data)
             self.state.integrity.checkpoint, self.state.integrity.pending = self.state.integrity.pending, None
             self._saved = current
-        atomic_write_json(self.run_dir / SESSION_FILE, self.state.to_dict())
+        runfiles.write_json(self.run_dir, SESSION_FILE, self.state.to_dict())
         return self.run_dir
 
     # -- what the session holds --
@@ -467,7 +463,9 @@ class CaptureSession(SessionFolder):
         Warns:
             EmptyModelWarning: as `EmptyModel`, when the request says `allow_empty`.
         """
-        folder, number = self.run_dir / PROPOSALS_DIR, len(self.state.proposals)
+        number = len(self.state.proposals)
+        name = f"{PROPOSALS_DIR}/proposal_{number:03d}"
+        poses_file, map_file = (runfiles.path_in(self.run_dir, f"{name}{suffix}") for suffix in (".json", ".png"))
         request = (request or ProposalRequest()).checked()  # once: a request the command or the service checked passes
         model = self.session_model()
         generator, seed = choose.proposal_generator(generator, model.seed, number, request.seed)
@@ -497,12 +495,12 @@ class CaptureSession(SessionFolder):
                 progress=lambda done: bar.update(task, completed=done),
             )
             bar.update(task, completed=len(engine))
-        map_path = folder / f"proposal_{number:03d}.png" if map else None
+        map_path = map_file if map else None
         proposal = choose.proposal_of(
             selection, candidates, engine, model, number, seed, request.min_separation, map_path
         )
-        written = proposal.write(folder / f"proposal_{number:03d}.json", include_candidates=True)
-        file = f"{folder.name}/{written.name}"
+        proposal.write(poses_file, include_candidates=True)
+        file = f"{name}.json"
         record = choose.record_of(proposal, file, candidates.described, selection, request.constraints, health.empty)
         record.health = health.to_dict()  # a further key of the record: what `nerfaug propose` reports
         if health.empty:
@@ -529,7 +527,7 @@ class CaptureSession(SessionFolder):
             template=self.template(),
             background=tuple(self.state.background),
             seed=self.seed,
-            pool=None if self.state.pool is None else self.run_dir / self.state.pool,
+            pool=None if self.state.pool is None else runfiles.path_in(self.run_dir, self.state.pool),
         )
 
     def add_views(self, images, poses=None, names: Sequence[str] | None = None) -> list[str]:

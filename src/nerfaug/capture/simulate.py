@@ -9,6 +9,7 @@ from typing import Annotated
 
 from pydantic import Field
 
+from nerfaug import runfiles
 from nerfaug.capture.folder import camera_of
 from nerfaug.capture.proposal import read_poses
 from nerfaug.capture.requests import Seed, check_threads, validated
@@ -47,7 +48,7 @@ def render_proposals(
     k = SessionState.read(run).intrinsics
     if not blender_fits(camera_of(k)):  # Blender renders from one camera_angle_x
         raise DatasetError(
-            run / SESSION_FILE,
+            runfiles.shown(run, SESSION_FILE),
             "Blender renders square pixels with the principal point at the image centre",
             "intrinsics",
             {"width": k.width, "height": k.height, "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},

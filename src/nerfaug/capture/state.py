@@ -32,6 +32,7 @@ from pydantic import (
 )
 
 import nerfaug
+from nerfaug import runfiles
 from nerfaug.capture.dataset import default_split
 from nerfaug.capture.requests import Downscale, Intrinsics, RequestError, Seed, SessionSettings
 from nerfaug.capture.runfolder import DATASET_SPLIT, SESSION_FILE
@@ -343,14 +344,14 @@ class SessionState(Stored):
         Raises:
             SessionError: the file is missing, not JSON, or holds a missing or wrong value.
         """
-        path = Path(run_dir) / SESSION_FILE
-        if not path.is_file():
+        path = runfiles.shown(run_dir, SESSION_FILE)
+        if not runfiles.exists(run_dir, SESSION_FILE):
             raise SessionError(
                 f"{run_dir} is not a capture session: {SESSION_FILE} not found "
                 f"(start one with `nerfaug train DATA --out {run_dir}`)"
             )
         try:
-            data = json.loads(path.read_text())
+            data = json.loads(runfiles.read_text(run_dir, SESSION_FILE))  # PathRefused when it leads outside
         except json.JSONDecodeError as error:
             raise SessionError(f"{path}: invalid JSON at line {error.lineno}: {error.msg}") from None
         except (OSError, UnicodeDecodeError) as error:

@@ -18,6 +18,7 @@ from typing import Annotated
 
 import tyro
 
+from nerfaug import runfiles
 from nerfaug.capture.requests import (
     CHECKPOINT_EVERY_S,
     SessionSettings,
@@ -71,7 +72,7 @@ def _recorded_engine(run: Path) -> str | None:
     """The engine a session in `run` records (format 2: "engine"; 1: "preset"), or None where there
     is none to read (opening the session then says what is wrong)."""
     try:
-        data = json.loads((run / SESSION_FILE).read_text())
+        data = json.loads(runfiles.read_text(run, SESSION_FILE))
         name = data.get("engine" if data.get("format") == 2 else "preset")
         parse_variant(name)  # an unknown one: not this command's to name
     except (OSError, ValueError, AttributeError):

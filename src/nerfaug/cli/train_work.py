@@ -13,6 +13,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from nerfaug import runfiles
 from nerfaug.capture.dataset import HELD_OUT_KEY, default_split
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
@@ -132,7 +133,7 @@ def open_session(run: Path, device: str, changing: str | None = None):
 
 
 def _lock(run: Path, command: str) -> None:
-    if (run / SESSION_FILE).is_file():  # else opening it says what is wrong with the folder
+    if runfiles.exists(run, SESSION_FILE):  # else opening it says what is wrong with the folder
         hold(run, f"nerfaug {command}", on_wait=lambda line: print(line, file=sys.stderr, flush=True))
 
 
@@ -208,11 +209,11 @@ def _which_session(path: Path, out: Path | None, given: set[str], steps: int):
     """(run folder, its dataset, the settings to compare) for `nerfaug train PATH [--out OUT]`:
     `train RUN` compares the settings `given`, the same `train DATA --out RUN` again every setting
     (None); (None, PATH, None) when a new session is to be made."""
-    if (path / SESSION_FILE).exists():
+    if runfiles.exists(path, SESSION_FILE):
         if out is not None:
             raise SystemExit(f"{path} is a session folder; drop --out: `{resume_command(path, steps)}`")
         return path, None, given
-    if out is not None and (out / SESSION_FILE).exists():
+    if out is not None and runfiles.exists(out, SESSION_FILE):
         return out, path, None
     if out is None:
         raise SystemExit(f"{path} is a dataset: give the run folder to create with --out RUN")

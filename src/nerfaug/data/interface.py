@@ -22,11 +22,12 @@ from typing import ClassVar
 
 import torch
 
+from nerfaug import runfiles
 from nerfaug.cameras import Cameras
 from nerfaug.data.errors import DatasetError
 from nerfaug.data.frames import resolve_image, stored_image, write_image_and_mask
 from nerfaug.data.views import Views
-from nerfaug.jsonio import atomic_write_bytes, atomic_write_json, read_json
+from nerfaug.jsonio import atomic_write_json, read_json
 
 
 @dataclass(frozen=True)
@@ -163,7 +164,8 @@ class Format(ABC):
         folder = self.image_folder(split)
         added = []
         for frame in new:
-            atomic_write_bytes(Path(root) / folder / f"{frame.stem}{frame.suffix}", frame.data)
+            # Into the dataset folder only (a session's dataset copy may hold a link out of it).
+            runfiles.write_bytes(root, Path(folder) / f"{frame.stem}{frame.suffix}", frame.data)
             added.append(
                 {
                     "file_path": self.file_path(folder, frame.stem, frame.suffix),
@@ -211,7 +213,7 @@ class Format(ABC):
         for i, (frame, path, keys) in enumerate(zip(frames, files, own)):
             stem = unique_stem(Path(str(frame["file_path"])).stem, taken)
             data, suffix = stored_image(path, self.png_only, f"frames[{i}].file_path")
-            atomic_write_bytes(Path(out) / folder / f"{stem}{suffix}", data)
+            runfiles.write_bytes(out, Path(folder) / f"{stem}{suffix}", data)  # never through a link out of `out`
             copied.append(
                 {
                     "file_path": self.file_path(folder, stem, suffix),

@@ -27,6 +27,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from nerfaug.containment import is_inside
+
 TRIAL_NAME = re.compile(r"trial_(\d+)")
 """A run folder's name: `trial_<k>`, k the trial."""
 
@@ -59,8 +61,9 @@ class ResultsFolder:
         return self.runs / scene / method / f"trial_{trial:03d}"
 
     def run_folders(self) -> list[Path]:
-        """Every folder at run depth (`runs/<scene>/<method>/<name>`), finished or not, sorted."""
-        return sorted(p for p in self.runs.glob("*/*/*") if p.is_dir())
+        """Every folder at run depth (`runs/<scene>/<method>/<name>`), finished or not, sorted; one
+        that leads out of the results folder (a link) is not one of its runs."""
+        return sorted(p for p in self.runs.glob("*/*/*") if p.is_dir() and is_inside(self.root, p))
 
     @property
     def superseded(self) -> Path:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import torch
 
+from nerfaug import runfiles
 from nerfaug.data import Views, find_split, has_split, load_dataset, require_split
 from nerfaug.data.views import spread_over_frames
 from nerfaug.data.world_frame import Hemisphere
@@ -406,7 +407,7 @@ def finish_run(
         lambda cameras, index: trained.model.render_image(cameras, index)["rgb"],
         data.test,
         lpips=cached_lpips(),
-        save_dir=folder / FILES.renders,
+        save_dir=runfiles.path_in(folder, FILES.renders),
         save_count=config.save_renders,
         progress=progress,
     )
@@ -435,7 +436,7 @@ def finish_run(
             selection.scores,
             data.initial.cameras.camera_to_world,
             data.pool.cameras.camera_to_world[chosen],
-            path=folder / FILES.uncertainty,
+            path=runfiles.path_in(folder, FILES.uncertainty),
             title=f"{key.scene}: {key.method}",
             label=selection.score_label(config.selection),
             train_label="initial views",

@@ -32,9 +32,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from nerfaug import runfiles
 from nerfaug.experiment.store import RESULT_FILE, read_result, write_result
 from nerfaug.hemisphere import angles_from_pose
-from nerfaug.jsonio import atomic_write_bytes, atomic_write_json
 from nerfaug.registry import check_name
 
 
@@ -82,9 +82,12 @@ class SelectionRecord:
     raw: dict
 
 
-def _read_json(path: Path):
+def _read_json(folder: Path, name: str):
+    """The JSON in `name` of the run folder, None when absent or unreadable; `PathRefused` (never
+    None) when it leads outside the run folder: a planted link is refused, not taken for absent."""
+    path = runfiles.path_in(folder, name)
     try:
-        return json.loads(Path(path).read_text())
+        return json.loads(path.read_text())
     except (OSError, ValueError):
         return None
 
@@ -103,9 +106,9 @@ def write_selection(folder: Path, selection: dict, chosen_names: list[str], cand
     )
     chosen = [int(i) for i in selection["indices"]]
     azimuth, polar, _ = angles_from_pose(candidates)
-    path = Path(folder) / FILES.selection
-    atomic_write_json(
-        path,
+    path = runfiles.write_json(
+        folder,
+        FILES.selection,
         {
             **selection,
             "chosen_names": list(chosen_names),
@@ -121,7 +124,7 @@ def write_selection(folder: Path, selection: dict, chosen_names: list[str], cand
 
 def read_selection(folder: Path) -> SelectionRecord | None:
     """selection.json as a `SelectionRecord`; None if absent, unreadable or lacking SELECTION_KEYS."""
-    raw = _read_json(Path(folder) / FILES.selection)
+    raw = _read_json(folder, FILES.selection)
     if not isinstance(raw, dict) or not set(SELECTION_KEYS) <= raw.keys():
         return None
     try:
@@ -141,64 +144,59 @@ def read_selection(folder: Path) -> SelectionRecord | None:
 
 def write_metrics(folder: Path, metrics: dict) -> Path:
     """Write metrics.json (`EvaluationResult.to_dict()`)."""
-    path = Path(folder) / FILES.metrics
-    atomic_write_json(path, metrics)
+    path = runfiles.write_json(folder, FILES.metrics, metrics)
     return path
 
 
 def read_metrics(folder: Path) -> dict | None:
-    found = _read_json(Path(folder) / FILES.metrics)
+    found = _read_json(folder, FILES.metrics)
     return found if isinstance(found, dict) else None
 
 
 def write_history(folder: Path, history) -> Path:
     """Write history.json: a list of per-step records, or a dict of equal-length lists."""
-    path = Path(folder) / FILES.history
-    atomic_write_json(path, history)
+    path = runfiles.write_json(folder, FILES.history, history)
     return path
 
 
 def read_history(folder: Path) -> list | dict | None:
-    found = _read_json(Path(folder) / FILES.history)
+    found = _read_json(folder, FILES.history)
     return found if isinstance(found, (list, dict)) else None
 
 
 def write_config(folder: Path, experiment: dict, engine: dict, **extra) -> Path:
     """Write config.json: the experiment's and the engine's settings as dicts, and any `extra`
     entries (e.g. the device the run used)."""
-    path = Path(folder) / FILES.config
-    atomic_write_json(path, {"experiment": experiment, "engine": engine, **extra})
+    path = runfiles.write_json(folder, FILES.config, {"experiment": experiment, "engine": engine, **extra})
     return path
 
 
 def read_config(folder: Path) -> dict | None:
-    found = _read_json(Path(folder) / FILES.config)
+    found = _read_json(folder, FILES.config)
     return found if isinstance(found, dict) else None
 
 
 def write_progress(folder: Path, step: int) -> Path:
-    path = Path(folder) / FILES.progress
-    atomic_write_json(path, {"step": int(step)})
+    path = runfiles.write_json(folder, FILES.progress, {"step": int(step)})
     return path
 
 
 def read_progress(folder: Path) -> int | None:
     """The last step recorded in progress.json, or None."""
-    found = _read_json(Path(folder) / FILES.progress)
+    found = _read_json(folder, FILES.progress)
     step = found.get("step") if isinstance(found, dict) else None
     return int(step) if isinstance(step, (int, float)) and not isinstance(step, bool) else None
 
 
 def write_error(folder: Path, error: str, traceback: str = "") -> Path:
     """Write error.json: why the run failed (one line) and its traceback."""
-    path = Path(folder) / FILES.error
-    atomic_write_json(path, {"error": error, "traceback": traceback})
+    path = runfiles.write_json(folder, FILES.error, {"error": error, "traceback": traceback})
     return path
 
 
 def read_error(folder: Path) -> str | None:
     """The one-line reason in error.json, or None."""
-    found = _read_json(Path(folder) / FILES.error)
+    found = _read_json(folder, FILES.error)
     error = found.get("error") if isinstance(found, dict) else None
     return str(error) if error is not None else None
 
@@ -212,25 +210,24 @@ def write_view_uncertainty(folder: Path, arrays: dict[str, np.ndarray]) -> Path:
     render (H, W, 3), error (H, W), entropy (H, W), fisher (h, w)). Returns the folder."""
     for name in arrays:
         check_name("view array", name, VIEW_ARRAYS)
-    target = Path(folder) / FILES.view_uncertainty
     for name, values in arrays.items():
         buffer = io.BytesIO()
         np.save(buffer, np.asarray(values), allow_pickle=False)
-        atomic_write_bytes(target / f"{name}.npy", buffer.getvalue())
-    return target
+        runfiles.write_bytes(folder, f"{FILES.view_uncertainty}/{name}.npy", buffer.getvalue())
+    return runfiles.path_in(folder, FILES.view_uncertainty)
 
 
 def read_view_uncertainty(folder: Path) -> dict[str, np.ndarray] | None:
     """The arrays of `FILES.view_uncertainty` by name, as float64; None when the folder is absent
     (runs made before it was written) or render, error or entropy is missing, unreadable or of
     another size. fisher, when absent or unreadable, is left out."""
-    source = Path(folder) / FILES.view_uncertainty
-    if not source.is_dir():
+    if not runfiles.path_in(folder, FILES.view_uncertainty).is_dir():
         return None
     found = {}
     for name in VIEW_ARRAYS:
         try:
-            found[name] = np.load(source / f"{name}.npy", allow_pickle=False).astype(np.float64)
+            data = runfiles.read_bytes(folder, f"{FILES.view_uncertainty}/{name}.npy")
+            found[name] = np.load(io.BytesIO(data), allow_pickle=False).astype(np.float64)
         except (OSError, ValueError):
             continue
     if not {"render", "error", "entropy"} <= found.keys():
@@ -248,7 +245,8 @@ def render_paths(folder: Path, kind: str = "render") -> list[Path]:
     """The saved test renders, sorted by view: kind "render" (the model's image) or "render_vs_gt"
     (render left, ground truth right)."""
     check_name("render kind", kind, ("render", "render_vs_gt"))
-    return sorted((Path(folder) / FILES.renders).glob(f"*_{kind}.png"))
+    found = runfiles.path_in(folder, FILES.renders).glob(f"*_{kind}.png")
+    return sorted(runfiles.path_in(folder, f"{FILES.renders}/{p.name}") for p in found)
 
 
 __all__ = [

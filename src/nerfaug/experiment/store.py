@@ -22,7 +22,7 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
-from nerfaug import owned
+from nerfaug import owned, runfiles
 from nerfaug.data import detect_format, find_split
 from nerfaug.errors import FolderRefused, NerfaugError
 from nerfaug.experiment.layout import ResultsFolder
@@ -124,7 +124,7 @@ def read_result(folder: Path, expected_fingerprint: str | None = None) -> dict |
     fingerprint that differs from `expected_fingerprint` (the run's `run_fingerprint`: it was
     made with another config or another definition of its method).
     """
-    path = Path(folder) / RESULT_FILE
+    path = runfiles.path_in(folder, RESULT_FILE)  # PathRefused (not None) for a link planted there
     try:
         result = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError):
@@ -194,7 +194,7 @@ def write_result(folder: Path, result: dict) -> None:
     missing = [key for key in RESULT_KEYS if key not in result]
     if missing:
         raise ValueError(f"result is missing {missing}")
-    atomic_write_json(Path(folder) / RESULT_FILE, result)
+    runfiles.write_json(folder, RESULT_FILE, result)
 
 
 class IncompatibleResults(NerfaugError, RuntimeError):

@@ -14,6 +14,7 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 import torch
 from torch import Tensor, nn
@@ -355,12 +356,16 @@ class Trainer:
         return path
 
     @classmethod
-    def load_checkpoint(cls, path: str | Path, device="cpu", progress: bool = True, precision: str = "auto") -> Trainer:
-        """A trainer restored from `save_checkpoint` (on any device); training continues exactly
-        as it would have on the device it is restored to."""
+    def load_checkpoint(
+        cls, path: str | Path | BinaryIO, device="cpu", progress: bool = True, precision: str = "auto"
+    ) -> Trainer:
+        """A trainer restored from `save_checkpoint` (on any device), from its file or its bytes
+        (`io.BytesIO`: what a session checked); training continues exactly as it would have on the
+        device it is restored to."""
         state = torch.load(path, map_location="cpu", weights_only=True)
         if state.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path}: unsupported checkpoint format {state.get('format')!r}")
+            named = f"{path}: " if isinstance(path, (str, Path)) else ""
+            raise ValueError(f"{named}unsupported checkpoint format {state.get('format')!r}")
         v = state["views"]
         cameras = Cameras(v["camera_to_world"], v["fx"], v["fy"], v["cx"], v["cy"], v["width"], v["height"])
         views = Views(cameras, v["images"], list(v["names"]), v["alphas"])

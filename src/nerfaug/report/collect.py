@@ -12,6 +12,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from nerfaug import runfiles
 from nerfaug.experiment.layout import TRIAL_NAME, ResultsFolder
 from nerfaug.experiment.runfolder import FILES, read_error, read_progress
 from nerfaug.experiment.store import RESULT_KEYS, read_result, run_fingerprint
@@ -100,7 +101,7 @@ def read_sweep(root: Path) -> dict:
 def why_not_valid(folder: Path, fingerprint: str) -> str:
     """A human reason why `read_result(folder, fingerprint)` refused the run (for the report only;
     the decision itself is `read_result`'s)."""
-    path = folder / FILES.result
+    path = runfiles.path_in(folder, FILES.result)
     if not path.exists() and (error := read_error(folder)) is not None:
         return f"failed: {error}"
     if not path.exists():

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug import runfiles
 from nerfaug.experiment.layout import ResultsFolder
 from nerfaug.experiment.runfolder import (
     FILES,
@@ -87,7 +88,7 @@ def plot_boxplots(results: Results, scene: str, path: Path, title: str | None = 
 
 def _first_run_with(results: Results, scene: str, method: str, filename: str) -> Run | None:
     """The lowest trial that has `filename` (trial 0 unless it is missing)."""
-    return next((r for r in results.runs_of(scene, method) if (r.folder / filename).exists()), None)
+    return next((r for r in results.runs_of(scene, method) if runfiles.exists(r.folder, filename)), None)
 
 
 MAP_PANELS_PER_FIGURE = 4  # wider figures shrink each hemisphere below legibility in the HTML page
