@@ -50,6 +50,21 @@ def save_figure(figure, path: str | Path, dpi: int = FIGURE_DPI) -> Path:
     return path
 
 
+def legend_below(figure, axes) -> None:
+    """One legend for all of `axes`' labelled artists (each label once), below the panels, so it
+    never hides a curve."""
+    legend = {label: handle for ax in axes for handle, label in zip(*ax.get_legend_handles_labels())}
+    figure.legend(
+        legend.values(),
+        legend.keys(),
+        loc="upper center",
+        bbox_to_anchor=(0.5, 0.0),
+        ncol=min(4, len(legend)),
+        fontsize=8,
+        frameon=False,
+    )
+
+
 def log_range(values, decades: int = LOG_DECADES) -> tuple[float, float] | None:
     """(low, high) of a log colour scale over the positive `values`: from their largest down to at
     most `decades` decades below it; None when no value is positive."""

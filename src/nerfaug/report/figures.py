@@ -22,7 +22,7 @@ from nerfaug.experiment.runfolder import (
 )
 from nerfaug.maps import plot_method_maps
 from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_LABELS, METRICS
-from nerfaug.plotting import new_figure, save_figure
+from nerfaug.plotting import legend_below, new_figure, save_figure
 from nerfaug.report.collect import Results, Run
 from nerfaug.report.document import slug
 from nerfaug.report.view_uncertainty import plot_view_uncertainty
@@ -311,17 +311,7 @@ def training_curves_figure(results: Results):
         ax.set_xlabel("step")
         ax.set_title(scene, fontsize=10)
         ax.grid(alpha=0.3)
-    # One legend for all panels, below them, so it never hides a curve.
-    legend = {label: handle for ax in axes for handle, label in zip(*ax.get_legend_handles_labels())}
-    figure.legend(
-        legend.values(),
-        legend.keys(),
-        loc="upper center",
-        bbox_to_anchor=(0.5, 0.0),
-        ncol=min(4, len(legend)),
-        fontsize=8,
-        frameon=False,
-    )
+    legend_below(figure, axes)
     shown = {key for _, curves in panels for key, _ in curves.values()}
     held_out = " (training batches, not held-out views)" if shown & {"psnr", "train_psnr"} else ""
     figure.suptitle(f"Training curves{held_out}: median over trials, IQR shaded", fontsize=11, y=1.03)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nerfaug.plotting import new_figure, save_figure
+from nerfaug.plotting import legend_below, new_figure, save_figure
 from nerfaug.report.collect import Results, Run
 from nerfaug.report.document import Block, Figure, Heading, Paragraph, Table, number
 from nerfaug.statistics import summarise
@@ -102,16 +102,7 @@ def plot_learning_curves(results: Results, path: Path) -> Path | None:
         ax.set_title(scene, fontsize=10)
         ax.xaxis.get_major_locator().set_params(integer=True)
         ax.grid(alpha=0.3)
-    legend = {label: handle for ax in axes for handle, label in zip(*ax.get_legend_handles_labels())}
-    figure.legend(
-        legend.values(),
-        legend.keys(),
-        loc="upper center",
-        bbox_to_anchor=(0.5, 0.0),
-        ncol=min(4, len(legend)),
-        fontsize=8,
-        frameon=False,
-    )
+    legend_below(figure, axes)
     figure.suptitle("Learning curves: test PSNR after each round, median over trials, IQR shaded", fontsize=11)
     return save_figure(figure, path)
 
