@@ -21,7 +21,7 @@ demo: $(STAMP)
 
 # A line per test file as it starts (not -q's dots alone), and the 20 slowest tests named at the end.
 test: $(STAMP) lint
-	$(BIN)/python -m pytest --durations=20
+	$(BIN)/python -m pytest --durations=25
 
 # The tests marked `rounding` compare numbers that a CPU's rounding moves (a batch against runs
 # alone, compiled against not, numbers recorded on one CPU): run again under torch's default
