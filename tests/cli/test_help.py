@@ -200,6 +200,7 @@ EVERY_COMMAND = [
     "train",
     "add",
     "serve",
+    "view",
     "scene render",
     "scene prepare",
 ]
