@@ -182,9 +182,9 @@ def test_headless_chromium_draws_the_scene(run, tmp_path):
 
     pixels = np.asarray(Image.open(shot).convert("RGB")).astype(int).reshape(-1, 3)
 
-    def near(colour) -> int:
-        return int((np.abs(pixels - np.asarray(colour)).sum(axis=1) < 60).sum())
-
-    # The frusta's lines in their colours: the training cameras (blue) and the picked proposal (magenta).
-    assert near(scene.TRAINING) > 50, near(scene.TRAINING)
-    assert near(scene.PICKED) > 50, near(scene.PICKED)
+    r, g, b = pixels.T
+    # The frusta's thin lines, blended with the white page by anti-aliasing: counted by hue. The
+    # training cameras are blue (`scene.TRAINING`), the picked proposal's views magenta (`scene.PICKED`).
+    blue = int(((b - r > 60) & (b > 150)).sum())
+    magenta = int(((r - g > 80) & (b - g > 40)).sum())
+    assert blue > 50 and magenta > 20, (blue, magenta)
