@@ -36,6 +36,7 @@ POLL_S = 1.0
 REST_S = 0.3  # the camera still for this long: the frame is rendered again, sharper
 IDLE_S = 0.05  # how often a browser's camera is looked at
 PANEL_IMAGE_WIDTH = 240
+STOP_S = 30.0  # at most this long to wait at the end for a checkpoint being loaded
 
 
 def proposal_label(proposal) -> str:
@@ -80,6 +81,9 @@ class Viewer:
         self._stop.set()
         with contextlib.redirect_stdout(io.StringIO()):
             self.server.stop()
+        # A checkpoint being loaded finishes first: torch aborts the process when it exits under a running load.
+        for thread in self._threads:
+            thread.join(timeout=STOP_S)
 
     # ---- the panel -------------------------------------------------------------------------------------------
 
@@ -187,7 +191,7 @@ class Viewer:
                 self._load()
 
     def _load(self) -> None:
-        if self.live.refresh():
+        if self.live.refresh() and not self._stop.is_set():
             self.live_note.content = f"the NeRF at step {self.live.step}"
 
     # ---- the live render -------------------------------------------------------------------------------------
