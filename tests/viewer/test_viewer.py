@@ -145,6 +145,7 @@ def test_the_viewer_serves_the_scene_renders_and_writes_nothing(run):
     assert contents(run) == before  # read only: not one file written, touched or added
 
 
+@pytest.mark.timeout(300)
 def test_a_proposal_made_while_the_viewer_is_open_appears_without_a_restart(run):
     viewer = Viewer(run, port=0, poll_s=0.2, live=False)
     try:
@@ -153,8 +154,20 @@ def test_a_proposal_made_while_the_viewer_is_open_appears_without_a_restart(run)
         assert wait_for(lambda: viewer.server.scene.get_handle_by_name("/proposals/1/rank_2") is not None, 30)
         assert viewer.picked == 1 and "#1: 2 views" in viewer.proposal_menu.value
         assert "proposal 1" in viewer.score_label.content
+        # Picking the first proposal in the panel highlights its views instead (labelled by rank).
+        viewer.proposal_menu.value = next(o for o in viewer.proposal_menu.options if o.startswith("#0:"))
+        assert viewer.picked == 0
+        assert viewer.server.scene.get_handle_by_name("/proposals/0/rank_1/label") is not None
+        assert viewer.server.scene.get_handle_by_name("/proposals/1/rank_1/label") is None
     finally:
         viewer.stop()
+    # Opened on a session of two proposals, the viewer shows the last one (and starts: the panel's
+    # menu, set while the scene is drawn, calls back into the viewer).
+    reopened = Viewer(run, port=0, live=False)
+    try:
+        assert reopened.picked == 1 and reopened.proposal_menu.value.startswith("#1:")
+    finally:
+        reopened.stop()
 
 
 def test_without_the_extra_the_command_says_how_to_install_it(run):

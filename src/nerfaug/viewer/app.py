@@ -104,6 +104,7 @@ class Viewer:
             self.live_box.on_update(lambda _: self._clear_backgrounds())
             self.live_note = gui.add_markdown("loading the checkpoint" if self.live is not None else "off")
         self._proposal_images: list = []
+        self._setting_menu = False
 
     def _update_panel(self) -> None:
         s = self.snapshot
@@ -124,13 +125,21 @@ class Viewer:
         else:
             self.score_range.content = "grey: not scored yet"
         labels = [proposal_label(p) for p in s.proposals] or ["(none yet)"]
-        self.proposal_menu.options = labels
         picked = next((proposal_label(p) for p in s.proposals if p.number == self.picked), labels[-1])
-        if self.proposal_menu.value != picked:
-            self.proposal_menu.value = picked
+        # viser calls the menu's on_update from these assignments, in this thread, inside the redraw:
+        # `_pick` ignores them (a redraw from there would wait on the redraw's own lock).
+        self._setting_menu = True
+        try:
+            self.proposal_menu.options = labels
+            if self.proposal_menu.value != picked:
+                self.proposal_menu.value = picked
+        finally:
+            self._setting_menu = False
         self._show_proposal()
 
     def _pick(self, label: str) -> None:
+        if self._setting_menu:
+            return
         number = next((p.number for p in self.snapshot.proposals if proposal_label(p) == label), None)
         if number is not None and number != self.picked:
             self.picked = number
