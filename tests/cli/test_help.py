@@ -201,6 +201,7 @@ EVERY_COMMAND = [
     "train",
     "add",
     "serve",
+    "view",
     "scene render",
     "scene prepare",
 ]

@@ -17,6 +17,7 @@ nerfaug uncertainty RUN --poses poses.json --out DIR
 nerfaug export RUN --format nerfstudio --out DIR
 nerfaug eval RUN --data DATA --split test       PSNR/SSIM/LPIPS of the session on held-out views
 nerfaug serve --root SESSIONS                   the same over HTTP, for a robot (API docs at /docs)
+nerfaug view RUN                                a session in the browser: cameras, scores, live render
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ COMMANDS = {
     "render-proposals": "nerfaug.cli.session:render_proposals",
     "uncertainty": "nerfaug.cli.uncertainty:uncertainty",
     "serve": "nerfaug.cli.serve:serve",
+    "view": "nerfaug.cli.view:view",
 }
 
 
