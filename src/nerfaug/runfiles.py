@@ -47,6 +47,18 @@ def path_in(run_dir: str | Path, name: str | Path) -> Path:
         ) from None
 
 
+def checked(run_dir: str | Path, name: str | Path) -> Path:
+    """`name` in `run_dir` as shown (unresolved, so messages and relative links read as the user
+    gave the folder), once `path_in` found it inside `run_dir`: for a path handed on to code that
+    opens it later (a run's folder, a figure), where the unresolved form is needed.
+
+    Raises:
+        PathRefused: as `path_in`.
+    """
+    path_in(run_dir, name)
+    return shown(run_dir, name)
+
+
 def exists(run_dir: str | Path, name: str | Path) -> bool:
     """Whether `run_dir` holds the name `name` (a link counts, wherever it leads: opening it then
     says where)."""
@@ -109,6 +121,7 @@ def open_lock(run_dir: str | Path, name: str | Path) -> IO[str]:
 
 
 __all__ = [
+    "checked",
     "exists",
     "folder",
     "is_file",

@@ -13,6 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from nerfaug import runfiles
 from nerfaug.cli.option_names import engine_variant
 from nerfaug.cli.run_size import per_cell, size_line
 from nerfaug.cli.run_work import runs_to_do
@@ -44,7 +45,9 @@ def study(
     if engine_settings:
         spec = with_engine_settings(spec, engine_settings)
     out = Path(spec.out)
-    table_path = Path(spec.table) if spec.table is not None else StudyFolder(out).table
+    # The table's default place is in OUT, held to it (a link planted there is refused); --table
+    # names a file of the user's choosing, anywhere.
+    table_path = Path(spec.table) if spec.table is not None else runfiles.checked(out, StudyFolder(out).table.name)
     previous = study_table.read_table(table_path) if table_path.exists() else None
     failed = {} if summary_only else run(spec, selection, previous, workers, force, budget_s)
     recorded = record_table(out, table_path, previous)
@@ -133,7 +136,7 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
                 "study first, or pass --table FILE"
             )
         return previous
-    record = study_runs.with_design(json.loads(path.read_text()), Path(out))
+    record = study_runs.with_design(json.loads(runfiles.read_text(out, path.name)), Path(out))
     if previous is not None:
         record = study_runs.merge_records(previous["plan"], record)
     rows, scenes = study_table.rows_from_folders(Path(out), record["engines"])

@@ -26,7 +26,6 @@ from nerfaug import owned, runfiles
 from nerfaug.data import detect_format, find_split
 from nerfaug.errors import FolderRefused, NerfaugError
 from nerfaug.experiment.layout import ResultsFolder
-from nerfaug.jsonio import atomic_write_json
 
 RESULT_FILE = "result.json"
 RESULT_KEYS = ("scene", "method", "trial", "seed", "fingerprint", "metrics", "timing", "code_version")
@@ -57,7 +56,10 @@ class RunKey:
     trial: int
 
     def folder(self, root: Path) -> Path:
-        return ResultsFolder(Path(root)).run(self.scene, self.method, self.trial)
+        """The run's folder under `root`, refused (`PathRefused`, one line) where `runs/`, its
+        scene or method folder is a link leading out of `root`: no run is read or made there."""
+        root = Path(root)
+        return runfiles.checked(root, ResultsFolder(root).run(self.scene, self.method, self.trial).relative_to(root))
 
     def __str__(self) -> str:
         return f"{self.scene}/{self.method}/trial {self.trial}"
@@ -210,11 +212,11 @@ def finished_runs(root: Path) -> list[dict]:
 
 def read_sweep(root: Path) -> tuple[dict | None, str | None]:
     """The folder's sweep record, or None and why not ("missing", or what is wrong)."""
-    path = ResultsFolder(Path(root)).sweep
-    if not path.exists():
+    name = ResultsFolder(Path(root)).sweep.name
+    if not runfiles.exists(root, name):
         return None, "is missing"
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(runfiles.read_text(root, name))  # PathRefused for a link leading out
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
         return None, f"is unreadable ({error})"
     if not isinstance(data, dict) or not isinstance(data.get("fingerprint"), str):
@@ -226,8 +228,10 @@ def move_aside(root: Path) -> Path:
     """Move `root/runs` and `root/sweep.json` into `root/superseded/<UTC time>/`; returns that folder."""
     results = ResultsFolder(Path(root))
     stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%S%fZ")
-    target = results.superseded / stamp
-    target.mkdir(parents=True)
+    # A link planted as superseded/ is refused; runs/ and sweep.json are renamed, a link as itself.
+    name = (results.superseded / stamp).relative_to(results.root)
+    runfiles.folder(root, name)
+    target = runfiles.shown(root, name)
     for moved in (results.runs, results.sweep):
         if moved.exists():
             moved.rename(target / moved.name)
@@ -279,7 +283,7 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
             "deleted), or use another --out folder"
         )
     owned.mark(root, RESULTS_KIND)
-    atomic_write_json(path, sweep)
+    runfiles.write_json(root, path.name, sweep)  # PathRefused for a sweep.json linked out
     return moved
 
 

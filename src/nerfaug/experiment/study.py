@@ -23,6 +23,7 @@ from pathlib import Path
 
 import torch
 
+from nerfaug import runfiles
 from nerfaug.data.prepare import PREPARED
 from nerfaug.device import resolve_device
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig, check_workers
@@ -32,7 +33,7 @@ from nerfaug.experiment.runfolder import write_error
 from nerfaug.experiment.store import RunKey, check_sweep, read_result, run_fingerprint
 from nerfaug.experiment.study_spec import PROCEDURAL_SCENES, StudySpec
 from nerfaug.experiment.sweep import check_config, run_sweep, scene_name, sweep_record
-from nerfaug.jsonio import atomic_write_json, read_json
+from nerfaug.jsonio import read_json
 from nerfaug.nerf.config import PRESETS, NerfConfig
 from nerfaug.nerf.registry import check_names
 from nerfaug.selection.families import FAMILIES
@@ -154,6 +155,14 @@ def prepare_datasets(
     return found
 
 
+def write_plan(plan: StudyPlan) -> None:
+    """OUT/study.json: the plan grown by the earlier sittings'; a study.json linked out of OUT is
+    refused (`PathRefused`, one line) before anything is read or written through it."""
+    plan.out.mkdir(parents=True, exist_ok=True)
+    name = StudyFolder(plan.out).record.name
+    runfiles.write_json(plan.out, name, merged_record(runfiles.path_in(plan.out, name), plan.record()))
+
+
 def merged_record(path: Path, record: dict) -> dict:
     """`record` grown by the study.json at `path`, if any (`merge_records`)."""
     try:
@@ -232,10 +241,8 @@ class EngineSweep:
         self.config = plan.engine_config(engine)
         if not self.config.batched():
             raise ValueError(f"--batch {self.config.batch}: an opened sweep runs trial batches; give --batch 2 or more")
-        study = StudyFolder(plan.out)
-        plan.out.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(study.record, merged_record(study.record, plan.record()))
-        self.root = study.engine(engine).root
+        write_plan(plan)
+        self.root = StudyFolder(plan.out).engine(engine).root
         self.record = sweep_record(self.config, plan.command, check_config(self.config))
         check_sweep(self.root, self.record)
         self.datasets = {
@@ -281,8 +288,7 @@ def run_study(
     began = time.monotonic()
     check_workers(workers)  # before anything is written
     study = StudyFolder(plan.out)
-    plan.out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(study.record, merged_record(study.record, plan.record()))
+    write_plan(plan)
     outcomes = {}
     for index, engine in enumerate(plan.engines):
         left = None if budget_s is None else max(budget_s - (time.monotonic() - began), 1e-6)

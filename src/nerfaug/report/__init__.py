@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from nerfaug import runfiles
 from nerfaug.experiment.layout import ResultsFolder
-from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.report.collect import (
     NotAggregated,
     ReportError,
@@ -26,7 +26,7 @@ from nerfaug.report.collect import (
     why_not_valid,
 )
 from nerfaug.report.document import Block, to_html, to_markdown
-from nerfaug.report.figures import Figures, history_series, make_figures
+from nerfaug.report.figures import Figures, figure_folder, history_series, make_figures
 from nerfaug.report.learning_curve import learning_curve_section, plot_learning_curves
 from nerfaug.report.sections import (
     PaperTables,
@@ -74,13 +74,15 @@ def write_report(results_dir: Path, paper: PaperTables) -> list[Path]:
         ReportError: no readable sweep.json in `results_dir`.
     """
     results = collect_results(results_dir)
-    figures = make_figures(results)
-    curves = plot_learning_curves(results, ResultsFolder(results.root).figures / "learning_curves.png")
-    blocks = build_report(results, figures, paper, curves)
     root = results.root
     markdown, page = ResultsFolder(root).report
-    atomic_write_bytes(markdown, to_markdown(blocks, root).encode())
-    atomic_write_bytes(page, to_html(blocks, f"nerfaug report: {root.name}").encode())
+    for name in (markdown.name, page.name):  # refused before any figure is drawn, as figures/ is
+        runfiles.path_in(root, name)
+    figures = make_figures(results)
+    curves = plot_learning_curves(results, figure_folder(root) / "learning_curves.png")
+    blocks = build_report(results, figures, paper, curves)
+    runfiles.write_text(root, markdown.name, to_markdown(blocks, root))
+    runfiles.write_text(root, page.name, to_html(blocks, f"nerfaug report: {root.name}"))
     return [markdown, page] + figures.paths() + ([curves] if curves else [])
 
 

@@ -87,10 +87,10 @@ class Results:
 
 def read_sweep(root: Path) -> dict:
     path = ResultsFolder(root).sweep
-    if not path.is_file():
+    if not runfiles.exists(root, path.name):
         raise ReportError(f"{path} not found: {root} is not a results folder written by `nerfaug run`")
     try:
-        sweep = json.loads(path.read_text())
+        sweep = json.loads(runfiles.read_text(root, path.name))  # PathRefused for a link leading out
     except json.JSONDecodeError as error:
         raise ReportError(f"{path}: invalid JSON ({error.msg} at line {error.lineno})") from None
     if not isinstance(sweep, dict) or "fingerprint" not in sweep:

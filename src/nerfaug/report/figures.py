@@ -364,8 +364,15 @@ class Figures:
         return found + ([self.curves] if self.curves else []) + list(self.view_uncertainty.values())
 
 
+def figure_folder(root: Path) -> Path:
+    """The results folder's `figures/` (as shown, unresolved: the report links its figures
+    relative to `root`), refused (`PathRefused`) where it is a link leading out of `root`; a
+    figure planted there as a link is replaced by the figure, the link's target left alone."""
+    return runfiles.checked(root, ResultsFolder(Path(root)).figures.relative_to(root))
+
+
 def make_figures(results: Results) -> Figures:
-    folder = ResultsFolder(results.root).figures
+    folder = figure_folder(results.root)
     figures = Figures()
     for scene in results.scenes:
         name = slug(scene)
@@ -385,6 +392,7 @@ def make_figures(results: Results) -> Figures:
 __all__ = [
     "Figures",
     "history_series",
+    "figure_folder",
     "make_figures",
     "method_colours",
     "plot_boxplots",

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug import runfiles
 from nerfaug.experiment.layout import StudyFolder
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_DECIMALS, METRIC_LABELS, METRICS
@@ -526,9 +527,12 @@ def write_study(root: Path, table: dict, plan: str = "auto") -> list[Path]:
     hypotheses of `plan` (`study_hypotheses.KINDS`). Returns study.md, then the figures."""
     study = collect_study(table)
     folder = StudyFolder(Path(root))
-    figures = make_study_figures(study, folder.figures)
-    path = folder.summary
-    atomic_write_bytes(path, to_markdown(study_blocks(study, figures, plan), folder.root).encode())
+    # study.md and figures/ linked out of the study folder are refused (`PathRefused`) before
+    # anything is drawn; the paths stay as shown, so the page links its figures relative to ROOT.
+    path = runfiles.checked(folder.root, folder.summary.relative_to(folder.root))
+    figures = make_study_figures(study, runfiles.checked(folder.root, folder.figures.relative_to(folder.root)))
+    markdown = to_markdown(study_blocks(study, figures, plan), folder.root)
+    runfiles.write_text(folder.root, path.relative_to(folder.root), markdown)
     return [path, *figures.values()]
 
 
