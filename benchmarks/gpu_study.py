@@ -429,24 +429,9 @@ def toy(out: Path, packs: Path) -> dict:
     what the CPU mode of `gpu_study.sh` runs."""
     import torch
 
-    from nerfaug.cameras import Cameras, image_rays
-    from nerfaug.data import Views, write_blender_split
-    from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, sample_uniform_poses
-
-    def views(poses: torch.Tensor, prefix: str, size: int = 24) -> Views:
-        cameras = Cameras.from_fov(poses.float(), BLENDER_CAMERA_ANGLE_X, size, size)
-        images, alphas = [], []
-        for i in range(len(cameras)):
-            origins, directions = image_rays(cameras, i)
-            b = (origins * directions).sum(-1)
-            disc = b**2 - ((origins**2).sum(-1) - 0.8**2)
-            hit_point = origins + (-b - disc.clamp_min(0).sqrt())[:, None] * directions
-            normal = torch.nn.functional.normalize(hit_point, dim=-1)
-            hit = (disc > 0).float()
-            images.append((hit[:, None] * (0.5 + 0.5 * normal) + (1 - hit[:, None])).reshape(size, size, 3))
-            alphas.append(hit.reshape(size, size))
-        names = [f"{prefix}_{i}" for i in range(len(cameras))]
-        return Views(cameras, torch.stack(images), names, torch.stack(alphas))
+    from nerfaug.data import write_blender_split
+    from nerfaug.hemisphere import half_hemisphere_poses, sample_uniform_poses
+    from nerfaug.scenes.sphere import sphere_views as views
 
     out = Path(out)
     write_blender_split(out, "initial", views(half_hemisphere_poses(3), "i"))

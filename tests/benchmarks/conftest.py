@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from nerfaug.cameras import Cameras, image_rays
-from nerfaug.data import Views, write_blender_split
-from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, half_hemisphere_poses, sample_uniform_poses
+from nerfaug.data import write_blender_split
+from nerfaug.hemisphere import half_hemisphere_poses, sample_uniform_poses
+from nerfaug.scenes.sphere import sphere_views
 
 
 @pytest.fixture(scope="module")
@@ -25,21 +25,6 @@ def bench(request):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-def sphere_views(poses: torch.Tensor, prefix: str, size: int = 24) -> Views:
-    """A sphere of radius 0.8 at the origin coloured by its normal, on white, with its alpha."""
-    cameras = Cameras.from_fov(poses.float(), BLENDER_CAMERA_ANGLE_X, size, size)
-    images, alphas = [], []
-    for i in range(len(cameras)):
-        origins, directions = image_rays(cameras, i)
-        b = (origins * directions).sum(-1)
-        disc = b**2 - ((origins**2).sum(-1) - 0.8**2)
-        normal = torch.nn.functional.normalize(origins + (-b - disc.clamp_min(0).sqrt())[:, None] * directions, dim=-1)
-        hit = (disc > 0).float()
-        images.append((hit[:, None] * (0.5 + 0.5 * normal) + (1 - hit[:, None])).reshape(size, size, 3))
-        alphas.append(hit.reshape(size, size))
-    return Views(cameras, torch.stack(images), [f"{prefix}_{i}" for i in range(len(cameras))], torch.stack(alphas))
 
 
 @pytest.fixture(scope="module")
