@@ -52,22 +52,15 @@ def test_an_add_killed_once_its_listing_is_written_is_recorded_at_the_next_open(
     assert len(CaptureSession.open(run).trainer.train_views) == 10 + len(names)
 
 
+def _sparse_start(bases, run) -> list:
+    """`nerfaug train`'s arguments for a 2-step sparse start of 3 views into `run`."""
+    options = ["--engine", "test", "--steps", "2", "--initial", "3", "--device", "cpu"]
+    return ["train", bases.dataset, "--out", run, *options]
+
+
 def test_a_sparse_start_killed_while_creating_is_not_called_a_session_that_lost_its_file(bases, tmp_path, monkeypatch):
     run = tmp_path / "run"
-    argv = [
-        "train",
-        bases.dataset,
-        "--out",
-        run,
-        "--engine",
-        "test",
-        "--steps",
-        "2",
-        "--initial",
-        "3",
-        "--device",
-        "cpu",
-    ]
+    argv = _sparse_start(bases, run)
     _kill_at_first_save(monkeypatch)
     monkeypatch.setattr(capture_session, "remove_unfinished", lambda *args: None)  # a kill runs no cleanup
     killed = run_cli(argv)
@@ -85,20 +78,7 @@ def test_a_sparse_start_killed_while_creating_is_not_called_a_session_that_lost_
 @pytest.mark.parametrize("own", ["notes.txt", "dataset/notes.txt"])
 def test_a_users_file_in_a_folder_left_by_a_stopped_creation_is_never_removed(bases, tmp_path, monkeypatch, own):
     run = tmp_path / "run"
-    argv = [
-        "train",
-        bases.dataset,
-        "--out",
-        run,
-        "--engine",
-        "test",
-        "--steps",
-        "2",
-        "--initial",
-        "3",
-        "--device",
-        "cpu",
-    ]
+    argv = _sparse_start(bases, run)
     _kill_at_first_save(monkeypatch)
     monkeypatch.setattr(capture_session, "remove_unfinished", lambda *args: None)
     run_cli(argv)
