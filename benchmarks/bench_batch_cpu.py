@@ -48,21 +48,39 @@ def arm(config, root: Path, workers: int) -> dict:
     return {"wall_s": wall, "cpu_s": cpu, "runs": len(runs), "results": runs, "skipped": outcome.skipped}
 
 
-def nudged_models():
-    """A context in which every run alone starts with one parameter of its field moved by one
-    unit in the last place (float32): the reference engine with a rounding-sized difference, the
-    null against which an engine that rounds otherwise is judged. In this process only (one worker)."""
+NUDGES = {
+    "one-weight": "the field's first density-network weight [0, 0] moved by one float32 ulp at initialisation",
+    "every-parameter": "every float parameter of the model (field and proposal networks) moved by one float32 "
+    "ulp towards +inf at initialisation",
+}
+
+
+def nudged_models(kind: str = "every-parameter"):
+    """A context in which every run alone starts from a model moved by a rounding-sized amount: the
+    reference engine with a difference of the size rounding makes, the null against which an engine
+    that rounds otherwise is judged. In this process only (one worker).
+
+    "one-weight" moves one weight of the field by one unit in the last place (float32): in 6 of 20
+    runs it changed nothing (the weight's unit was lost in the first sums). "every-parameter" moves
+    every element of every float parameter one unit towards +inf, so every product of the first
+    step differs: each run's arithmetic changes."""
     import contextlib
 
     from nerfaug.nerf import trainer as trainer_module
 
     original = trainer_module.seeded_model
+    up = torch.tensor(float("inf"))
 
     def nudged(*args, **kwargs):
         model = original(*args, **kwargs)
         with torch.no_grad():
-            weight = model.field.density_mlp[0].weight
-            weight[0, 0] = torch.nextafter(weight[0, 0], torch.tensor(float("inf")))
+            if kind == "one-weight":
+                weight = model.field.density_mlp[0].weight
+                weight[0, 0] = torch.nextafter(weight[0, 0], up)
+            else:
+                for parameter in model.parameters():
+                    if parameter.is_floating_point():
+                        parameter.copy_(torch.nextafter(parameter, up.to(parameter.dtype)))
         return model
 
     @contextlib.contextmanager
@@ -100,6 +118,13 @@ def main(argv=None) -> int:
         help="instead: run the reference engine with one weight moved by one ulp, in this process, and "
         "compare with the runs alone of this earlier --json (the rounding null)",
     )
+    parser.add_argument("--nudge", choices=sorted(NUDGES), default="every-parameter", help="the null's nudge")
+    parser.add_argument(
+        "--check-against",
+        type=Path,
+        help="instead: run the reference engine alone on the first --trials seeds and check it reproduces the "
+        "runs alone of this earlier --json to every digit (whether that arm can be reused)",
+    )
     args = parser.parse_args(argv)
 
     base = STUDY_PRESETS.choose(
@@ -110,6 +135,8 @@ def main(argv=None) -> int:
     started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     if args.nudged_against is not None:
         return nudged_null(base, args, started)
+    if args.check_against is not None:
+        return reference_check(base, args)
     arms = {
         "alone": arm(base.replace(batch=1), args.out / "alone", args.workers),
         "batched": arm(base.replace(batch=args.batch), args.out / "batched", args.workers),
@@ -174,7 +201,7 @@ def nudged_null(base, args, started: str) -> int:
     """The rounding null: runs alone with a one-ulp nudge against the same runs alone without."""
     reference = json.loads(args.nudged_against.read_text())
     before = {(r["scene"], r["trial"]): r["psnr_alone"] for r in reference["runs"]}
-    with nudged_models():
+    with nudged_models(args.nudge):
         nudged = arm(base.replace(batch=1), args.out / "nudged", workers=1)
     pairs = sorted(set(before) & set(nudged["results"]))
     after = [nudged["results"][p]["metrics"]["psnr"] for p in pairs]
@@ -183,7 +210,8 @@ def nudged_null(base, args, started: str) -> int:
         "date": started,
         "host": platform.node(),
         "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
-        "nudge": "the field's first density-network weight [0, 0] moved by one float32 ulp at initialisation",
+        "nudge": NUDGES[args.nudge],
+        "unchanged_runs": sum(a == before[p] for p, a in zip(pairs, after)),
         "runs": [
             {"scene": s, "trial": t, "psnr_alone": before[(s, t)], "psnr_nudged": a, "difference": a - before[(s, t)]}
             for (s, t), a in zip(pairs, after)
@@ -193,12 +221,29 @@ def nudged_null(base, args, started: str) -> int:
     print(
         f"PSNR nudged - alone over {result['n_pairs']} seeds: mean {result['mean']:+.3f} dB, 90% CI "
         f"[{result['low']:+.3f}, {result['high']:+.3f}], TOST p = {result['p_value']:.4f}, largest |d| "
-        f"{result['max_abs_difference']:.3f} dB"
+        f"{result['max_abs_difference']:.3f} dB; {figures['unchanged_runs']} of {len(pairs)} runs unchanged"
     )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=2) + "\n")
     return 0
+
+
+def reference_check(base, args) -> int:
+    """Run the reference engine alone on the first `args.trials` seeds of each dataset and compare
+    each run's test PSNR with the earlier arm's, exactly: 0 when all equal (the arm can be reused)."""
+    reference = json.loads(args.check_against.read_text())
+    before = {(r["scene"], r["trial"]): r["psnr_alone"] for r in reference["runs"]}
+    now = arm(base.replace(batch=1), args.out / "reference-check", args.workers)["results"]
+    equal = True
+    for key, result in sorted(now.items()):
+        psnr = result["metrics"]["psnr"]
+        same = key in before and psnr == before[key]
+        equal &= same
+        verdict = "equal" if same else "DIFFERENT"
+        print(f"{key[0]} trial {key[1]}: {psnr!r} now, {before.get(key)!r} recorded: {verdict}")
+    print("the recorded arm is reproduced" if equal else "the recorded arm is NOT reproduced: run it again")
+    return 0 if equal else 1
 
 
 if __name__ == "__main__":

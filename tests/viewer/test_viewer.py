@@ -201,3 +201,27 @@ def test_headless_chromium_draws_the_scene(run, tmp_path):
     blue = int(((b - r > 60) & (b > 150)).sum())
     magenta = int(((r - g > 80) & (b - g > 40)).sum())
     assert blue > 50 and magenta > 20, (blue, magenta)
+
+
+def test_a_proposal_linked_out_of_the_run_and_a_damaged_session_are_said_in_the_panel(run, tmp_path):
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy, symlinks=True)
+    outside = tmp_path / "elsewhere.json"
+    outside.write_text("{}")
+    proposal = next((copy / "proposals").glob("proposal_*.json"))
+    proposal.unlink()
+    proposal.symlink_to(outside)
+    snapshot = read_snapshot(copy)
+    assert snapshot.proposals[0].refused, "a proposal file linked out of the run is refused, not followed"
+    viewer = Viewer(copy, port=0, poll_s=0.2, live=False)
+    try:
+        assert "could not be read" not in viewer.status.content
+        session_file = copy / "session.json"
+        good = session_file.read_bytes()
+        session_file.write_text("{ damaged")
+        assert wait_for(lambda: "could not be read" in viewer.status.content, 30)
+        assert viewer.server.scene.get_handle_by_name("/proposals/0/rank_1") is not None  # the last view stays
+        session_file.write_bytes(good)
+        assert wait_for(lambda: "could not be read" not in viewer.status.content, 30)
+    finally:
+        viewer.stop()

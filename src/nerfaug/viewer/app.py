@@ -59,6 +59,7 @@ class Viewer:
         self._redraw_lock = threading.Lock()
         with contextlib.redirect_stdout(io.StringIO()):  # viser's banner: `nerfaug view` prints its own line
             self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.read_error = ""
         self.live = None
         if live:
             self.live = LiveModel(self.run_dir, self.snapshot.hemisphere, self.snapshot.background)
@@ -117,6 +118,8 @@ class Viewer:
         else:
             lines.append("last evaluation: none found (`nerfaug eval RUN ... --out RUN/eval.json`)")
         lines.append(f"{len(s.held_out)} held-out views (grey), {len(s.candidates.positions)} candidates")
+        if self.read_error:
+            lines.append(f"**the session could not be read just now** (the view above is older): {self.read_error}")
         self.status.content = "\n\n".join(lines)
         c = s.candidates
         self.score_label.content = f"colour: **{c.label}**"
@@ -153,6 +156,10 @@ class Viewer:
         if proposal is None:
             return
         with self.proposal_box:
+            if proposal.refused:
+                note = f"its folder was not read: {proposal.refused}"
+                self._proposal_images.append(self.server.gui.add_markdown(note))
+                return
             if proposal.map is not None:
                 image = thumbnail(proposal.map, (1, 1, 1), PANEL_IMAGE_WIDTH)
                 if image is not None:
@@ -187,8 +194,14 @@ class Viewer:
                 continue
             try:
                 snapshot = read_snapshot(self.run_dir)
-            except (NerfaugError, OSError, ValueError):
-                continue  # caught between two writes, or being repaired: looked at again next time
+            except (NerfaugError, OSError, ValueError) as error:
+                # Caught between two writes, or being repaired: looked at again next time, and said
+                # in the panel meanwhile (the last good snapshot stays drawn).
+                self.read_error = f"{type(error).__name__}: {error}"
+                with self._redraw_lock:
+                    self._update_panel()
+                continue
+            self.read_error = ""
             self.key = key
             known = {p.number for p in self.snapshot.proposals}
             self.snapshot = snapshot

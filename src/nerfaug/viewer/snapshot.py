@@ -57,6 +57,8 @@ class ProposalView:
     poses: np.ndarray
     map: Path | None
     images: dict[str, list[Path]] = field(default_factory=dict)
+    refused: str = ""
+    """why its file's folder was not read (a link out of the run folder), or empty."""
 
 
 @dataclass(frozen=True)
@@ -152,7 +154,11 @@ def read_snapshot(run_dir: Path) -> Snapshot:
 
 
 def _proposal(run_dir: Path, record) -> ProposalView:
-    path = runfiles.path_in(run_dir, record.file)
+    poses = np.asarray(record.poses, dtype=np.float64).reshape(-1, 4, 4)
+    try:
+        path = runfiles.path_in(run_dir, record.file)
+    except PathRefused as error:  # its poses are in session.json; nothing beside a link is read
+        return ProposalView(record.number, record.method, record.step, list(record.names), poses, None, {}, str(error))
     picture = path.with_suffix(".png")
     images = {}
     folder = path.parent
@@ -166,7 +172,7 @@ def _proposal(run_dir: Path, record) -> ProposalView:
         method=record.method,
         step=record.step,
         names=list(record.names),
-        poses=np.asarray(record.poses, dtype=np.float64).reshape(-1, 4, 4),
+        poses=poses,
         map=picture if picture.is_file() else None,
         images=images,
     )
