@@ -10,6 +10,7 @@ import dataclasses
 
 from nerfaug.capture.requests import RequestError, words
 from nerfaug.nerf.config import variant_name
+from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.footprint import check_engine_fits
 
 
@@ -44,6 +45,16 @@ def engine_refusal(error: ValueError) -> str:
     if isinstance(error, RequestError) and error.argument:
         return f"--engine.{error.argument.replace('_', '-')} {words(error.value)}: {error.problem}"
     return f"--engine: {error}"
+
+
+def engine_with(engine, settings: dict) -> Engine:
+    """The engine `engine` (an `Engine`, or a name) with the --engine.GROUP.SETTING given
+    (`settings`, nested) changed, read and checked once; one line naming the option (SystemExit)
+    when a setting is refused or makes a run too large for this machine's memory."""
+    try:
+        return check_engine_fits(Engine.read(engine).with_settings(settings))
+    except ValueError as error:
+        raise SystemExit(engine_refusal(error)) from None
 
 
 def engine_variant(engine: str, settings: dict) -> str:
