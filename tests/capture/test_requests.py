@@ -60,7 +60,7 @@ def test_session_settings_defaults_and_conversions():
     settings = SessionSettings(centre=[1, 2, 3], radius=2).checked()
     assert settings == SessionSettings(centre=(1.0, 2.0, 3.0), radius=2.0)
     # No pole and no --estimate-up: the dataset's format decides (+z, or the cameras' up where it records none).
-    assert (settings.engine, settings.seed, settings.downscale) == ("nerfacto-cpu", 0, 1)
+    assert (settings.engine.record(), settings.seed, settings.downscale) == ("nerfacto-cpu", 0, 1)
     assert (settings.up, settings.estimate_up) == (None, None)
 
 

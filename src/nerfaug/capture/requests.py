@@ -47,7 +47,7 @@ from nerfaug import camera_schema
 from nerfaug.camera_schema import MAX_IMAGE_SIDE
 from nerfaug.errors import DatasetError
 from nerfaug.nerf.config import PRESETS
-from nerfaug.nerf.engine import Engine
+from nerfaug.nerf.engine import ENGINE_OPTION, Engine
 from nerfaug.nerf.footprint import check_engine_fits
 from nerfaug.registry import check_name
 from nerfaug.schema import SCHEMA, RequestError, Schema, adapter, problem_text, validated
@@ -339,15 +339,11 @@ DEFAULT_SESSION_ENGINE = "nerfacto-cpu"
 def _engine(value) -> Engine:
     """The engine a request names (`Engine.read`: a preset, or a preset with settings changed),
     once one run of it fits this machine's memory; a refusal names the setting by its path."""
-    engine = Engine.read(value)
     try:
-        return check_engine_fits(engine)
+        return check_engine_fits(Engine.read(value))
     except ValueError as error:  # the refusal names the field and value before the reason
-        raise ValueError(str(error).removeprefix(f"engine {engine.preset!r}: ")) from None
-
-
-def _read_engine(words: list[str]) -> Engine:
-    return Engine.read(words[0])
+        named = value.preset if isinstance(value, Engine) else value.get("preset") if isinstance(value, dict) else value
+        raise ValueError(str(error).removeprefix(f"engine {named!r}: ")) from None
 
 
 # The JSON form of an engine: a preset's name, or an object naming the preset and the settings
@@ -375,13 +371,7 @@ EngineName = Annotated[
     PlainValidator(_engine),
     PlainSerializer(Engine.record),
     WithJsonSchema(ENGINE_JSON),
-    PrimitiveConstructorSpec(
-        nargs=1,
-        metavar="{" + ",".join(PRESETS) + "}",
-        instance_from_str=_read_engine,
-        is_instance=lambda value: value is None or isinstance(value, Engine),
-        str_from_instance=lambda value: [str(value)],
-    ),
+    ENGINE_OPTION,
 ]
 
 

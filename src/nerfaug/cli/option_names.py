@@ -9,7 +9,6 @@ import contextlib
 import dataclasses
 
 from nerfaug.capture.requests import RequestError, words
-from nerfaug.nerf.config import variant_name
 from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.footprint import check_engine_fits
 
@@ -53,15 +52,5 @@ def engine_with(engine, settings: dict) -> Engine:
     when a setting is refused or makes a run too large for this machine's memory."""
     try:
         return check_engine_fits(Engine.read(engine).with_settings(settings))
-    except ValueError as error:
-        raise SystemExit(engine_refusal(error)) from None
-
-
-def engine_variant(engine: str, settings: dict) -> str:
-    """`variant_name(engine, settings)`: the engine with the --engine.GROUP.SETTING given changed,
-    one line naming the option (SystemExit) when a setting is refused or makes a run too large
-    for this machine's memory (`check_engine_fits`)."""
-    try:
-        return check_engine_fits(variant_name(engine, settings))
     except ValueError as error:
         raise SystemExit(engine_refusal(error)) from None

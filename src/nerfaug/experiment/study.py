@@ -18,7 +18,7 @@ import platform
 import sys
 import time
 import traceback
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
@@ -129,7 +129,7 @@ class StudyPlan:
             "datasets": self.datasets,
             "methods": list(self.config.methods),
             "trials": self.config.trials,
-            "config": asdict(self.config),
+            "config": self.config.to_record(),
             "command": self.command,
             "machine": machine(),
             "written": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),

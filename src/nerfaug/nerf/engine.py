@@ -17,6 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from tyro.constructors import PrimitiveConstructorSpec
+
 from nerfaug.nerf.bounds import get, unused
 from nerfaug.nerf.config import FLAT_NAMES, PRESETS, VARIANT_SEPARATOR, NerfConfig, _build, _variant_text, parse_variant
 from nerfaug.registry import lookup
@@ -106,10 +108,10 @@ class Engine:
 
     def flat_name(self) -> str:
         """The name earlier records gave this engine ("nerfacto-cpu+hidden_dim=48"): what a
-        fingerprint hashes as "engine", so that results recorded under it keep theirs."""
+        fingerprint hashes as "engine" (`experiment.fingerprints`), so that results recorded under
+        it keep theirs, and what a study names its cell."""
         flat = {path: name for name, path in FLAT_NAMES.items()}
-        preset = PRESETS[self.preset]
-        parts = [f"{flat[path]}={_text(v)}" for path, v in _in_flat_order(self.changes()) if get(preset, path) != v]
+        parts = [f"{flat[path]}={_text(v)}" for path, v in _in_flat_order(self.changes())]
         return VARIANT_SEPARATOR.join([self.preset, *parts])
 
     def __eq__(self, other: object) -> bool:
@@ -120,6 +122,21 @@ class Engine:
 
     def __str__(self) -> str:
         return self.options().removeprefix("--engine ")
+
+
+def _read_words(words: list[str]) -> Engine:
+    return Engine.read(words[0])
+
+
+ENGINE_OPTION = PrimitiveConstructorSpec(
+    nargs=1,
+    metavar="{" + ",".join(PRESETS) + "}",
+    instance_from_str=_read_words,
+    is_instance=lambda value: value is None or isinstance(value, Engine),
+    str_from_instance=lambda value: [str(value)],
+)
+"""How tyro reads `--engine NAME` as an `Engine` (its settings are the --engine.GROUP.SETTING
+options, read apart: `cli.engine_options`)."""
 
 
 def _leaves(settings: dict, path: tuple[str, ...] = ()) -> dict[tuple[str, ...], Any]:

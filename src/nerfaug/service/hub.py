@@ -12,6 +12,7 @@ from pathlib import Path
 
 from nerfaug.capture.pool import MAX_TRAINING, SessionPool
 from nerfaug.capture.requests import CHECKPOINT_EVERY_S, RequestError
+from nerfaug.nerf.engine import Engine
 from nerfaug.service.errors import status_of
 from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
 
@@ -47,7 +48,7 @@ class SessionHub(SessionPool):
         if not self.engine_settings:
             return request
         try:
-            engine = request.engine.with_settings(self.engine_settings)
+            engine = Engine.read(request.engine).with_settings(self.engine_settings)
         except ValueError as error:  # e.g. proposal settings for an engine without proposal networks
             raise RequestError("engine", request.engine, f"refuses this service's engine settings: {error}") from None
         return replace(request, engine=engine).checked()
