@@ -125,7 +125,11 @@ class Engine:
 
 
 def _read_words(words: list[str]) -> Engine:
-    return Engine.read(words[0])
+    """`--engine NAME`: a preset (an earlier flat variant name is refused with the options it means)."""
+    name = words[0]
+    if VARIANT_SEPARATOR in name:
+        raise ValueError(f"{name!r}: give the preset and each setting as its own option: {Engine.read(name).options()}")
+    return Engine.of(name)
 
 
 ENGINE_OPTION = PrimitiveConstructorSpec(
