@@ -68,8 +68,8 @@ class ExperimentConfig:
     seed: int = 0
     """base seed."""
     engine: Annotated[Engine, ENGINE_OPTION] = Engine.of("cpu")
-    """the NeRF engine preset (the names `nerfaug train --engine` takes); its settings are changed with
-    --engine.GROUP.SETTING."""
+    """the NeRF engine preset (the names `nerfaug train --engine` takes); any of its settings is an option
+    too (`nerfaug engines` lists them)."""
     resolution: int = 100
     """image size of built-in scenes (or the width user data is downscaled to)."""
     steps: int = 2000
