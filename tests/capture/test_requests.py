@@ -25,6 +25,7 @@ from nerfaug.capture.requests import (
 )
 from nerfaug.capture.state import SessionError
 from nerfaug.hemisphere import sample_uniform_poses
+from nerfaug.nerf.engine import Engine
 from nerfaug.selection import SelectionConfig
 
 OLD_SESSION = Path(__file__).parent / "data" / "session_v1.json"
@@ -60,7 +61,7 @@ def test_session_settings_defaults_and_conversions():
     settings = SessionSettings(centre=[1, 2, 3], radius=2).checked()
     assert settings == SessionSettings(centre=(1.0, 2.0, 3.0), radius=2.0)
     # No pole and no --estimate-up: the dataset's format decides (+z, or the cameras' up where it records none).
-    assert (settings.engine, settings.seed, settings.downscale) == ("nerfacto-cpu", 0, 1)
+    assert (settings.engine.record(), settings.seed, settings.downscale) == ("nerfacto-cpu", 0, 1)
     assert (settings.up, settings.estimate_up) == (None, None)
 
 
@@ -183,7 +184,7 @@ def test_a_session_json_the_earlier_writer_made_reads_and_writes_back_with_the_e
     assert written["format"] == 1 and written["preset"] == "test"
     state = SessionState.from_dict(copy.deepcopy(written), OLD_SESSION)
     assert state.engine == "test" and state.engine_config == written["engine"]
-    assert state.settings().engine == "test"
+    assert state.settings().engine == Engine.of("test")
     assert state.to_dict() == as_format_2(written)
     assert json.loads(json.dumps(state.to_dict())) == as_format_2(written)
     assert list(state.to_dict()) == list(as_format_2(written))  # the historic key order
@@ -208,7 +209,7 @@ def test_the_settings_a_session_was_made_with():
     state = SessionState.from_dict(json.loads(OLD_SESSION.read_text()), OLD_SESSION)
     ours = state.settings()
     assert ours == SessionSettings(
-        engine="test", seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0), estimate_up=False
+        engine=Engine.of("test"), seed=7, radius=4.03, centre=None, up=(0.0, 0.0, 1.0), estimate_up=False
     )
     asked = SessionSettings(engine="cpu", seed=7, centre=(0, 0, 0), radius=None, estimate_up=True)
     assert asked.differences(ours, {"engine", "seed", "centre", "radius", "up", "estimate_up"}) == [

@@ -1,6 +1,7 @@
 """Any engine setting is an option of every command that trains, with one syntax:
-`--engine NAME --engine.GROUP.SETTING VALUE`. The command's engine becomes the variant that
-changes those settings (`paper+hidden_dim=48`), which sessions and runs record and fingerprint."""
+`--engine NAME --engine.GROUP.SETTING VALUE`. The command's engine is the preset with those settings
+changed, by their nested names, which sessions and runs record ({"preset": "paper", "field":
+{"hidden_dim": 48}}) and fingerprint."""
 
 import json
 
@@ -8,8 +9,10 @@ import pytest
 import torch
 
 from nerfaug.cameras import Cameras
+from nerfaug.capture import CaptureSession
 from nerfaug.cli import main
 from nerfaug.data import Views, write_blender_split
+from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.sweep import SweepOutcome
 from nerfaug.hemisphere import BLENDER_CAMERA_ANGLE_X, sample_uniform_poses
 from nerfaug.nerf.config import NerfConfig
@@ -30,16 +33,27 @@ def swept(monkeypatch):
 def test_run_takes_engine_settings_over_its_engine(swept, tmp_path):
     main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", "--engine", "cpu", *OVERRIDE])
     (config,) = swept
-    assert config.engine == "cpu+hidden_dim=48+batch_size=64"
-    engine = NerfConfig.preset(config.engine)
+    assert config.to_record()["engine"] == {
+        "preset": "cpu",
+        "field": {"hidden_dim": 48},
+        "optimiser": {"batch_size": 64},
+    }
+    engine = config.engine_config("lego")
     assert (engine.field.hidden_dim, engine.optimiser.batch_size) == (48, 64)
     record = config.fingerprinted()
     assert record["engine.hidden_dim"] == 48 and record["engine.plane_features"] == 8  # the rest: cpu's
+    # the fingerprint hashes the engine by the name earlier runs recorded it under: none moves
+    assert record["engine"] == "cpu+hidden_dim=48+batch_size=64"
 
 
-def test_run_without_engine_settings_keeps_the_engine_name_as_given(swept, tmp_path):
-    main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", "--engine", "cpu+lr=0.005"])
-    assert swept[0].engine == "cpu+lr=0.005"
+def test_the_engine_option_takes_a_preset_and_an_earlier_records_name_reads(swept, tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--out", str(tmp_path / "out"), "--preset", "tiny", "--no-report", "--engine", "cpu+lr=0.005"])
+    assert "--engine.optimiser.lr" in capsys.readouterr().err
+    assert ExperimentConfig(engine="cpu+lr=0.005").to_record()["engine"] == {
+        "preset": "cpu",
+        "optimiser": {"lr": 0.005},
+    }
 
 
 def test_study_applies_engine_settings_to_every_engine(monkeypatch, tmp_path):
@@ -62,8 +76,10 @@ def test_train_records_the_variant_trains_with_its_settings_and_logs(tmp_path):
     args = ["--steps", "20", "--device", "cpu", "--engine", "test", "--logger", "tensorboard", *OVERRIDE]
     main(["train", str(data), "--out", str(run), *args])
     state = json.loads((run / "session.json").read_text())
-    assert state["engine"] == "test+hidden_dim=48+batch_size=64"
+    assert state["engine"] == {"preset": "test", "field": {"hidden_dim": 48}, "optimiser": {"batch_size": 64}}
     assert NerfConfig.from_dict(state["engine_config"]) == NerfConfig.preset("test", hidden_dim=48, batch_size=64)
+    session = CaptureSession.open(run)
+    assert session.trainer.model.field.density_mlp[0].out_features == 48  # the field built is 48 wide
     assert len(list((run / "tensorboard").glob("events.out.tfevents.*"))) == 1  # --logger tensorboard
 
 
@@ -103,7 +119,9 @@ def test_train_checks_every_session_setting_before_reading_the_data(capsys, tmp_
 def test_serve_names_the_engines_its_settings_do_not_fit(capsys):
     from nerfaug.cli.serve import _check_engine_settings
 
-    _check_engine_settings({"plane_resolutions": (32,)})  # the K-planes engines read it; the hash-grid ones do not
+    _check_engine_settings(
+        {"field": {"planes": {"resolutions": (32,)}}}
+    )  # the K-planes engines read it; the hash-grid ones do not
     err = capsys.readouterr().err
     assert err.startswith("warning: a session asking for the engine paper, nerfacto-cpu, nerfacto-cpu-last-sample ")
     assert "--engine.field.planes.resolutions 32: not used" in err and "cpu," not in err.replace("nerfacto-cpu,", "")

@@ -328,14 +328,18 @@ def test_every_setting_nerfaug_engines_lists_is_accepted_wherever_it_stands(caps
         value = paper[flat]
         many = isinstance(value, tuple)
         words += ["--engine." + ".".join(path).replace("_", "-"), *(str(v) for v in (value if many else [value]))]
-        expected[flat] = value
+        *groups, leaf = path
+        group = expected
+        for step in groups:
+            group = group.setdefault(step, {})
+        group[leaf] = value  # nested, by the names the options give
         # After it, now and then, an option of the command, or a positional word (not after a list,
         # which takes every word up to the next option, as the parser always has).
         after = ["--steps", str(at)] if at % 3 == 0 else [f"WORD{at}"] if at % 3 == 1 and not many else []
         words, others = words + after, others + after
     settings, rest = split_engine_options(["DATA", *words])
     assert rest == ["DATA", *others]
-    assert engine_settings_given(settings, "nerfaug train") == expected
+    assert engine_settings_given(settings, "nerfaug train") == PRESETS["paper"].to_dict() == expected
 
 
 def test_split_engine_options_takes_one_value_or_a_list_and_leaves_the_rest_in_order():

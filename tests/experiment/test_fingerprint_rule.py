@@ -61,7 +61,7 @@ def test_settings_added_with_their_defaults_move_no_committed_fingerprint(monkey
     config = recorded.plan_config(plan, "nerfacto-cpu", None)
     # The committed check builds its configs with the added settings ...
     assert isinstance(config, LaterExperiment) and isinstance(config.selection, LaterSelection)
-    assert NerfConfig.preset(config.engine).flat()["ray_jitter"] is False
+    assert config.engine.config.flat()["ray_jitter"] is False
     # ... which the record holds once they differ from their defaults,
     changed = config.replace(warm_start=2, selection=dataclasses.replace(config.selection, dither_views=True))
     assert {"warm_start": 2, "selection.dither_views": True}.items() <= changed.fingerprinted().items()

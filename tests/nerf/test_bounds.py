@@ -5,7 +5,8 @@ import math
 
 import pytest
 
-from nerfaug.nerf.config import FLAT_NAMES, NerfConfig, parse_variant, variant_name
+from nerfaug.nerf.config import FLAT_NAMES, NerfConfig, parse_variant
+from nerfaug.nerf.engine import Engine
 from nerfaug.schema import RequestError
 
 
@@ -52,13 +53,17 @@ def test_a_variant_name_with_an_infinite_learning_rate_is_refused():
     ],
 )
 def test_a_setting_the_engine_does_not_read_is_refused(engine, setting):
-    with pytest.raises(RequestError, match="not used by this engine") as refused:
-        variant_name(engine, setting)
-    assert refused.value.argument == ".".join(FLAT_NAMES[next(iter(setting))])
+    path = FLAT_NAMES[next(iter(setting))]
+    nested = {path[0]: {path[1]: {path[2]: next(iter(setting.values()))}}}
+    with pytest.raises(RequestError, match="not used by this engine: its (field.encoding|sampler.kind) is") as refused:
+        Engine.of(engine, nested)
+    assert refused.value.argument == ".".join(path)
     with pytest.raises(ValueError, match="not used by this engine"):
         parse_variant(f"{engine}+{next(iter(setting))}={next(iter(setting.values()))}")
 
 
 def test_a_setting_read_once_its_part_is_chosen_is_taken():
-    assert variant_name("test", {"encoding": "hash", "hash_levels": 8}) == "test+encoding=hash+hash_levels=8"
+    both = Engine.of("test", {"field": {"encoding": "hash", "hash": {"levels": 8}}})
+    assert both.flat_name() == "test+encoding=hash+hash_levels=8"
+    assert both.record() == {"preset": "test", "field": {"encoding": "hash", "hash": {"levels": 8}}}
     assert NerfConfig.preset("test+encoding=hash+hash_levels=8").field.hash.levels == 8

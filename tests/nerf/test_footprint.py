@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from nerfaug.nerf.config import PRESETS, NerfConfig
+from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.footprint import check_engine_fits, estimated_bytes, machine_memory, parameters
 from nerfaug.nerf.trainer import seeded_model
 from nerfaug.schema import RequestError
@@ -24,7 +25,7 @@ def test_the_parameter_count_bounds_the_built_models_within_a_third(name):
 def test_every_preset_fits_a_machine_of_4_gib_by_estimate():
     for name, config in PRESETS.items():
         assert estimated_bytes(config) < 4 * GIB, name
-        check_engine_fits(name, limit=4 * GIB)
+        check_engine_fits(Engine.read(name), limit=4 * GIB)
 
 
 def test_the_estimate_grows_with_each_size_setting():
@@ -46,14 +47,14 @@ def test_the_estimate_grows_with_each_size_setting():
 )
 def test_a_run_too_large_names_the_setting(variant, path, value):
     with pytest.raises(RequestError, match="by estimate, more than this machine's") as refused:
-        check_engine_fits(variant)
+        check_engine_fits(Engine.read(variant))
     assert (refused.value.argument, refused.value.value) == (path, value)
 
 
 def test_a_preset_too_large_for_a_machine_names_the_engine():
     expected = "^engine 'paper': one run of this engine needs about 2.* more than this machine's 1.0 GiB"
     with pytest.raises(ValueError, match=expected):
-        check_engine_fits("paper", limit=GIB)
+        check_engine_fits(Engine.read("paper"), limit=GIB)
 
 
 def test_this_machines_memory_is_read():

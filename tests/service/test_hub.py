@@ -55,17 +55,20 @@ def test_a_session_linked_out_of_the_root_is_neither_listed_nor_served_nor_made(
 def test_the_services_engine_settings_change_the_engine_of_each_session_it_creates(tmp_path):
     from nerfaug.service.models import FromDataset
 
-    hub = SessionHub(tmp_path, engine_settings={"hidden_dim": 48})
+    hub = SessionHub(tmp_path, engine_settings={"field": {"hidden_dim": 48}})
     plain = SessionHub(tmp_path)
-    fitting_occupancy = SessionHub(tmp_path, engine_settings={"plane_resolutions": (32,)})  # K-planes engines only
+    fitting_occupancy = SessionHub(
+        tmp_path, engine_settings={"field": {"planes": {"resolutions": (32,)}}}
+    )  # K-planes engines only
     try:
         request = FromDataset(id="s", dataset="data", engine="cpu")
-        assert hub.settings_of(request).engine == "cpu+hidden_dim=48"
-        assert hub.settings_of(FromDataset(id="s", dataset="data")).engine == "nerfacto-cpu+hidden_dim=48"
+        assert hub.settings_of(request).engine.record() == {"preset": "cpu", "field": {"hidden_dim": 48}}
+        nerfacto = hub.settings_of(FromDataset(id="s", dataset="data")).engine
+        assert nerfacto.record() == {"preset": "nerfacto-cpu", "field": {"hidden_dim": 48}}
         assert plain.settings_of(request) is request
         status, message, _ = refusal(lambda: fitting_occupancy.settings_of(FromDataset(id="s", dataset="data")))
         assert status == 422 and message.startswith("engine: refuses this service's engine settings: field.planes")
-        assert fitting_occupancy.settings_of(request).engine == "cpu+plane_resolutions=32"
+        assert fitting_occupancy.settings_of(request).engine.config.field.planes.resolutions == (32,)
     finally:
         hub.shutdown()
         plain.shutdown()

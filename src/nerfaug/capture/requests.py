@@ -35,6 +35,7 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
+    PlainSerializer,
     PlainValidator,
     ValidationError,
     WithJsonSchema,
@@ -46,6 +47,7 @@ from nerfaug import camera_schema
 from nerfaug.camera_schema import MAX_IMAGE_SIDE
 from nerfaug.errors import DatasetError
 from nerfaug.nerf.config import PRESETS
+from nerfaug.nerf.engine import ENGINE_OPTION, Engine
 from nerfaug.nerf.footprint import check_engine_fits
 from nerfaug.registry import check_name
 from nerfaug.schema import SCHEMA, RequestError, Schema, adapter, problem_text, validated
@@ -334,18 +336,42 @@ def _direction(value: tuple[float, float, float]) -> tuple[float, float, float]:
 DEFAULT_SESSION_ENGINE = "nerfacto-cpu"
 
 
-def _engine_name(name: str) -> str:
-    try:  # an unknown preset or setting, a badly typed value, or a run too large here: refused by name
-        check_engine_fits(name)
+def _engine(value) -> Engine:
+    """The engine a request names (`Engine.read`: a preset, or a preset with settings changed),
+    once one run of it fits this machine's memory; a refusal names the setting by its path."""
+    try:
+        return check_engine_fits(Engine.read(value))
     except ValueError as error:  # the refusal names the field and value before the reason
-        raise ValueError(str(error).removeprefix(f"engine {name!r}: ")) from None
-    return name
+        named = value.preset if isinstance(value, Engine) else value.get("preset") if isinstance(value, dict) else value
+        raise ValueError(str(error).removeprefix(f"engine {named!r}: ")) from None
 
 
-# A preset's name, or a variant that changes some of its settings ("paper+hidden_dim=32", as
-# `--engine paper --engine.field.hidden-dim 32` names it).
+# The JSON form of an engine: a preset's name, or an object naming the preset and the settings
+# changed over it, by component as `NerfConfig` nests them.
+ENGINE_JSON = {
+    "anyOf": [
+        {"type": "string", "enum": list(PRESETS)},
+        {
+            "type": "object",
+            "properties": {
+                "preset": {"type": "string", "enum": list(PRESETS)},
+                **{group: {"type": "object"} for group in ("scene", "field", "sampler", "optimiser", "renderer")},
+            },
+            "required": ["preset"],
+            "additionalProperties": False,
+        },
+    ],
+    "examples": ["nerfacto-cpu", {"preset": "nerfacto-cpu", "field": {"hidden_dim": 48}}],
+}
+
+# A preset, with any of its settings changed (`--engine paper --engine.field.hidden-dim 32`; over
+# HTTP {"preset": "paper", "field": {"hidden_dim": 32}}): read, checked and resolved once.
 EngineName = Annotated[
-    str, AfterValidator(_engine_name), tyro.conf.arg(metavar="{" + ",".join(PRESETS) + "}|PRESET+SETTING=VALUE")
+    Engine,
+    PlainValidator(_engine),
+    PlainSerializer(Engine.record),
+    WithJsonSchema(ENGINE_JSON),
+    ENGINE_OPTION,
 ]
 
 
@@ -355,7 +381,10 @@ class SessionSettings(Schema):
 
     __pydantic_config__ = SCHEMA
 
-    engine: EngineName = DEFAULT_SESSION_ENGINE
+    # Its default shown in the service's schema as a request writes it.
+    engine: Annotated[EngineName, Field(json_schema_extra={"default": DEFAULT_SESSION_ENGINE})] = Engine.of(
+        DEFAULT_SESSION_ENGINE
+    )
     """the NeRF engine: nerfacto-cpu (nerfacto shrunk), cpu (K-planes), paper (a GPU's), test; any of its
     settings changed with --engine.GROUP.SETTING (listed below)."""
     seed: Seed = 0
@@ -424,7 +453,7 @@ def words(value) -> str:
 
 def _close(a, b) -> bool:
     """Two settings equal (numbers to within float noise)."""
-    if a is None or b is None or isinstance(a, (str, bool)) or isinstance(b, (str, bool)):
+    if a is None or b is None or isinstance(a, (str, bool, Engine)) or isinstance(b, (str, bool, Engine)):
         return a == b
     a, b = (tuple(x) if isinstance(x, (tuple, list)) else (x,) for x in (a, b))
     return len(a) == len(b) and all(math.isclose(float(x), float(y), rel_tol=1e-6, abs_tol=1e-9) for x, y in zip(a, b))

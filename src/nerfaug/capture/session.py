@@ -89,6 +89,7 @@ from nerfaug.data.world_frame import TILTED_POLE_DEGREES, estimate_hemisphere, p
 from nerfaug.evaluation import EvaluationResult
 from nerfaug.health import EmptyModel, EmptyModelWarning, Health, model_health
 from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.trainer import Trainer
 from nerfaug.progress import progress_bar
 from nerfaug.selection import select_views
@@ -206,7 +207,8 @@ class CaptureSession(SessionFolder):
             start = validated(SparseStart, start, "start")
             source, cameras, pool, record = sparse_start(source, views, hemisphere, start)
         origin = SourceInfo(data_dir=str(data_dir), split=split, format=source.format.name)
-        engine, config = (settings.engine, NerfConfig.preset(settings.engine)) if config is None else ("custom", config)
+        engine = Engine.read(settings.engine)  # an Engine as it is: resolved where the request entered
+        engine, config = (engine, engine.config) if config is None else ("custom", config)
         state = new_state(origin, source, cameras, settings, engine, config, background, hemisphere)
         if pool is not None:
             state.start, state.pool = record, POOL_FILE

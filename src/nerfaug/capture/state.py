@@ -3,8 +3,11 @@ validates and writes the file, every path in it checked to stay inside the run f
 session reports of itself (`SessionSummary`).
 
 The file's layout is format 2: format 1's keys, with the engine's name under "engine" (format 1:
-"preset") and its complete settings under "engine_config" (format 1: "engine"), so that the engine
-has one name on the command line, over HTTP and here. A format-1 file still loads: its two keys are
+"preset"; a preset's name, or {"preset": NAME, GROUP: {SETTING: VALUE}} for the settings changed
+over it, as over HTTP) and its complete settings under "engine_config" (format 1: "engine"), so
+that the engine and each setting have one name on the command line, over HTTP and here. An earlier
+file's flat variant name ("cpu+hidden_dim=48") is read as its settings and written nested. A
+format-1 file still loads: its two keys are
 renamed when it is read (`SessionState._format_1`, the one place that knows the old names), and it
 is written as format 2 at its next save. One optional key, `integrity` (`Integrity`): a file
 without it is checked from its next save on. A record's keys that a later version adds are kept
@@ -40,7 +43,8 @@ from nerfaug.data.formats import FORMATS, plainest_format
 from nerfaug.data.interface import DatasetSplit, Format
 from nerfaug.data.world_frame import Hemisphere, pole_is_estimated
 from nerfaug.errors import NerfaugError
-from nerfaug.nerf.config import NerfConfig, parse_variant
+from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.engine import Engine
 
 if TYPE_CHECKING:  # cameras bring torch; the state is read without it
     from nerfaug.cameras import Cameras
@@ -208,8 +212,9 @@ class SessionState(Stored):
     created: str = Field(default_factory=now)
     source: SourceInfo
     dataset: DatasetInfo
-    engine: str
-    """the engine's name (`SessionSettings.engine`), or "custom" for a `NerfConfig` given as is."""
+    engine: str | dict
+    """the engine (`Engine.record`: a preset's name, or {"preset": NAME, GROUP: {SETTING: VALUE}}
+    with the settings changed over it), or "custom" for a `NerfConfig` given as is."""
     engine_config: dict
     """the engine's complete settings (`NerfConfig.to_dict()`)."""
     seed: Seed
@@ -251,10 +256,14 @@ class SessionState(Stored):
 
     @field_validator("engine")
     @classmethod
-    def _known_engine(cls, value: str) -> str:
-        if value != CUSTOM_ENGINE:
-            parse_variant(value)  # an unknown engine or setting: refused, naming them
-        return value
+    def _known_engine(cls, value: str | dict) -> str | dict:
+        """The engine as this format records it: an unknown engine or setting refused, naming
+        them; an earlier file's flat variant name ("cpu+hidden_dim=48") read as its settings."""
+        return value if value == CUSTOM_ENGINE else Engine.read(value).record()
+
+    def named_engine(self) -> Engine | None:
+        """The engine the session trains with, or None for a `NerfConfig` given as is."""
+        return None if self.engine == CUSTOM_ENGINE else Engine.read(self.engine)
 
     @model_validator(mode="after")
     def _engine_is_its_settings(self):
@@ -266,7 +275,7 @@ class SessionState(Stored):
             recorded = NerfConfig.from_dict(self.engine_config)
         except ValueError as error:
             raise ValueError(f"engine_config: {error}") from None
-        named = NerfConfig.preset(self.engine)
+        named = Engine.read(self.engine).config
         if recorded != named:
             differ = ", ".join(sorted(k for k, v in recorded.flat().items() if named.flat()[k] != v)[:3])
             raise ValueError(
@@ -292,7 +301,7 @@ class SessionState(Stored):
         or `estimate_up`)."""
         h, estimated = self.hemisphere, self.hemisphere_estimated
         return SessionSettings(
-            engine=self.engine,
+            engine=self.named_engine() or self.engine,
             seed=self.seed,
             downscale=self.downscale,
             centre=None if estimated.get("centre", False) else h.centre,
@@ -375,11 +384,12 @@ class SessionSummary(BaseModel):
 
 def new_state(origin: SourceInfo, source, cameras, settings: SessionSettings, engine, config, background, hemisphere):
     """The `SessionState` of a new session on `source` (read from `origin`), whose cameras are
-    `cameras`, its engine `config` (named `engine`: the one place the name is resolved is `create`)."""
+    `cameras`, its engine `config` (`engine`: an `Engine`, resolved once where the request entered,
+    or "custom")."""
     return SessionState(
         source=origin,
         dataset=DatasetInfo.of(plainest_format(source, cameras)),
-        engine=engine,
+        engine=engine.record() if isinstance(engine, Engine) else engine,
         engine_config=config.to_dict(),
         seed=settings.seed,
         downscale=settings.downscale,

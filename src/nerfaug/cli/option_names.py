@@ -9,7 +9,7 @@ import contextlib
 import dataclasses
 
 from nerfaug.capture.requests import RequestError, words
-from nerfaug.nerf.config import variant_name
+from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.footprint import check_engine_fits
 
 
@@ -46,11 +46,11 @@ def engine_refusal(error: ValueError) -> str:
     return f"--engine: {error}"
 
 
-def engine_variant(engine: str, settings: dict) -> str:
-    """`variant_name(engine, settings)`: the engine with the --engine.GROUP.SETTING given changed,
-    one line naming the option (SystemExit) when a setting is refused or makes a run too large
-    for this machine's memory (`check_engine_fits`)."""
+def engine_with(engine, settings: dict) -> Engine:
+    """The engine `engine` (an `Engine`, or a name) with the --engine.GROUP.SETTING given
+    (`settings`, nested) changed, read and checked once; one line naming the option (SystemExit)
+    when a setting is refused or makes a run too large for this machine's memory."""
     try:
-        return check_engine_fits(variant_name(engine, settings))
+        return check_engine_fits(Engine.read(engine).with_settings(settings))
     except ValueError as error:
         raise SystemExit(engine_refusal(error)) from None

@@ -15,7 +15,7 @@ from typing import Annotated, ClassVar, Literal
 
 import tyro
 
-from nerfaug.cli.option_names import engine_variant
+from nerfaug.cli.option_names import engine_with
 from nerfaug.experiment.config import PROTOCOL_PRESETS, ExperimentConfig, PresetName
 from nerfaug.registry import Presets
 
@@ -53,9 +53,9 @@ class Run:
         force: move the runs already in --out aside (into OUT/superseded/, nothing is deleted) and
             redo every run; needed when OUT's sweep.json is missing or its settings differ.
         report: write report.md / report.html at the end.
-        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
-            these options, `nerfaug.cli.engine_options`): the runs' engine is then the variant
-            that changes them ("cpu+hidden_dim=32"), recorded and fingerprinted as such.
+        engine_settings: the --engine.GROUP.SETTING given (nested by component; read apart from
+            these options, `nerfaug.cli.engine_options`), changed over the engine's own: the runs'
+            engine, recorded with them and fingerprinted.
     """
 
     PRESETS: ClassVar[Presets[ExperimentConfig]] = PROTOCOL_PRESETS
@@ -83,7 +83,7 @@ class Run:
 
         protocol = self.protocol
         if given := self.engine_settings:
-            protocol = protocol.replace(engine=engine_variant(protocol.engine, given))
+            protocol = protocol.replace(engine=engine_with(protocol.engine, given))
         run_work.run(
             protocol,
             self.out,

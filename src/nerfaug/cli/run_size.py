@@ -72,8 +72,8 @@ RENDER_START_S = 2.0
 
 
 def costs(engine: str, device: str) -> Costs:
-    """The costs of `engine` (a preset, or a variant BASE+FIELD=VALUE: its base's) on `device`."""
-    base = engine.split("+")[0]
+    """The costs of `engine` (an `Engine` in words, "cpu --engine.field.hidden-dim 48": its preset's) on `device`."""
+    base = engine.split()[0]
     if device == "cuda":
         return GPU_COSTS.get(base, GPU_COSTS["paper"])
     return CPU_COSTS.get(base, CPU_COSTS["cpu"])
@@ -166,7 +166,7 @@ def size_line(
     to_do = sum(runs.values())
     done = f", {finished} already finished" if finished else ""
     side = config.resolution
-    names = sorted({engine for engine, _ in runs}) or [config.engine]  # said: `nerfaug train`'s default differs
+    names = sorted({engine for engine, _ in runs}) or [str(config.engine)]  # said: `nerfaug train`'s default differs
     engines = " and ".join(names)
     # The schedule, where it is not the paper's one round.
     rounds = ""

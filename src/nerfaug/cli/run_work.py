@@ -97,7 +97,7 @@ def runs_to_do(config: ExperimentConfig, root: Path, recorded=None) -> tuple[dic
     finished = 0
     for method in config.methods:
         done = sweep.finished_in_plan(config.replace(methods=(method,)), root, recorded)
-        kind = (config.engine, get_method(method).estimator)
+        kind = (str(config.engine), get_method(method).estimator)
         runs[kind] = runs.get(kind, 0) + len(config.scenes) * config.trials - done
         finished += done
     return runs, finished

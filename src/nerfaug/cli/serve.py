@@ -25,7 +25,8 @@ from nerfaug.capture.requests import (
 )
 from nerfaug.cli.option_names import as_options, engine_refusal
 from nerfaug.device_choice import Device
-from nerfaug.nerf.config import PRESETS, variant_name
+from nerfaug.nerf.config import PRESETS
+from nerfaug.nerf.engine import Engine
 
 TOKEN_ENV = "NERFAUG_TOKEN"
 
@@ -71,7 +72,7 @@ def serve(
         checkpoint_every: save a training session after this many seconds (and when a job ends).
         threads: torch threads for training.
         max_upload_mb: the largest image file accepted, in MB.
-        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
+        engine_settings: the --engine.GROUP.SETTING given (nested by component; read apart from
             these options), over those of the engine each new session asks for: its engine is then
             the variant that changes them.
     """
@@ -100,7 +101,7 @@ def _check_engine_settings(settings: dict) -> None:
     refusals = {}
     for engine in PRESETS:
         try:
-            variant_name(engine, settings)
+            Engine.of(engine, settings)
         except ValueError as error:
             refusals[engine] = engine_refusal(error)
     if len(refusals) == len(PRESETS):

@@ -17,7 +17,7 @@ def service_app(
     root: Path, device: str, token, checkpoint_every: float, threads: int, max_upload_mb: float, engine_settings=None
 ):
     """(uvicorn, the service's app over the sessions in `root`), torch set up for `threads`;
-    `engine_settings` (flat name -> value) change the engine of every session it creates."""
+    `engine_settings` (nested by component) change the engine of every session it creates."""
     try:  # the service's packages are optional (FastAPI, imported by the service's modules)
         import uvicorn
 

@@ -49,9 +49,8 @@ class Study(StudySpec):
         selection: options of the selection methods (every one is part of the runs' fingerprint;
             left at the preset's, they change nothing); a method's own settings (e.g.
             ours-authors') apply over them.
-        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
-            these options), over those of every engine the study runs: each engine is then the
-            variant that changes them.
+        engine_settings: the --engine.GROUP.SETTING given (nested by component; read apart from
+            these options), over those of every engine the study runs.
     """
 
     PRESETS: ClassVar[Presets[ExperimentConfig]] = STUDY_PRESETS

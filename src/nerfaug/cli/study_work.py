@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from nerfaug import runfiles
-from nerfaug.cli.option_names import engine_variant
+from nerfaug.cli.option_names import engine_with
 from nerfaug.cli.run_size import per_cell, size_line
 from nerfaug.cli.run_work import runs_to_do
 from nerfaug.device import device_kind
@@ -64,10 +64,11 @@ def study(
 
 
 def with_engine_settings(spec: StudySpec, settings: dict) -> StudySpec:
-    """`spec` whose engines (--engines, or the default ones for its device) are each the variant
-    with `settings` changed."""
+    """`spec` whose engines (--engines, or the default ones for its device) each have `settings`
+    changed, checked once here; a study names each engine's cell and folder by its flat name
+    (`Engine.flat_name`), as its tables always have."""
     engines = spec.engines or default_engines(device_kind(spec.device))[0]
-    return replace(spec, engines=tuple(engine_variant(engine, settings) for engine in engines))
+    return replace(spec, engines=tuple(engine_with(engine, settings).flat_name() for engine in engines))
 
 
 def method_records() -> dict[str, dict]:

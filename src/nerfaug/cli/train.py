@@ -30,9 +30,9 @@ from nerfaug.capture.requests import (
     replaced_by,
 )
 from nerfaug.capture.runfolder import SESSION_FILE
-from nerfaug.cli.option_names import as_options, checked, engine_variant
+from nerfaug.cli.option_names import as_options, checked, engine_with
 from nerfaug.device_choice import Device
-from nerfaug.nerf.config import parse_variant
+from nerfaug.nerf.engine import Engine
 from nerfaug.training_log import Logger, LoggerUnavailable, require
 
 RunFolder = Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RUN")]
@@ -59,25 +59,23 @@ def _check_training(steps: int, checkpoint_every: float, logger: Logger) -> None
 
 def with_engine_settings(settings: GivenSettings, given: dict | None, path: Path | None = None) -> GivenSettings:
     """`settings` whose engine is --engine (or else the engine of the session in `path`, or the
-    default) with the --engine.GROUP.SETTING `given` (flat name -> value) changed: one engine
-    name, a variant such as "paper+hidden_dim=32", which the session records."""
+    default) with the --engine.GROUP.SETTING `given` (nested: {"field": {"hidden_dim": 32}})
+    changed: one `Engine`, read and checked here, which the session records."""
     if not given:
-        return settings  # the engine's name is checked with the other settings (`checked`)
+        return settings  # the engine is checked with the other settings (`checked`)
     base = settings.engine or (_recorded_engine(path) if path is not None else None) or SessionSettings().engine
     # Before the session is opened: an unknown setting, or a value out of its bounds, is one line naming it.
-    return replace(settings, engine=engine_variant(base, given))
+    return replace(settings, engine=engine_with(base, given))
 
 
-def _recorded_engine(run: Path) -> str | None:
+def _recorded_engine(run: Path) -> Engine | None:
     """The engine a session in `run` records (format 2: "engine"; 1: "preset"), or None where there
     is none to read (opening the session then says what is wrong)."""
     try:
         data = json.loads(runfiles.read_text(run, SESSION_FILE))
-        name = data.get("engine" if data.get("format") == 2 else "preset")
-        parse_variant(name)  # an unknown one: not this command's to name
+        return Engine.read(data.get("engine" if data.get("format") == 2 else "preset"))
     except (OSError, ValueError, AttributeError):
         return None
-    return name
 
 
 def train(
@@ -127,9 +125,8 @@ def train(
         logger: "tensorboard": also write each loss as TensorBoard scalars into RUN/tensorboard
             while training (`tensorboard --logdir RUN/tensorboard`; needs `pip install
             'nerfaug[tensorboard]'`).
-        engine_settings: the --engine.GROUP.SETTING given (flat name -> value; read apart from
-            these options, `nerfaug.cli.engine_options`): the session's engine is then named by
-            the settings it changes ("nerfacto-cpu+hidden_dim=32").
+        engine_settings: the --engine.GROUP.SETTING given (nested by component; read apart from
+            these options, `nerfaug.cli.engine_options`), changed over the engine's own.
     """
     _check_training(steps, checkpoint_every, logger)
     settings = with_engine_settings(settings, engine_settings, path)

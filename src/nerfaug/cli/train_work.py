@@ -17,7 +17,7 @@ from nerfaug import runfiles
 from nerfaug.capture.dataset import HELD_OUT_KEY, default_split
 from nerfaug.capture.folder import SessionFolder
 from nerfaug.capture.lock import hold
-from nerfaug.capture.requests import SessionSettings, check_threads, words
+from nerfaug.capture.requests import SessionSettings, check_threads
 from nerfaug.capture.runfolder import SESSION_FILE, remove_unfinished
 from nerfaug.capture.session import CaptureSession
 from nerfaug.capture.state import DuplicateViews, TiltedPole, UnverifiedCheckpoint, pole_settings
@@ -28,7 +28,7 @@ from nerfaug.data.world_frame import TooFewCameras
 from nerfaug.device import configure_process, resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.health import EmptyModelWarning
-from nerfaug.nerf.config import FLAT_NAMES, parse_variant
+from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.trainer import TrainingDiverged
 from nerfaug.selection.selectors import DirectDraw, UniformFill
 from nerfaug.training_log import Logger, LoggerUnavailable, open_log
@@ -69,15 +69,14 @@ def train(
             raise ValueError(f"{run}: {diverged(error, session.state.engine)}; {kept}") from None
 
 
-def diverged(error: TrainingDiverged, engine: str) -> str:
-    """A divergence as the fault of the engine's settings, naming them as options: "training
-    diverged at step 1 (loss nan) with --engine test --engine.optimiser.field-lr 1e30: ..."."""
-    base, changes = parse_variant(engine)
-    named = " ".join(f"--engine.{'.'.join(FLAT_NAMES[f]).replace('_', '-')} {words(v)}" for f, v in changes.items())
-    fix = "change them" if changes else "choose another engine or --seed"
-    given = f"--engine {base} {named}".strip()
+def diverged(error: TrainingDiverged, engine) -> str:
+    """A divergence as the fault of the engine's settings (`engine`: a session's record of it),
+    naming them as options: "training diverged at step 1 (loss nan) with --engine test
+    --engine.optimiser.field-lr 1e30: ..."."""
+    named = Engine.read(engine)
+    fix = "change them" if named.settings else "choose another engine or --seed"
     return (
-        f"training diverged at step {error.step} (loss {error.loss}) with {given}: "
+        f"training diverged at step {error.step} (loss {error.loss}) with {named.options()}: "
         f"these settings do not train on this data ({fix}, e.g. a smaller learning rate)"
     )
 

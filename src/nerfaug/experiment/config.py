@@ -14,9 +14,9 @@ from typing import Annotated
 import tyro
 
 from nerfaug.device_choice import Device
-from nerfaug.experiment.fingerprints import defaults_of, engine_record, surviving
+from nerfaug.experiment.fingerprints import defaults_of, engine_name, engine_record, surviving
 from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
-from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
+from nerfaug.nerf.engine import ENGINE_OPTION, Engine
 from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
 
@@ -67,8 +67,9 @@ class ExperimentConfig:
     """trials per (scene, method); trial k uses seed + k."""
     seed: int = 0
     """base seed."""
-    engine: Annotated[str, tyro.conf.arg(metavar="{" + ",".join(ENGINE_PRESETS) + "}")] = "cpu"
-    """the NeRF engine preset (the names `nerfaug train --engine` takes), or a variant BASE+FIELD=VALUE."""
+    engine: Annotated[Engine, ENGINE_OPTION] = Engine.of("cpu")
+    """the NeRF engine preset (the names `nerfaug train --engine` takes); any of its settings is an option
+    too (`nerfaug engines` lists them)."""
     resolution: int = 100
     """image size of built-in scenes (or the width user data is downscaled to)."""
     steps: int = 2000
@@ -131,6 +132,15 @@ class ExperimentConfig:
     compile: Annotated[str | None, tyro.conf.arg(metavar="BACKEND", help_behavior_hint="(default: off)")] = None
     """a torch.compile backend for the engine's networks ("inductor", on a GPU); off: plain PyTorch."""
 
+    def __post_init__(self) -> None:
+        # An engine given by name, or read from an earlier record: read, and checked, once.
+        self.engine = Engine.read(self.engine)
+
+    def to_record(self) -> dict:
+        """Every option as plain data, as config.json and sweep.json record them; the engine as
+        `Engine.record` writes it (its preset's name, or its settings nested by component)."""
+        return dataclasses.asdict(self) | {"engine": self.engine.record()}
+
     def fingerprinted(self) -> dict:
         """The settings that change a run's numbers; results made under others are not mixed.
 
@@ -147,6 +157,7 @@ class ExperimentConfig:
 
         own = [f.name for f in dataclasses.fields(self) if f.name not in NOT_FINGERPRINTED | _FINGERPRINTED_AS]
         record = {name: getattr(self, name) for name in own} | {"device": device_kind(self.device)}
+        record["engine"] = engine_name(self.engine)
         # The reference engine (None) is what every run before trial batches ran.
         record["engine_version"] = BATCH_ENGINE_VERSION if self.batched() else None
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
@@ -154,7 +165,7 @@ class ExperimentConfig:
         if self.rounds == 1:  # one round: `round_every` changes nothing, so it splits no results
             record["round_every"] = defaults["round_every"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
-        return surviving(record, defaults) | engine_record(NerfConfig.preset(self.engine))
+        return surviving(record, defaults) | engine_record(self.engine.config)
 
     def batched(self) -> bool:
         """Whether runs train as trial batches: `batch` > 1, or 0 (auto) on a GPU with an engine
@@ -166,7 +177,7 @@ class ExperimentConfig:
             return False
         from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
 
-        return device_kind(self.device) == "cuda" and batch_support(NerfConfig.preset(self.engine)) is None
+        return device_kind(self.device) == "cuda" and batch_support(self.engine.config) is None
 
     def replace(self, **changes) -> ExperimentConfig:
         return dataclasses.replace(self, **changes)
@@ -176,7 +187,11 @@ class ExperimentConfig:
         engine preset's, with the field learning rate `field_lr` gives the scene's name, if any.
         The one place a run's field learning rate is decided."""
         name = Path(scene).name
-        return NerfConfig.preset(self.engine, **({"field_lr": self.field_lr[name]} if name in self.field_lr else {}))
+        if name not in self.field_lr:
+            return self.engine.config
+        config = self.engine.config
+        optimiser = dataclasses.replace(config.optimiser, field_lr=self.field_lr[name])
+        return dataclasses.replace(config, optimiser=optimiser)
 
 
 PROTOCOL_PRESETS: Presets[ExperimentConfig] = Presets(

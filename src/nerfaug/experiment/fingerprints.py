@@ -30,6 +30,7 @@ from types import MappingProxyType
 from typing import Any
 
 from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.engine import Engine
 
 _PROTOCOL_1 = (
     "seed engine resolution steps add_at_step n_new n_initial pool n_test render_samples field_lr threads_per_run "
@@ -100,6 +101,13 @@ def surviving(settings: dict[str, Any], defaults: dict[str, Any]) -> dict[str, A
         for name, value in stored.items()
         if name in VERSION_1 or name not in neutral or _text(value) != _text(neutral[name])
     }
+
+
+def engine_name(engine: Engine) -> str:
+    """The engine's name as every run recorded before settings were named by their nested names
+    hashed it ("nerfacto-cpu+hidden_dim=48", `Engine.flat_name`): a fingerprint's "engine", so that
+    no recorded run's fingerprint moves."""
+    return engine.flat_name()
 
 
 def engine_record(engine: NerfConfig) -> dict[str, Any]:

@@ -446,7 +446,7 @@ def finish_run(
     spec = get_method(key.method)
     write_config(
         folder,
-        asdict(config),
+        config.to_record(),
         asdict(run.engine),
         device=describe_device(trained.device),
         selection=selection.config.to_dict(),  # the sweep's settings, with the method's own over them

@@ -18,7 +18,7 @@ import platform
 import sys
 import time
 import traceback
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
@@ -34,7 +34,8 @@ from nerfaug.experiment.store import RunKey, check_sweep, read_result, run_finge
 from nerfaug.experiment.study_spec import PROCEDURAL_SCENES, StudySpec
 from nerfaug.experiment.sweep import check_config, run_sweep, scene_name, sweep_record
 from nerfaug.jsonio import read_json
-from nerfaug.nerf.config import PRESETS, NerfConfig
+from nerfaug.nerf.config import PRESETS
+from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.registry import check_names
 from nerfaug.selection.families import FAMILIES
 from nerfaug.statistics import min_attainable_paired_p
@@ -123,13 +124,13 @@ class StudyPlan:
     def record(self) -> dict:
         return {
             "engines": self.engines,
-            "engine_settings": {e: NerfConfig.preset(e).flat() for e in self.engines},
+            "engine_settings": {e: Engine.read(e).config.flat() for e in self.engines},
             "left_out": self.left_out,
             "scenes": self.scenes,
             "datasets": self.datasets,
             "methods": list(self.config.methods),
             "trials": self.config.trials,
-            "config": asdict(self.config),
+            "config": self.config.to_record(),
             "command": self.command,
             "machine": machine(),
             "written": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
@@ -397,7 +398,7 @@ def _engines(engines, device_type: str) -> tuple[list[str], dict[str, str]]:
         return default_engines(device_type)
     for engine in engines:
         try:
-            check_names(NerfConfig.preset(engine))
+            check_names(Engine.read(engine).config)
         except ValueError as error:
             raise SystemExit(f"--engines: {error}") from None
     return list(dict.fromkeys(engines)), {}

@@ -13,7 +13,7 @@ import platform
 import sys
 import time
 import traceback
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Literal
@@ -43,7 +43,7 @@ from nerfaug.experiment.store import (
     run_fingerprint,
 )
 from nerfaug.experiment.workers import worker_pool
-from nerfaug.nerf.config import NerfConfig, batch_support
+from nerfaug.nerf.config import batch_support
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
 from nerfaug.registry import did_you_mean
@@ -134,9 +134,9 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         option = "--selection." + error.argument.replace("_", "-")
         raise ValueError(f"{option} {error.value!r}: {error.problem}") from None
     try:
-        check_names(NerfConfig.preset(config.engine))
+        check_names(config.engine.config)
     except ValueError as error:
-        raise ValueError(f"--engine {config.engine!r}: {error}") from None
+        raise ValueError(f"--engine {config.engine}: {error}") from None
     _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
     for name in (
         "trials",
@@ -153,8 +153,8 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         _need(isinstance(value, int) and value >= 1, name, value, "must be an integer >= 1")
     _need(isinstance(config.batch, int) and config.batch >= 0, "batch", config.batch, "must be an integer >= 0")
     if config.batch > 1:
-        reason = batch_support(NerfConfig.preset(config.engine))
-        _need(reason is None, "batch", config.batch, f"engine {config.engine!r}: {reason}")
+        reason = batch_support(config.engine.config)
+        _need(reason is None, "batch", config.batch, f"engine {str(config.engine)!r}: {reason}")
     _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
     check_schedule(config)  # the steps, the rounds and the pool they draw on
     datasets: dict[str, dict] = {}
@@ -283,7 +283,7 @@ def sweep_record(config: ExperimentConfig, command: list[str] | None = None, dat
         "fingerprinted": fingerprinted,
         # Each method's own definition: a run's fingerprint combines the sweep's with its method's.
         "methods": {m: get_method(m).definition() for m in config.methods},
-        "config": asdict(config),
+        "config": config.to_record(),
         "command": command or sys.argv,
         "versions": versions(),
         "datasets": datasets or {},
@@ -337,7 +337,7 @@ def batch_size(config: ExperimentConfig, runs: int) -> int:
         return config.batch
     from nerfaug.nerf.batch import auto_batch_size  # torch, only where runs are batched
 
-    size, text = auto_batch_size(NerfConfig.preset(config.engine), config.device, runs)
+    size, text = auto_batch_size(config.engine.config, config.device, runs)
     console.print(text)
     return size
 

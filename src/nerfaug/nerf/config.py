@@ -529,23 +529,5 @@ def _variant_text(value: Any) -> str:
     return str(value).replace("e+", "e")  # 1e+30 as 1e30: "+" separates a variant's changes
 
 
-def variant_name(engine: str, settings: dict[str, Any]) -> str:
-    """The engine `engine` (a preset or a variant) with `settings` (flat name -> value) changed, as
-    one name: variant_name("paper", {"hidden_dim": 32}) == "paper+hidden_dim=32". Settings equal
-    to the preset's own are left out, so an engine named with its preset's values keeps its name.
-
-    Raises:
-        ValueError: an unknown setting (by name), or a value a component refuses.
-    """
-    base, changes = parse_variant(engine)
-    changes |= {flat: tuple(value) if isinstance(value, list) else value for flat, value in settings.items()}
-    preset = PRESETS[base]
-    _used(preset.with_settings(**changes), changes)  # an unknown, refused or unread setting: refused here
-    changes = {flat: value for flat, value in changes.items() if _get(preset, FLAT_NAMES[flat]) != value}
-    name = VARIANT_SEPARATOR.join([base, *(f"{k}={_variant_text(v)}" for k, v in changes.items())])
-    parse_variant(name)  # the name reads back, before any run is named by it
-    return name
-
-
 EnginePreset = PRESETS.name_type()
 """The preset names as a type, for a CLI (tyro) to offer and check."""

@@ -56,10 +56,18 @@ def _metavar(kind: Any) -> str:
 
 
 def _given_settings(form: Any) -> dict[str, Any]:
-    """flat name -> value of every setting given in `form` (an `EngineSettings`)."""
-    return {flat: value for flat, path in FLAT_NAMES.items() if (value := _get(form, path)) is not None}
+    """Every setting given in `form` (an `EngineSettings`), nested by component as `NerfConfig`
+    nests them: {"field": {"hidden_dim": 32}}."""
+    given: dict[str, Any] = {}
+    for path in FLAT_NAMES.values():
+        if (value := _get(form, path)) is not None:
+            group = given
+            for step in path[:-1]:
+                group = group.setdefault(step, {})
+            group[path[-1]] = value
+    return given
 
 
 EngineSettings = _given_form(NerfConfig)
 """The engine's settings as options of a command (`--engine.field.hidden-dim 32`), each None unless
-given; `EngineSettings().given()` are those given, by flat name, for `variant_name`."""
+given; `EngineSettings().given()` are those given, nested, for `Engine.with_settings`."""

@@ -18,7 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from nerfaug.nerf.bounds import get
-from nerfaug.nerf.config import FLAT_NAMES, PRESETS, NerfConfig, parse_variant
+from nerfaug.nerf.config import PRESETS
+from nerfaug.nerf.engine import Engine
 from nerfaug.schema import RequestError
 
 FLOAT = 4  # bytes of a float32
@@ -145,20 +146,18 @@ def _with(config: Any, path: tuple[str, ...], value: Any) -> Any:
     return replace(config, **{path[0]: _with(getattr(config, path[0]), path[1:], value)})
 
 
-def check_engine_fits(name: str, limit: int | None = None) -> str:
-    """`name` (a preset or a variant, "nerfacto-cpu+hidden_dim=32"), once one run of it fits this
-    machine's memory (`check_fits`); a refusal that no single setting is to blame for names the
-    engine: "engine 'paper': one run of this engine needs ...".
+def check_engine_fits(engine: Engine, limit: int | None = None) -> Engine:
+    """`engine`, once one run of it fits this machine's memory (`check_fits`); a refusal that no
+    single setting is to blame for names the engine: "engine 'paper': one run of this engine
+    needs ...".
 
     Raises:
         RequestError: naming the setting (its path) and its value; ValueError: naming the engine.
     """
-    base, changes = parse_variant(name)
-    config = NerfConfig.preset(name)
     try:
-        check_fits(config, {FLAT_NAMES[flat]: value for flat, value in changes.items()}, PRESETS[base], limit)
+        check_fits(engine.config, engine.changes(), PRESETS[engine.preset], limit)
     except RequestError as error:
         if error.argument:
             raise
-        raise ValueError(f"engine {name!r}: {error.problem}") from None
-    return name
+        raise ValueError(f"engine {engine.preset!r}: {error.problem}") from None
+    return engine

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from nerfaug.capture.pool import MAX_TRAINING, SessionPool
 from nerfaug.capture.requests import CHECKPOINT_EVERY_S, RequestError
-from nerfaug.nerf.config import variant_name
+from nerfaug.nerf.engine import Engine
 from nerfaug.service.errors import status_of
 from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
 
@@ -23,7 +23,7 @@ class SessionHub(SessionPool):
     Args:
         root, device, checkpoint_every, max_training: the pool's (`SessionPool`).
         workers, per_session, total: the request queues' bounds (`WorkQueues`).
-        engine_settings: engine settings (flat name -> value) changed in every session created
+        engine_settings: engine settings (nested by component) changed in every session created
             (`nerfaug serve --engine.field.hidden-dim 32`).
     """
 
@@ -48,7 +48,7 @@ class SessionHub(SessionPool):
         if not self.engine_settings:
             return request
         try:
-            engine = variant_name(request.engine, self.engine_settings)
+            engine = Engine.read(request.engine).with_settings(self.engine_settings)
         except ValueError as error:  # e.g. proposal settings for an engine without proposal networks
             raise RequestError("engine", request.engine, f"refuses this service's engine settings: {error}") from None
         return replace(request, engine=engine).checked()

@@ -141,7 +141,7 @@ def read_snapshot(run_dir: Path) -> Snapshot:
         run_dir=run_dir,
         step=state.step,
         views=len(frames),
-        engine=state.engine,
+        engine=str(state.named_engine() or state.engine),
         hemisphere=state.hemisphere,
         box_half_size=box,
         background=tuple(state.background),
