@@ -122,7 +122,7 @@ def test_every_protocol_field_is_fingerprinted_unless_declared_not_to_be():
     names = {f.name for f in dataclasses.fields(ExperimentConfig)}
     assert NOT_FINGERPRINTED <= names
     record = base.fingerprinted()
-    for name in sorted(names - NOT_FINGERPRINTED - {"device", "batch", "selection", "round_every"}):
+    for name in sorted(names - NOT_FINGERPRINTED - {"device", "batch", "selection", "round_every", "round_growth"}):
         value = OTHER_VALUES[name] if name in OTHER_VALUES else getattr(base, name) + 1
         changed = base.replace(**{name: value}).fingerprinted()
         assert fingerprint(changed) != fingerprint(record), name
@@ -130,6 +130,8 @@ def test_every_protocol_field_is_fingerprinted_unless_declared_not_to_be():
     assert base.replace(round_every=50).fingerprinted() == record
     rounds = base.replace(rounds=3)
     assert fingerprint(rounds.replace(round_every=50).fingerprinted()) != fingerprint(rounds.fingerprinted())
+    assert base.replace(round_growth="per-view").fingerprinted() == record  # so does their growth
+    assert fingerprint(rounds.replace(round_growth="per-view").fingerprinted()) != fingerprint(rounds.fingerprinted())
     # What a run saves beside its numbers, and which runs a sweep makes, are not.
     for name, value in (("hemisphere_map", False), ("view_uncertainty", False), ("save_renders", 0), ("trials", 9)):
         assert name in NOT_FINGERPRINTED

@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 
@@ -86,6 +86,9 @@ class ExperimentConfig:
     """rounds of selection, each adding n_new views chosen with the model trained so far (1: the paper's protocol)."""
     round_every: int = 100
     """training steps between two rounds (the first at add_at_step); unused with one round."""
+    round_growth: Literal["fixed", "per-view"] = "fixed"
+    """fixed: round_every steps between rounds; per-view: round_every steps per view in the model
+    (training between rounds grows with the views, as FisherRF's schedule); unused with one round."""
     pool: int = 300
     """candidate views of a built-in scene, uniform over the hemisphere."""
     # The paper evaluates all 200 test views. A captured set without a test split keeps n_test of
@@ -164,6 +167,7 @@ class ExperimentConfig:
         defaults = defaults_of(type(self)) | {"engine_version": None}
         if self.rounds == 1:  # one round: `round_every` changes nothing, so it splits no results
             record["round_every"] = defaults["round_every"]
+            record["round_growth"] = defaults["round_growth"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
         return surviving(record, defaults) | engine_record(self.engine.config)
 

@@ -375,6 +375,7 @@ def make_plan(spec: StudySpec, command: list[str], progress: bool = True) -> Stu
         batch=spec.batch,
         rounds=spec.rounds,
         round_every=spec.round_every,
+        round_growth=spec.round_growth,
         **spec.schedule_changes(),
     )
     scenes = tuple(spec.scenes) if spec.scenes else PROCEDURAL_SCENES

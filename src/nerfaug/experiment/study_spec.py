@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 
@@ -76,6 +76,9 @@ class StudySpec:
         rounds: rounds of selection, each chosen with the model trained on the views so far (1:
             the paper's protocol, one round).
         round_every: training steps between two rounds; unused with one round.
+        round_growth: fixed (round_every steps between rounds) or per-view (round_every steps per
+            view in the model: training between rounds grows with the views, as FisherRF's
+            schedule); unused with one round.
         device: where the runs train, select and evaluate.
         preset: the study's protocol, which --steps and --selection.* change: study (the paper's
             at 100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
@@ -98,6 +101,7 @@ class StudySpec:
     add_at_step: PresetInt = None
     rounds: int = 1
     round_every: int = STUDY_PRESETS[DEFAULT_PRESET].round_every
+    round_growth: Literal["fixed", "per-view"] = "fixed"
     device: Device = "auto"
     preset: StudyPreset = DEFAULT_PRESET
     table: Table = None
@@ -128,6 +132,7 @@ class StudySpec:
             ("--add-at-step", self.add_at_step),
             ("--rounds", self.rounds if self.rounds != 1 else None),
             ("--round-every", self.round_every if self.rounds != 1 else None),
+            ("--round-growth", self.round_growth if self.rounds != 1 and self.round_growth != "fixed" else None),
         ):
             if value is not None:
                 command += [flag, str(value)]
