@@ -116,3 +116,19 @@ def test_the_engine_version_names_the_arithmetic(monkeypatch):
     monkeypatch.setattr(HashEncoding, "default_kernel", "torch")
     assert study.engine_version() is None
     assert "engine_version" not in study.fingerprinted()
+
+
+def test_without_a_c_compiler_runs_take_the_reference_path_and_record_it(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # no loop built before
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    monkeypatch.setattr(HashEncoding, "default_kernel", "auto")
+    hash_cpu._library.cache_clear()
+    try:
+        assert not hash_cpu.available()
+        reference, fused = pair(SIZES[1])
+        x = points(64)
+        assert not fused.cpu_fused(x)
+        assert torch.equal(fused(x), reference(x))  # the PyTorch path, bit for bit
+        assert ExperimentConfig(device="cpu", engine="nerfacto-cpu").engine_version() is None
+    finally:
+        hash_cpu._library.cache_clear()  # the next call builds with the real compiler
