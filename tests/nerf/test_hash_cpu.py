@@ -76,6 +76,15 @@ def test_points_outside_the_cube_encode_as_the_nearest_points_on_it():
     torch.testing.assert_close(got_grad, want_grad, rtol=1e-4, atol=1e-5 * want_grad.abs().max().item())
 
 
+def test_a_nan_point_reads_no_memory_outside_the_table():
+    """A diverging run may hand the encoding NaN positions: the loop reads the origin's cell (the
+    trainer then reports the divergence) instead of a row outside the table."""
+    _, fused = pair(SIZES[0])
+    x = torch.tensor([[float("nan"), 0.0, 0.0], [0.0, 0.0, 0.0], [float("nan")] * 3])
+    out = fused(x)
+    assert torch.equal(out[0], out[1]) and torch.equal(out[2], out[1])
+
+
 def test_the_loop_is_deterministic_and_takes_no_points():
     _, fused = pair(SIZES[1])
     x = points(64)

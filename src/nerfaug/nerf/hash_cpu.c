@@ -26,9 +26,10 @@ static inline void cell(const float *p, int32_t res, const int32_t *factor, int 
     float w[3][2];
     for (int a = 0; a < 3; a++) {
         /* Points are clamped into the unit cube: a point outside reads the nearest face's cell
-         * (the model clamps before encoding; the clamp keeps every row inside the table). */
+         * (the model clamps before encoding; the clamp keeps every row inside the table). A NaN
+         * (a diverging run's sample) reads the origin's cell rather than memory outside the table. */
         float x = p[a];
-        x = x < 0.0f ? 0.0f : (x > 1.0f ? 1.0f : x);
+        x = !(x >= 0.0f) ? 0.0f : (x > 1.0f ? 1.0f : x);
         float scaled = (float)res * x;
         /* scaled >= 0, so truncation is the floor (floorf is a library call without SSE4.1). */
         float floor_ = (float)(int32_t)scaled;
