@@ -6,6 +6,7 @@ import pytest
 from nerfaug.experiment.config import ExperimentConfig
 from nerfaug.experiment.store import RunKey
 from nerfaug.experiment.sweep import check_config, plan_runs, plan_units
+from nerfaug.nerf.encoding import HashEncoding
 
 
 def test_batches_hold_runs_of_one_engine_configuration_in_plan_order():
@@ -22,8 +23,9 @@ def test_batches_hold_runs_of_one_engine_configuration_in_plan_order():
     assert plan_units(todo, alone, 4) == [[key] for key in todo]
 
 
-def test_the_batched_engine_is_its_own_engine_version():
-    cpu = ExperimentConfig(engine="nerfacto-cpu")
+def test_the_batched_engine_is_its_own_engine_version(monkeypatch):
+    monkeypatch.setattr(HashEncoding, "default_kernel", "torch")  # the reference engine (NERFAUG_HASH_KERNEL=torch)
+    cpu = ExperimentConfig(engine="nerfacto-cpu", device="cpu")
     assert not cpu.batched() and "engine_version" not in cpu.fingerprinted()  # earlier results stay valid
     batched = cpu.replace(batch=4)
     assert batched.batched() and batched.fingerprinted()["engine_version"] == "batched-1"

@@ -15,7 +15,13 @@ import tyro
 
 from nerfaug.device_choice import Device
 from nerfaug.experiment.fingerprints import defaults_of, engine_name, engine_record, surviving
-from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
+from nerfaug.nerf.config import (
+    BATCH_ENGINE_VERSION,
+    HASH_CPU_ENGINE_VERSION,
+    NerfConfig,
+    batch_support,
+    uses_hash_grid,
+)
 from nerfaug.nerf.engine import ENGINE_OPTION, Engine
 from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
@@ -161,8 +167,7 @@ class ExperimentConfig:
         own = [f.name for f in dataclasses.fields(self) if f.name not in NOT_FINGERPRINTED | _FINGERPRINTED_AS]
         record = {name: getattr(self, name) for name in own} | {"device": device_kind(self.device)}
         record["engine"] = engine_name(self.engine)
-        # The reference engine (None) is what every run before trial batches ran.
-        record["engine_version"] = BATCH_ENGINE_VERSION if self.batched() else None
+        record["engine_version"] = self.engine_version()
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         defaults = defaults_of(type(self)) | {"engine_version": None}
         if self.rounds == 1:  # one round: `round_every` changes nothing, so it splits no results
@@ -170,6 +175,22 @@ class ExperimentConfig:
             record["round_growth"] = defaults["round_growth"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
         return surviving(record, defaults) | engine_record(self.engine.config)
+
+    def engine_version(self) -> str | None:
+        """The arithmetic this config's runs train with, recorded with each run and fingerprinted:
+        trial batches' (`BATCH_ENGINE_VERSION`); a run alone on the CPU whose hash grids run the
+        fused C loop (`HASH_CPU_ENGINE_VERSION`: where a C compiler built it and
+        `NERFAUG_HASH_KERNEL` is not "torch", `nerfaug.nerf.encoding.HashEncoding.default_kernel`);
+        or None, the reference engine every run before either ran."""
+        if self.batched():
+            return BATCH_ENGINE_VERSION
+        from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
+
+        if device_kind(self.device) != "cpu" or not uses_hash_grid(self.engine.config):
+            return None
+        from nerfaug.nerf.encoding import HashEncoding  # torch, likewise
+
+        return HASH_CPU_ENGINE_VERSION if HashEncoding.cpu_loop_selected() else None
 
     def batched(self) -> bool:
         """Whether runs train as trial batches: `batch` > 1, or 0 (auto) on a GPU with an engine

@@ -472,6 +472,8 @@ def finish_run(
     }
     if batch is not None:
         result["engine_version"], result["batch_size"] = batch["engine_version"], batch["size"]
+    elif config.engine_version() is not None:  # the reference engine's runs record none
+        result["engine_version"] = config.engine_version()
     if rounds is not None:
         result.update(rounds.record(evaluation.mean, len(data.test), config.steps))
     write_result(folder, result)

@@ -460,6 +460,17 @@ run alone (`Trainer`, the reference engine) rounds otherwise, so results of the 
 mixed in one cell of a study."""
 
 
+HASH_CPU_ENGINE_VERSION = "hash-cpu-1"
+"""The arithmetic of a run alone on the CPU whose hash grids (the field's, the proposal networks')
+run `nerfaug.nerf.hash_cpu`'s fused C loop: its sums in another order than the PyTorch path's, so
+its runs are never mixed with the reference engine's in one cell of a study."""
+
+
+def uses_hash_grid(config: NerfConfig) -> bool:
+    """Whether engine `config` has a hash grid (its field's encoding, or proposal networks)."""
+    return config.field.encoding == "hash" or config.sampler.kind == "proposal"
+
+
 def batch_support(config: NerfConfig) -> str | None:
     """Why engine `config` cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
     if config.sampler.kind != "proposal":
