@@ -12,12 +12,17 @@ from pathlib import Path
 from typing import Annotated
 
 import tyro
+from annotated_types import MinLen
+from pydantic import model_validator
 
 from nerfaug.device_choice import Device
 from nerfaug.experiment.fingerprints import defaults_of, engine_record, surviving
+from nerfaug.experiment.schedule import check_schedule
+from nerfaug.nerf.bounds import Count, NonNegativeInt, Positive, Seed, Steps
 from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
 from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
 from nerfaug.registry import Presets
+from nerfaug.schema import SCHEMA, Settings
 from nerfaug.selection.config import SelectionConfig
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
@@ -43,9 +48,12 @@ NOT_FINGERPRINTED = frozenset({"scenes", "methods", "trials", "save_renders", "v
 # the selection options and the engine by each of their settings.
 _FINGERPRINTED_AS = frozenset({"device", "batch", "selection"})
 
+# Names given one or more times: a sweep needs at least one scene and one method.
+Names = Annotated[tuple[str, ...], MinLen(1)]
+
 
 @dataclass
-class ExperimentConfig:
+class ExperimentConfig(Settings):
     """The protocol of the paper's Sec. IV, made configurable.
 
     Per (scene, method, trial): train on the fixed initial views (the same for every trial of a
@@ -55,56 +63,64 @@ class ExperimentConfig:
     seed (initialisation, ray sampling, and the selector's randomness).
 
     Its fields are the options of `nerfaug run` (tyro reads each field's docstring as its help,
-    one line each), which start from a preset (`PROTOCOL_PRESETS`).
+    one line each), which start from a preset (`PROTOCOL_PRESETS`). Each is checked when the
+    config is made (`nerfaug.schema.Settings`): its bounds in its annotation, the rules between
+    fields in `_rules`; a refusal is one line naming the option ("--n-initial 0: must be >= 1").
+    What needs the disk or a registry that loads torch (the scenes, the methods' names, the
+    engine's parts) is checked before a sweep starts (`nerfaug.experiment.sweep.check_config`).
     """
 
-    scenes: Annotated[tuple[str, ...], tyro.conf.arg(metavar="SCENE [SCENE ...]")] = ("lego",)
+    __pydantic_config__ = SCHEMA
+
+    scenes: Annotated[Names, tyro.conf.arg(metavar="SCENE [SCENE ...]")] = ("lego",)
     """built-in scene names (rendered with Blender) or dataset folders (Blender format, or captured
     sets: nerfstudio, LLFF, IDR/DTU)."""
-    methods: Annotated[tuple[str, ...], tyro.conf.arg(metavar="METHOD [METHOD ...]")] = MAIN_COMPARISON
+    methods: Annotated[Names, tyro.conf.arg(metavar="METHOD [METHOD ...]")] = MAIN_COMPARISON
     """selection methods (see `nerfaug methods`); the first is compared with the others."""
-    trials: int = 3
+    trials: Count = 3
     """trials per (scene, method); trial k uses seed + k."""
-    seed: int = 0
+    seed: Seed = 0
     """base seed."""
     engine: Annotated[str, tyro.conf.arg(metavar="{" + ",".join(ENGINE_PRESETS) + "}")] = "cpu"
     """the NeRF engine preset (the names `nerfaug train --engine` takes), or a variant BASE+FIELD=VALUE."""
-    resolution: int = 100
+    resolution: Count = 100
     """image size of built-in scenes (or the width user data is downscaled to)."""
-    steps: int = 2000
+    steps: Count = 2000
     """training steps per run."""
-    add_at_step: int = 200
+    add_at_step: Steps = 200
     """the training step at which each method adds its views."""
-    n_new: int = 6
+    n_new: Count = 6
     """views each method adds."""
-    n_initial: int = 6
+    n_initial: Count = 6
     """initial training views, all on one half of the hemisphere."""
     # The field's active-learning protocol (FisherRF's: few initial views, one added a round,
     # training between rounds) is e.g. --n-initial 4 --n-new 1 --rounds 8 (`experiment.schedule`).
-    rounds: int = 1
+    rounds: Count = 1
     """rounds of selection, each adding n_new views chosen with the model trained so far (1: the paper's protocol)."""
-    round_every: int = 100
+    round_every: Count = 100
     """training steps between two rounds (the first at add_at_step); unused with one round."""
-    pool: int = 300
+    pool: Count = 300
     """candidate views of a built-in scene, uniform over the hemisphere."""
     # The paper evaluates all 200 test views. A captured set without a test split keeps n_test of
     # its views, at most a quarter, spread over all directions, apart for testing.
-    n_test: int = 50
+    n_test: Count = 50
     """test views evaluated, spread evenly over the test split (all of it when it holds no more)."""
     # One layout: a rendered scene's `initial` split as rendered. Each further layout turns the
     # half the initial views lie on by a `layouts`-th of the way round.
-    layouts: int = 1
+    layouts: Count = 1
     """initial layouts: trial k starts from layout k mod LAYOUTS, each turned 1/LAYOUTS of the way round."""
-    render_samples: int = 16
+    render_samples: Count = 16
     """Cycles samples per pixel of built-in scenes."""
-    field_lr: Annotated[dict[str, float], tyro.conf.Suppress] = field(default_factory=lambda: dict(LOW_FIELD_LR_SCENES))
+    field_lr: Annotated[dict[str, Positive], tyro.conf.Suppress] = field(
+        default_factory=lambda: dict(LOW_FIELD_LR_SCENES)
+    )
     """Field learning rate by scene name, over the engine preset's `field_lr` (the paper: 0.002 for
     chair and materials); `engine_config` applies it."""
     # One thread per run, with one run per core, measured faster and far steadier than two threads
     # per run on a 2-core machine: torch's second thread stalls whenever anything else wants a core.
-    threads_per_run: int = 1
+    threads_per_run: Count = 1
     """torch threads in each run (fixed, so that local and Ray runs compute identically)."""
-    save_renders: int = 3
+    save_renders: NonNegativeInt = 3
     """test renders saved per run (for the report's figures)."""
     # Off in the study, whose page does not show them: they cost several seconds of a run (FisherRF
     # per pixel).
@@ -122,7 +138,7 @@ class ExperimentConfig:
     # Trial batches train K runs in lockstep, one kernel serving all (`nerfaug.nerf.batch`): on a
     # GPU many times the runs a second; on a CPU about 1.1x (BENCHMARKS.md, "Trial batches"). Their
     # engine rounds otherwise than a run alone, so it is fingerprinted as its own engine version.
-    batch: int = 0
+    batch: NonNegativeInt = 0
     """runs trained together as one trial batch; 1: each run alone; 0: auto (1 on a CPU, more on a GPU)."""
 
     selection: SelectionConfig = field(default_factory=SelectionConfig)
@@ -130,6 +146,20 @@ class ExperimentConfig:
     # Fingerprinted when set (set apart from the default, off): compiled kernels round differently.
     compile: Annotated[str | None, tyro.conf.arg(metavar="BACKEND", help_behavior_hint="(default: off)")] = None
     """a torch.compile backend for the engine's networks ("inductor", on a GPU); off: plain PyTorch."""
+
+    @model_validator(mode="after")
+    def _rules(self) -> ExperimentConfig:
+        """The rules between settings (each setting's own bounds are in its annotation)."""
+        if len(set(self.methods)) != len(self.methods):
+            raise ValueError(f"--methods {self.methods!r}: a method is listed twice")
+        try:
+            engine = NerfConfig.preset(self.engine)  # a preset, or a variant of one (its settings checked)
+        except ValueError as error:
+            raise ValueError(f"--engine {self.engine!r}: {error}") from None
+        if self.batch > 1 and (reason := batch_support(engine)) is not None:
+            raise ValueError(f"--batch {self.batch}: engine {self.engine!r}: {reason}")
+        check_schedule(self)  # the steps, the rounds and the pool they draw on
+        return self
 
     def fingerprinted(self) -> dict:
         """The settings that change a run's numbers; results made under others are not mixed.
