@@ -188,16 +188,23 @@ class Settings:
             _VALIDATING.reset(token)
 
 
-def built_then_checked(build: Callable[[], T]) -> T:
-    """`build()` (a command-line parser's, which builds the `Settings` of the options given) with
-    no `Settings` checked while it builds them, then each one it returns checked: a refusal is then
-    the command's one line, not the parser's box (tyro draws its own around an error raised while
-    it builds its root class)."""
+def unchecked(build: Callable[[], T]) -> T:
+    """`build()`, with no `Settings` checked while it makes them: for presets made when a module
+    is imported (`--help` then builds no validator; each is checked when it is chosen, and a test
+    checks them all)."""
     token = _VALIDATING.set(True)
     try:
-        built = build()
+        return build()
     finally:
         _VALIDATING.reset(token)
+
+
+def built_then_checked(build: Callable[[], T]) -> T:
+    """`build()` (a command-line parser's, which makes the `Settings` of the options given) with
+    no `Settings` checked while it makes them, then each one it returns checked: a refusal is then
+    the command's one line, not the parser's box (tyro draws its own around an error raised while
+    it makes its root class), and `--help`, which ends inside `build`, builds no validator."""
+    built = unchecked(build)
     _check_inside(built)
     return built
 

@@ -22,7 +22,7 @@ from nerfaug.nerf.bounds import Count, NonNegativeInt, Positive, Seed, Steps
 from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
 from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
 from nerfaug.registry import Presets
-from nerfaug.schema import SCHEMA, Settings
+from nerfaug.schema import SCHEMA, Settings, unchecked
 from nerfaug.selection.config import SelectionConfig
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
@@ -209,39 +209,43 @@ class ExperimentConfig(Settings):
         return NerfConfig.preset(self.engine, **({"field_lr": self.field_lr[name]} if name in self.field_lr else {}))
 
 
+# Made unchecked, so that `--help` builds no validator: each preset is checked when it is chosen
+# (`Presets.choose` makes a copy), and tests/experiment/test_settings.py checks every one.
 PROTOCOL_PRESETS: Presets[ExperimentConfig] = Presets(
     "preset",
-    {
-        "quick": ExperimentConfig(trials=5, steps=800, pool=100, n_test=20),
-        "paper": ExperimentConfig(
-            scenes=("lego", "chair", "materials"),
-            trials=10,
-            engine="paper",
-            resolution=800,
-            steps=10_000,
-            pool=500,
-            n_test=200,
-            render_samples=64,
-        ),
-        "ablation": ExperimentConfig(
-            methods=tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
-            trials=5,
-        ),
-        "tiny": ExperimentConfig(
-            methods=("ours", "uniform"),
-            trials=2,
-            engine="test",
-            resolution=24,
-            steps=60,
-            add_at_step=20,
-            n_new=2,
-            n_initial=3,
-            pool=12,
-            n_test=3,
-            render_samples=4,
-            save_renders=1,
-        ),
-    },
+    unchecked(
+        lambda: {
+            "quick": ExperimentConfig(trials=5, steps=800, pool=100, n_test=20),
+            "paper": ExperimentConfig(
+                scenes=("lego", "chair", "materials"),
+                trials=10,
+                engine="paper",
+                resolution=800,
+                steps=10_000,
+                pool=500,
+                n_test=200,
+                render_samples=64,
+            ),
+            "ablation": ExperimentConfig(
+                methods=tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
+                trials=5,
+            ),
+            "tiny": ExperimentConfig(
+                methods=("ours", "uniform"),
+                trials=2,
+                engine="test",
+                resolution=24,
+                steps=60,
+                add_at_step=20,
+                n_new=2,
+                n_initial=3,
+                pool=12,
+                n_test=3,
+                render_samples=4,
+                save_renders=1,
+            ),
+        }
+    ),
 )
 """The protocols of `nerfaug run --preset`:
 
@@ -261,23 +265,25 @@ PresetName = PROTOCOL_PRESETS.name_type()
 
 STUDY_PRESETS: Presets[ExperimentConfig] = Presets(
     "study preset",
-    {
-        # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page
-        # does not show them, and they cost seconds per run.
-        "study": ExperimentConfig(view_uncertainty=False),
-        "tiny": PROTOCOL_PRESETS.choose("tiny", view_uncertainty=False),
-        # The GPU study (docs/study-plan.md, 2026-11-27): the paper engine at the paper's scale
-        # (400 px, 10k steps, 200 test views); the page shows no uncertainty images.
-        "gpu": ExperimentConfig(
-            engine="paper",
-            resolution=400,
-            steps=10_000,
-            n_test=200,
-            render_samples=32,
-            view_uncertainty=False,
-            hemisphere_map=False,
-        ),
-    },
+    unchecked(
+        lambda: {
+            # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page
+            # does not show them, and they cost seconds per run.
+            "study": ExperimentConfig(view_uncertainty=False),
+            "tiny": PROTOCOL_PRESETS.choose("tiny", view_uncertainty=False),
+            # The GPU study (docs/study-plan.md, 2026-11-27): the paper engine at the paper's scale
+            # (400 px, 10k steps, 200 test views); the page shows no uncertainty images.
+            "gpu": ExperimentConfig(
+                engine="paper",
+                resolution=400,
+                steps=10_000,
+                n_test=200,
+                render_samples=32,
+                view_uncertainty=False,
+                hemisphere_map=False,
+            ),
+        }
+    ),
 )
 """The protocols a study runs every engine under (`nerfaug study --preset`): "study" is the
 paper's protocol at 100x100 (6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50
