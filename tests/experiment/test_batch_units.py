@@ -10,7 +10,9 @@ from nerfaug.nerf.encoding import HashEncoding
 
 
 def test_batches_hold_runs_of_one_engine_configuration_in_plan_order():
-    config = ExperimentConfig(scenes=("lego", "chair"), methods=("ours", "uniform"), trials=3, batch=4)
+    config = ExperimentConfig(
+        scenes=("lego", "chair"), methods=("ours", "uniform"), trials=3, engine="nerfacto-cpu", batch=4
+    )
     todo = plan_runs(config)
     units = plan_units(todo, config, 4)
     # chair trains with another field learning rate (the paper's): never in a batch with lego.

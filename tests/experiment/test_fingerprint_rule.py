@@ -109,7 +109,7 @@ def test_every_version_1_setting_is_hashed_at_every_value():
     assert VERSION_1 <= record.keys()
     assert record.keys() - VERSION_1 == set()  # compile, layouts, engine_version: at their neutral values
     assert {"compile", "layouts", "engine_version"} <= ExperimentConfig(
-        device="cpu", compile="inductor", layouts=2, batch=2
+        device="cpu", engine="nerfacto-cpu", compile="inductor", layouts=2, batch=2  # an engine that batches
     ).fingerprinted().keys()
 
 

@@ -99,8 +99,9 @@ def test_one_round_keeps_the_record_and_fingerprint_it_always_had(toy_data, tmp_
     [
         ({"rounds": 7, "round_every": 1}, "--rounds 7: 7 rounds of --n-new 2 add 14 views, more than the 12"),
         ({"rounds": 4, "round_every": 10}, "--rounds 4: the last round would come at step 40"),
-        ({"rounds": 0}, "--rounds 0: must be an integer >= 1"),
-        ({"rounds": 2, "round_every": 0}, "--round-every 0: must be an integer >= 1"),
+        ({"rounds": 0}, "--rounds 0: must be >= 1"),
+        ({"rounds": 2, "round_every": 0}, "--round-every 0: must be >= 1"),
+        ({"rounds": 2.0}, "--rounds 2.0: Input should be a valid integer"),
         ({"rounds": 2, "batch": 2, "engine": "nerfacto-cpu"}, "--rounds 2: trial batches (--batch 2)"),
     ],
 )

@@ -12,9 +12,13 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
+from annotated_types import MinLen
+from pydantic import PlainValidator, model_validator
 
 from nerfaug.device_choice import Device
 from nerfaug.experiment.fingerprints import defaults_of, engine_name, engine_record, surviving
+from nerfaug.experiment.schedule import check_schedule
+from nerfaug.nerf.bounds import Count, NonNegativeInt, Positive, Seed, Steps
 from nerfaug.nerf.config import (
     BATCH_ENGINE_VERSION,
     HASH_CPU_ENGINE_VERSION,
@@ -24,6 +28,7 @@ from nerfaug.nerf.config import (
 )
 from nerfaug.nerf.engine import ENGINE_OPTION, Engine
 from nerfaug.registry import Presets
+from nerfaug.schema import SCHEMA, RequestError, Settings, unchecked
 from nerfaug.selection.config import SelectionConfig
 
 # Method families (Tables I and II, the main comparison, the study) live with the methods.
@@ -49,9 +54,12 @@ NOT_FINGERPRINTED = frozenset({"scenes", "methods", "trials", "save_renders", "v
 # the selection options and the engine by each of their settings.
 _FINGERPRINTED_AS = frozenset({"device", "batch", "selection"})
 
+# Names given one or more times: a sweep needs at least one scene and one method.
+Names = Annotated[tuple[str, ...], MinLen(1)]
+
 
 @dataclass
-class ExperimentConfig:
+class ExperimentConfig(Settings):
     """The protocol of the paper's Sec. IV, made configurable.
 
     Per (scene, method, trial): train on the fixed initial views (the same for every trial of a
@@ -61,60 +69,68 @@ class ExperimentConfig:
     seed (initialisation, ray sampling, and the selector's randomness).
 
     Its fields are the options of `nerfaug run` (tyro reads each field's docstring as its help,
-    one line each), which start from a preset (`PROTOCOL_PRESETS`).
+    one line each), which start from a preset (`PROTOCOL_PRESETS`). Each is checked when the
+    config is made (`nerfaug.schema.Settings`): its bounds in its annotation, the rules between
+    fields in `_rules`; a refusal is one line naming the option ("--n-initial 0: must be >= 1").
+    What needs the disk or a registry that loads torch (the scenes, the methods' names, the
+    engine's parts) is checked before a sweep starts (`nerfaug.experiment.sweep.check_config`).
     """
 
-    scenes: Annotated[tuple[str, ...], tyro.conf.arg(metavar="SCENE [SCENE ...]")] = ("lego",)
+    __pydantic_config__ = SCHEMA
+
+    scenes: Annotated[Names, tyro.conf.arg(metavar="SCENE [SCENE ...]")] = ("lego",)
     """built-in scene names (rendered with Blender) or dataset folders (Blender format, or captured
     sets: nerfstudio, LLFF, IDR/DTU)."""
-    methods: Annotated[tuple[str, ...], tyro.conf.arg(metavar="METHOD [METHOD ...]")] = MAIN_COMPARISON
+    methods: Annotated[Names, tyro.conf.arg(metavar="METHOD [METHOD ...]")] = MAIN_COMPARISON
     """selection methods (see `nerfaug methods`); the first is compared with the others."""
-    trials: int = 3
+    trials: Count = 3
     """trials per (scene, method); trial k uses seed + k."""
-    seed: int = 0
+    seed: Seed = 0
     """base seed."""
-    engine: Annotated[Engine, ENGINE_OPTION] = Engine.of("cpu")
+    engine: Annotated[Engine, PlainValidator(Engine.read), ENGINE_OPTION] = Engine.of("cpu")
     """the NeRF engine preset (the names `nerfaug train --engine` takes); any of its settings is an option
     too (`nerfaug engines` lists them)."""
-    resolution: int = 100
+    resolution: Count = 100
     """image size of built-in scenes (or the width user data is downscaled to)."""
-    steps: int = 2000
+    steps: Count = 2000
     """training steps per run."""
-    add_at_step: int = 200
+    add_at_step: Steps = 200
     """the training step at which each method adds its views."""
-    n_new: int = 6
+    n_new: Count = 6
     """views each method adds."""
-    n_initial: int = 6
+    n_initial: Count = 6
     """initial training views, all on one half of the hemisphere."""
     # The field's active-learning protocol (FisherRF's: few initial views, one added a round,
     # training between rounds) is e.g. --n-initial 4 --n-new 1 --rounds 8 (`experiment.schedule`).
-    rounds: int = 1
+    rounds: Count = 1
     """rounds of selection, each adding n_new views chosen with the model trained so far (1: the paper's protocol)."""
-    round_every: int = 100
+    round_every: Count = 100
     """training steps between two rounds (the first at add_at_step); unused with one round."""
     round_growth: Literal["fixed", "per-view"] = "fixed"
     """fixed: round_every steps between rounds; per-view: round_every steps per view in the model
     (training between rounds grows with the views, as FisherRF's schedule); unused with one round."""
-    pool: int = 300
+    pool: Count = 300
     """candidate views of a built-in scene, uniform over the hemisphere."""
     # The paper evaluates all 200 test views. A captured set without a test split keeps n_test of
     # its views, at most a quarter, spread over all directions, apart for testing.
-    n_test: int = 50
+    n_test: Count = 50
     """test views evaluated, spread evenly over the test split (all of it when it holds no more)."""
     # One layout: a rendered scene's `initial` split as rendered. Each further layout turns the
     # half the initial views lie on by a `layouts`-th of the way round.
-    layouts: int = 1
+    layouts: Count = 1
     """initial layouts: trial k starts from layout k mod LAYOUTS, each turned 1/LAYOUTS of the way round."""
-    render_samples: int = 16
+    render_samples: Count = 16
     """Cycles samples per pixel of built-in scenes."""
-    field_lr: Annotated[dict[str, float], tyro.conf.Suppress] = field(default_factory=lambda: dict(LOW_FIELD_LR_SCENES))
+    field_lr: Annotated[dict[str, Positive], tyro.conf.Suppress] = field(
+        default_factory=lambda: dict(LOW_FIELD_LR_SCENES)
+    )
     """Field learning rate by scene name, over the engine preset's `field_lr` (the paper: 0.002 for
     chair and materials); `engine_config` applies it."""
     # One thread per run, with one run per core, measured faster and far steadier than two threads
     # per run on a 2-core machine: torch's second thread stalls whenever anything else wants a core.
-    threads_per_run: int = 1
+    threads_per_run: Count = 1
     """torch threads in each run (fixed, so that local and Ray runs compute identically)."""
-    save_renders: int = 3
+    save_renders: NonNegativeInt = 3
     """test renders saved per run (for the report's figures)."""
     # Off in the study, whose page does not show them: they cost several seconds of a run (FisherRF
     # per pixel).
@@ -132,7 +148,7 @@ class ExperimentConfig:
     # Trial batches train K runs in lockstep, one kernel serving all (`nerfaug.nerf.batch`): on a
     # GPU many times the runs a second; on a CPU about 1.1x (BENCHMARKS.md, "Trial batches"). Their
     # engine rounds otherwise than a run alone, so it is fingerprinted as its own engine version.
-    batch: int = 0
+    batch: NonNegativeInt = 0
     """runs trained together as one trial batch; 1: each run alone; 0: auto (1 on a CPU, more on a GPU)."""
 
     selection: SelectionConfig = field(default_factory=SelectionConfig)
@@ -143,12 +159,28 @@ class ExperimentConfig:
 
     def __post_init__(self) -> None:
         # An engine given by name, or read from an earlier record: read, and checked, once.
-        self.engine = Engine.read(self.engine)
+        try:
+            self.engine = Engine.read(self.engine)
+        except RequestError:
+            raise  # it names the setting
+        except ValueError as error:
+            raise ValueError(f"--engine {self.engine!r}: {error}") from None
+        super().__post_init__()
 
     def to_record(self) -> dict:
         """Every option as plain data, as config.json and sweep.json record them; the engine as
         `Engine.record` writes it (its preset's name, or its settings nested by component)."""
         return dataclasses.asdict(self) | {"engine": self.engine.record()}
+
+    @model_validator(mode="after")
+    def _rules(self) -> ExperimentConfig:
+        """The rules between settings (each setting's own bounds are in its annotation)."""
+        if len(set(self.methods)) != len(self.methods):
+            raise ValueError(f"--methods {self.methods!r}: a method is listed twice")
+        if self.batch > 1 and (reason := batch_support(self.engine.config)) is not None:
+            raise ValueError(f"--batch {self.batch}: engine {str(self.engine)!r}: {reason}")
+        check_schedule(self)  # the steps, the rounds and the pool they draw on
+        return self
 
     def fingerprinted(self) -> dict:
         """The settings that change a run's numbers; results made under others are not mixed.
@@ -219,39 +251,43 @@ class ExperimentConfig:
         return dataclasses.replace(config, optimiser=optimiser)
 
 
+# Made unchecked, so that `--help` builds no validator: each preset is checked when it is chosen
+# (`Presets.choose` makes a copy), and tests/experiment/test_settings.py checks every one.
 PROTOCOL_PRESETS: Presets[ExperimentConfig] = Presets(
     "preset",
-    {
-        "quick": ExperimentConfig(trials=5, steps=800, pool=100, n_test=20),
-        "paper": ExperimentConfig(
-            scenes=("lego", "chair", "materials"),
-            trials=10,
-            engine="paper",
-            resolution=800,
-            steps=10_000,
-            pool=500,
-            n_test=200,
-            render_samples=64,
-        ),
-        "ablation": ExperimentConfig(
-            methods=tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
-            trials=5,
-        ),
-        "tiny": ExperimentConfig(
-            methods=("ours", "uniform"),
-            trials=2,
-            engine="test",
-            resolution=24,
-            steps=60,
-            add_at_step=20,
-            n_new=2,
-            n_initial=3,
-            pool=12,
-            n_test=3,
-            render_samples=4,
-            save_renders=1,
-        ),
-    },
+    unchecked(
+        lambda: {
+            "quick": ExperimentConfig(trials=5, steps=800, pool=100, n_test=20),
+            "paper": ExperimentConfig(
+                scenes=("lego", "chair", "materials"),
+                trials=10,
+                engine="paper",
+                resolution=800,
+                steps=10_000,
+                pool=500,
+                n_test=200,
+                render_samples=64,
+            ),
+            "ablation": ExperimentConfig(
+                methods=tuple(dict.fromkeys(TABLE_I + TABLE_II + ("distance-nbv",) + AUTHORS_VARIANTS)),
+                trials=5,
+            ),
+            "tiny": ExperimentConfig(
+                methods=("ours", "uniform"),
+                trials=2,
+                engine="test",
+                resolution=24,
+                steps=60,
+                add_at_step=20,
+                n_new=2,
+                n_initial=3,
+                pool=12,
+                n_test=3,
+                render_samples=4,
+                save_renders=1,
+            ),
+        }
+    ),
 )
 """The protocols of `nerfaug run --preset`:
 
@@ -271,23 +307,25 @@ PresetName = PROTOCOL_PRESETS.name_type()
 
 STUDY_PRESETS: Presets[ExperimentConfig] = Presets(
     "study preset",
-    {
-        # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page
-        # does not show them, and they cost seconds per run.
-        "study": ExperimentConfig(view_uncertainty=False),
-        "tiny": PROTOCOL_PRESETS.choose("tiny", view_uncertainty=False),
-        # The GPU study (docs/study-plan.md, 2026-11-27): the paper engine at the paper's scale
-        # (400 px, 10k steps, 200 test views); the page shows no uncertainty images.
-        "gpu": ExperimentConfig(
-            engine="paper",
-            resolution=400,
-            steps=10_000,
-            n_test=200,
-            render_samples=32,
-            view_uncertainty=False,
-            hemisphere_map=False,
-        ),
-    },
+    unchecked(
+        lambda: {
+            # The paper's protocol at 100x100 (the defaults). No uncertainty images: the study's page
+            # does not show them, and they cost seconds per run.
+            "study": ExperimentConfig(view_uncertainty=False),
+            "tiny": PROTOCOL_PRESETS.choose("tiny", view_uncertainty=False),
+            # The GPU study (docs/study-plan.md, 2026-11-27): the paper engine at the paper's scale
+            # (400 px, 10k steps, 200 test views); the page shows no uncertainty images.
+            "gpu": ExperimentConfig(
+                engine="paper",
+                resolution=400,
+                steps=10_000,
+                n_test=200,
+                render_samples=32,
+                view_uncertainty=False,
+                hemisphere_map=False,
+            ),
+        }
+    ),
 )
 """The protocols a study runs every engine under (`nerfaug study --preset`): "study" is the
 paper's protocol at 100x100 (6 initial views, 6 added at step 200, 2000 steps, a pool of 300, 50

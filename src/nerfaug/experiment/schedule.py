@@ -9,10 +9,24 @@ read it.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-if TYPE_CHECKING:
-    from nerfaug.experiment.config import ExperimentConfig
+
+class Schedule(Protocol):
+    """The settings a schedule is made of, as an `ExperimentConfig` (`nerfaug.experiment.config`)
+    holds them. Named here without importing it: it imports this module, to check its schedule
+    with `check_schedule` whenever one is made."""
+
+    steps: int
+    add_at_step: int
+    n_new: int
+    rounds: int
+    round_every: int
+    pool: int
+    batch: int
+
+
+ExperimentConfig = Schedule  # what every function here is given
 
 CURVE_VIEWS = 8
 """Test views a learning curve's points are measured on between rounds (spread over the test
@@ -54,19 +68,13 @@ def _refuse(name: str, value, problem: str) -> None:
 
 
 def check_schedule(config: ExperimentConfig) -> None:
-    """The schedule's settings against each other, the steps and a built-in scene's pool.
+    """The schedule's settings against each other, the steps and a built-in scene's pool: one of
+    `ExperimentConfig`'s rules between settings, run when a config is made (each setting's own
+    bounds, e.g. --rounds >= 1, are in its annotation).
 
     Raises:
         ValueError: one line naming the option, its value and what would be accepted.
     """
-    for name in ("rounds", "round_every"):
-        value = getattr(config, name)
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            _refuse(name, value, "must be an integer >= 1")
-    if config.round_growth not in ROUND_GROWTH:
-        _refuse("round_growth", config.round_growth, f"must be one of {', '.join(ROUND_GROWTH)}")
-    if config.add_at_step < 0:
-        _refuse("add_at_step", config.add_at_step, "must be >= 0")
     if config.steps <= config.add_at_step:
         _refuse(
             "steps",

@@ -13,8 +13,10 @@ from typing import Annotated, Literal
 import tyro
 
 from nerfaug.device_choice import Device
-from nerfaug.experiment.config import STUDY_PRESETS
+from nerfaug.experiment.config import STUDY_PRESETS, Names
 from nerfaug.experiment.layout import StudyFolder
+from nerfaug.nerf.bounds import Count, NonNegativeInt, Steps
+from nerfaug.schema import SCHEMA, Settings
 
 StudyPreset = STUDY_PRESETS.name_type()
 DEFAULT_PRESET = "study"
@@ -26,7 +28,7 @@ mesh, and real captures are given by name or folder, as the real-scene study doe
 
 # How `nerfaug study --help` shows the options whose default (None) is decided when the study is planned.
 Engines = Annotated[
-    tuple[str, ...] | None,
+    Names | None,
     tyro.conf.arg(
         metavar="ENGINE [ENGINE ...]",
         help_behavior_hint="(default: every preset but the test one, and the paper's only on a GPU; the reason "
@@ -34,31 +36,34 @@ Engines = Annotated[
     ),
 ]
 Scenes = Annotated[
-    tuple[str, ...] | None,
+    Names | None,
     tyro.conf.arg(metavar="SCENE [SCENE ...]", help_behavior_hint=f"(default: {' '.join(PROCEDURAL_SCENES)})"),
 ]
 Methods = Annotated[
-    tuple[str, ...] | None,
+    Names | None,
     tyro.conf.arg(metavar="METHOD [METHOD ...]", help_behavior_hint='(default: the registry\'s "study" family)'),
 ]
 Trials = Annotated[
-    int | None,
+    Count | None,
     tyro.conf.arg(
         metavar="INT",
         help_behavior_hint="(default: 10, or more when Bonferroni over the comparisons with uniform needs more "
         "for p < 0.05 to be reachable)",
     ),
 ]
-PresetInt = Annotated[int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's)")]
+PresetCount = Annotated[Count | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's)")]
+PresetSteps = Annotated[Steps | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: the preset's)")]
 Table = Annotated[
     Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint=f"(default: {StudyFolder(Path('OUT')).table})")
 ]
 
 
 @dataclass(frozen=True)
-class StudySpec:
+class StudySpec(Settings):
     """What a study runs: the options of `nerfaug study` that decide its runs (None: decided when
-    it is planned, `make_plan`).
+    it is planned, `make_plan`). Each is checked when the spec is made, by the bounds in its
+    annotation (`nerfaug.schema.Settings`); the rules between them are the protocol's, checked when
+    the plan makes its `ExperimentConfig`.
 
     Args:
         out: the study folder.
@@ -88,24 +93,26 @@ class StudySpec:
             CPU, more on a GPU for engines that batch).
     """
 
+    __pydantic_config__ = SCHEMA
+
     out: Path = Path("results/study")
     engines: Engines = None
     scenes: Scenes = None
     methods: Methods = None
     trials: Trials = None
-    resolution: int = 100
-    layouts: int = 1
-    steps: int = STUDY_PRESETS[DEFAULT_PRESET].steps
-    n_initial: PresetInt = None
-    n_new: PresetInt = None
-    add_at_step: PresetInt = None
-    rounds: int = 1
-    round_every: int = STUDY_PRESETS[DEFAULT_PRESET].round_every
+    resolution: Count = 100
+    layouts: Count = 1
+    steps: Count = STUDY_PRESETS[DEFAULT_PRESET].steps
+    n_initial: PresetCount = None
+    n_new: PresetCount = None
+    add_at_step: PresetSteps = None
+    rounds: Count = 1
+    round_every: Count = STUDY_PRESETS[DEFAULT_PRESET].round_every
     round_growth: Literal["fixed", "per-view"] = "fixed"
     device: Device = "auto"
     preset: StudyPreset = DEFAULT_PRESET
     table: Table = None
-    batch: int = 0
+    batch: NonNegativeInt = 0
 
     def schedule_changes(self) -> dict[str, int]:
         """The schedule's settings given over the preset's (n_initial, n_new, add_at_step)."""

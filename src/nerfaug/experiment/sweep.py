@@ -28,7 +28,7 @@ from nerfaug.experiment.config import ExperimentConfig, check_workers
 from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, run_trial_batch, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.scene_views import split_captured
-from nerfaug.experiment.schedule import check_pool, check_schedule
+from nerfaug.experiment.schedule import check_pool
 from nerfaug.experiment.store import (
     IncompatibleResults,
     RunKey,
@@ -43,11 +43,9 @@ from nerfaug.experiment.store import (
     run_fingerprint,
 )
 from nerfaug.experiment.workers import worker_pool
-from nerfaug.nerf.config import batch_support
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
 from nerfaug.registry import did_you_mean
-from nerfaug.schema import RequestError
 from nerfaug.selection import METHODS, get_method
 
 Backend = Literal["local", "ray"]
@@ -108,7 +106,11 @@ def _need(ok: bool, name: str, value, problem: str) -> None:
 
 
 def check_config(config: ExperimentConfig) -> dict[str, dict]:
-    """Check every setting against the registries and the datasets, before any work starts.
+    """What a config's settings cannot say by themselves, checked before any work starts: each
+    setting's bounds and the rules between settings were checked when `config` was made
+    (`ExperimentConfig`). Here: the names looked up in registries that load torch (the methods,
+    the engine's encoding and sampler), and what needs the disk (each scene a built-in name or a
+    dataset folder, names apart in results, a built-in scene's size and pool, a dataset's views).
 
     Returns:
         Per scene (its name in results), what it runs on: {"builtin": name} or, for a user
@@ -119,7 +121,6 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         ValueError: naming the setting, its value and what would be accepted.
         DatasetError: a user dataset is missing or malformed.
     """
-    _need(len(config.methods) > 0, "methods", config.methods, "give at least one selection method")
     for method in config.methods:
         _need(
             method in METHODS,
@@ -127,36 +128,10 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
             method,
             f"unknown selection method; {did_you_mean(method, METHODS)}see `nerfaug methods`: {', '.join(METHODS)}",
         )
-    _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
-    try:
-        config.selection.checked()  # the selection settings' one check
-    except RequestError as error:
-        option = "--selection." + error.argument.replace("_", "-")
-        raise ValueError(f"{option} {error.value!r}: {error.problem}") from None
     try:
         check_names(config.engine.config)
     except ValueError as error:
         raise ValueError(f"--engine {config.engine}: {error}") from None
-    _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
-    for name in (
-        "trials",
-        "n_new",
-        "n_initial",
-        "n_test",
-        "pool",
-        "resolution",
-        "render_samples",
-        "threads_per_run",
-        "layouts",
-    ):
-        value = getattr(config, name)
-        _need(isinstance(value, int) and value >= 1, name, value, "must be an integer >= 1")
-    _need(isinstance(config.batch, int) and config.batch >= 0, "batch", config.batch, "must be an integer >= 0")
-    if config.batch > 1:
-        reason = batch_support(config.engine.config)
-        _need(reason is None, "batch", config.batch, f"engine {str(config.engine)!r}: {reason}")
-    _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
-    check_schedule(config)  # the steps, the rounds and the pool they draw on
     datasets: dict[str, dict] = {}
     for scene in config.scenes:
         name, folder = scene_name(scene), scene_folder(scene)
