@@ -15,7 +15,7 @@ import tyro
 
 from nerfaug.device_choice import Device
 from nerfaug.experiment.fingerprints import defaults_of, engine_record, surviving
-from nerfaug.nerf.config import BATCH_ENGINE_VERSION, NerfConfig, batch_support
+from nerfaug.nerf.config import ENGINE_VERSION, NerfConfig
 from nerfaug.nerf.config import PRESETS as ENGINE_PRESETS
 from nerfaug.registry import Presets
 from nerfaug.selection.config import SelectionConfig
@@ -38,10 +38,13 @@ LOW_FIELD_LR_SCENES = {"chair": 0.002, "materials": 0.002}
 # The fields no run's fingerprint holds: which runs a sweep makes, and what a run saves beside its
 # numbers. Every other field is fingerprinted, a field added later only when it differs from its
 # neutral value (`nerfaug.experiment.fingerprints`).
-NOT_FINGERPRINTED = frozenset({"scenes", "methods", "trials", "save_renders", "view_uncertainty", "hemisphere_map"})
-# Fingerprinted in another form: the device by its kind, `batch` by the engine version it chooses,
-# the selection options and the engine by each of their settings.
-_FINGERPRINTED_AS = frozenset({"device", "batch", "selection"})
+# `batch`: a run computes the same numbers in a batch of any size as alone (`nerfaug.nerf.trainer`).
+NOT_FINGERPRINTED = frozenset(
+    {"scenes", "methods", "trials", "save_renders", "view_uncertainty", "hemisphere_map", "batch"}
+)
+# Fingerprinted in another form: the device by its kind, the selection options and the engine by
+# each of their settings.
+_FINGERPRINTED_AS = frozenset({"device", "selection"})
 
 
 @dataclass
@@ -119,11 +122,10 @@ class ExperimentConfig:
     device: Device = "auto"
     """where runs train, select and evaluate."""
 
-    # Trial batches train K runs in lockstep, one kernel serving all (`nerfaug.nerf.batch`): on a
-    # GPU many times the runs a second; on a CPU about 1.1x (BENCHMARKS.md, "Trial batches"). Their
-    # engine rounds otherwise than a run alone, so it is fingerprinted as its own engine version.
+    # A batch trains K runs in lockstep in one process (`nerfaug.nerf.trainer.Trainer`), each
+    # computed as it would be alone: its size changes no number, only how runs share a process.
     batch: int = 0
-    """runs trained together as one trial batch; 1: each run alone; 0: auto (1 on a CPU, more on a GPU)."""
+    """runs trained together as one batch; 1: each run alone; 0: auto (1 on a CPU, as many as memory holds on a GPU)."""
 
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     """options of the selection methods (every one fingerprinted); a method's own settings apply over them."""
@@ -135,7 +137,7 @@ class ExperimentConfig:
         """The settings that change a run's numbers; results made under others are not mixed.
 
         Flat, so a refusal names the setting: the protocol's settings by name (every field but
-        `NOT_FINGERPRINTED`; the device by its kind; trial batches as "engine_version"), every
+        `NOT_FINGERPRINTED`; the device by its kind; the engine's arithmetic as "engine_version"), every
         `SelectionConfig` field as "selection.<field>", and the engine preset's `NerfConfig` as
         "engine.<flat name>" ("engine" keeps the preset's name; per-scene overrides are
         "field_lr"). A setting added since fingerprint version 1 is left out at its neutral value
@@ -147,26 +149,14 @@ class ExperimentConfig:
 
         own = [f.name for f in dataclasses.fields(self) if f.name not in NOT_FINGERPRINTED | _FINGERPRINTED_AS]
         record = {name: getattr(self, name) for name in own} | {"device": device_kind(self.device)}
-        # The reference engine (None) is what every run before trial batches ran.
-        record["engine_version"] = BATCH_ENGINE_VERSION if self.batched() else None
+        # The reference engine (None) is what every recorded run ran.
+        record["engine_version"] = ENGINE_VERSION
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         defaults = defaults_of(type(self)) | {"engine_version": None}
         if self.rounds == 1:  # one round: `round_every` changes nothing, so it splits no results
             record["round_every"] = defaults["round_every"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
         return surviving(record, defaults) | engine_record(NerfConfig.preset(self.engine))
-
-    def batched(self) -> bool:
-        """Whether runs train as trial batches: `batch` > 1, or 0 (auto) on a GPU with an engine
-        that batches (`nerfaug.nerf.config.batch_support`). The batch's size does not change a
-        run's numbers beyond rounding; only this choice is fingerprinted."""
-        if self.batch != 0:
-            return self.batch > 1
-        if self.rounds > 1:  # a trial batch adds views in one round only: auto trains such runs alone
-            return False
-        from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
-
-        return device_kind(self.device) == "cuda" and batch_support(NerfConfig.preset(self.engine)) is None
 
     def replace(self, **changes) -> ExperimentConfig:
         return dataclasses.replace(self, **changes)

@@ -454,18 +454,11 @@ PRESETS["nerfacto-cpu-last-sample"] = dataclasses.replace(
 VARIANT_SEPARATOR = "+"
 
 
-BATCH_ENGINE_VERSION = "batched-1"
-"""The arithmetic of trial batches (`nerfaug.nerf.batch`), recorded with every run they train: a
-run alone (`Trainer`, the reference engine) rounds otherwise, so results of the two are never
-mixed in one cell of a study."""
-
-
-def batch_support(config: NerfConfig) -> str | None:
-    """Why engine `config` cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
-    if config.sampler.kind != "proposal":
-        kind = config.sampler.kind
-        return f"trial batches need the proposal sampler; this engine uses {kind!r}: run it with batch 1"
-    return None
+ENGINE_VERSION: str | None = None
+"""The engine's arithmetic, recorded with every run's fingerprint when set: None is the reference
+engine every recorded run ran (a run alone or in a batch of any size, `nerfaug.nerf.trainer`). A
+change of arithmetic that no setting names sets a new version, so its runs are never mixed with
+earlier ones in one cell of a study."""
 
 
 def _setting(base: NerfConfig, name: str, text: str, where: str):
