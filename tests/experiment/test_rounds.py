@@ -101,7 +101,6 @@ def test_one_round_keeps_the_record_and_fingerprint_it_always_had(toy_data, tmp_
         ({"rounds": 4, "round_every": 10}, "--rounds 4: the last round would come at step 40"),
         ({"rounds": 0}, "--rounds 0: must be an integer >= 1"),
         ({"rounds": 2, "round_every": 0}, "--round-every 0: must be an integer >= 1"),
-        ({"rounds": 2, "batch": 2, "engine": "nerfacto-cpu"}, "--rounds 2: trial batches (--batch 2)"),
     ],
 )
 def test_impossible_schedules_are_refused_in_one_line_naming_the_option(toy_data, changes, refusal):
@@ -115,9 +114,9 @@ def test_a_built_in_scenes_pool_bounds_the_views_all_rounds_add():
         check_config(tiny(rounds=5, n_new=3, round_every=5, scenes=("lego",)))
 
 
-def test_rounds_never_train_as_a_trial_batch_when_the_batch_is_chosen_automatically():
-    assert ExperimentConfig(rounds=3, device="cpu").batched() is False
-    assert ExperimentConfig(rounds=3, batch=1).batched() is False
+def test_rounds_are_checked_at_any_batch_size(toy_data):
+    """Runs of several rounds train in batches as alone: a batch passes the check a run alone passes."""
+    check_config(tiny(scenes=(str(toy_data),), rounds=2, round_every=5, batch=2, engine="nerfacto-cpu"))
 
 
 def test_the_time_estimate_covers_every_rounds_scoring_and_curve():

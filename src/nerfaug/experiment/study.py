@@ -234,8 +234,7 @@ class EngineSweep:
     """One engine's sweep of a study, opened for runs handed out a unit at a time by a caller that
     decides their number and order itself (a GPU slot's scheduler, `benchmarks/gpu_study.py`):
     study.json and sweep.json written and the datasets checked as `run_study` does; every unit
-    runs as a trial batch (its runs recorded with the batched engine's version, a batch of one
-    included), so a cell never mixes engine versions."""
+    runs as one batch (`run_trials`), each run computed as it would be alone."""
 
     def __init__(self, plan: StudyPlan, engine: str, table: dict | None = None):
         self.config = plan.engine_config(engine)
