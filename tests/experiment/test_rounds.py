@@ -165,3 +165,44 @@ def test_run_and_study_take_the_schedule_on_the_command_line(monkeypatch, toy_da
     ]  # fmt: skip
     # A study of one round plans as it did: none of the schedule's options in its command.
     assert "--rounds" not in StudySpec(preset="tiny").command()
+
+
+# A batch of runs against the same runs alone: rounding that a CPU's kernels move (`make test-rounding`).
+@pytest.mark.rounding
+@pytest.mark.parametrize("engine", ["test", "nerfacto-cpu"])
+def test_a_batch_of_trials_records_what_each_run_records_alone(toy_data, tmp_path, engine):
+    """Runs of several rounds trained as one batch choose the same views and reach the same
+    metrics as each alone, with the same fingerprint; the record adds only the batch's size."""
+    config = tiny(rounds=2, n_new=2, round_every=10, steps=30, engine=engine)
+    keys = [RunKey("scene", "uniform", 0), RunKey("scene", "entropy", 1)]
+    together = protocol.run_trials(keys, {"scene": toy_data}, config.replace(batch=2), tmp_path / "batch")
+    for key in keys:
+        alone = protocol.run_trial(key, toy_data, config.replace(batch=1), tmp_path / "alone")
+        batched = together[key]
+        assert batched["chosen"] == alone["chosen"] and batched["fingerprint"] == alone["fingerprint"]
+        numbers = {name for name, value in alone["metrics"].items() if value is not None}  # LPIPS: no weights here
+        assert numbers >= {"psnr", "ssim"} and batched["metrics"].keys() == alone["metrics"].keys()
+        assert {n: batched["metrics"][n] for n in numbers} == pytest.approx(
+            {n: alone["metrics"][n] for n in numbers}, rel=1e-5
+        )
+        assert [r["chosen"] for r in batched["rounds"]] == [r["chosen"] for r in alone["rounds"]]
+        assert batched["batch_size"] == 2 and "batch_size" not in alone
+        assert batched.keys() - alone.keys() == {"batch_size"}
+    assert together[keys[0]]["metrics"] != together[keys[1]]["metrics"]
+
+
+def test_a_failing_run_of_a_batch_fails_alone(toy_data, tmp_path, monkeypatch):
+    original = protocol.select_views
+
+    def failing(method, *args, **kwargs):
+        if method == "entropy":
+            raise RuntimeError("this method broke")
+        return original(method, *args, **kwargs)
+
+    monkeypatch.setattr(protocol, "select_views", failing)
+    keys = [RunKey("scene", "uniform", 0), RunKey("scene", "entropy", 0)]
+    outcomes = protocol.run_trials(keys, {"scene": toy_data}, tiny(steps=20, batch=2), tmp_path)
+    assert isinstance(outcomes[keys[1]], RuntimeError) and outcomes[keys[0]]["method"] == "uniform"
+    # Alone, the run's failure is raised.
+    with pytest.raises(RuntimeError, match="this method broke"):
+        protocol.run_trial(keys[1], toy_data, tiny(steps=20), tmp_path / "alone")
