@@ -206,3 +206,21 @@ def test_a_failing_run_of_a_batch_fails_alone(toy_data, tmp_path, monkeypatch):
     # Alone, the run's failure is raised.
     with pytest.raises(RuntimeError, match="this method broke"):
         protocol.run_trial(keys[1], toy_data, tiny(steps=20), tmp_path / "alone")
+
+
+def test_a_batch_trains_with_the_compile_setting_it_is_fingerprinted_with(toy_data, tmp_path, monkeypatch):
+    built = []
+
+    class Recording(protocol.Trainer):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            built.append(self)
+
+    monkeypatch.setattr(protocol, "Trainer", Recording)
+    keys = [RunKey("scene", "uniform", 0), RunKey("scene", "uniform", 1)]
+    config = tiny(steps=12, add_at_step=6, batch=2, compile="eager")
+    outcomes = protocol.run_trials(keys, {"scene": toy_data}, config, tmp_path)
+    assert all(isinstance(outcome, dict) for outcome in outcomes.values())
+    (trainer,) = built
+    assert len(trainer) == 2 and trainer.compile_backend == "eager"
+    assert all(run.model.field._compiled_call_impl is not None for run in trainer.runs)

@@ -157,6 +157,36 @@ def test_a_batch_refuses_in_one_line_what_is_one_runs(views_pair):
         Trainer(views_pair, SMALL, [1, 2], field=field, progress=False)
 
 
+def test_a_batch_compiles_every_runs_networks(views_pair):
+    """`compile` at any batch size: each run's field and sampler networks compiled ("eager": the
+    same kernels), training as the pure path does."""
+    pure = Trainer(views_pair, SMALL, [3, 8], progress=False)
+    compiled = Trainer(views_pair, SMALL, [3, 8], progress=False, compile="eager")
+    for run in compiled.runs:
+        assert all(m._compiled_call_impl is not None for m in [run.model.field, *run.model.sampler.networks])
+    pure.train(4)
+    compiled.train(4)
+    for k in range(2):
+        assert losses(compiled.runs[k].history) == pytest.approx(losses(pure.runs[k].history), rel=1e-5)
+
+
+def test_a_batch_trains_under_autocast_with_a_scaler_per_run(views_pair):
+    """Half precision at any batch size (cuda in use; here the CPU's bfloat16 through the same code
+    path): float32 parameters, each run learning; a float16 batch gives each run its own loss
+    scaler, so one run's overflow skips no other run's step."""
+    batch = Trainer(views_pair, NerfConfig.preset("test"), [3, 8], progress=False)
+    batch._autocast = torch.bfloat16  # the cuda code path, with the CPU's autocast dtype
+    batch.train(40)
+    for run in batch.runs:
+        values = losses(run.history)
+        assert all(math.isfinite(v) for v in values) and sum(values[-10:]) < 0.8 * sum(values[:10])
+        assert all(p.dtype == torch.float32 for p in run.model.parameters())
+        assert run.scaler is None  # bfloat16 needs none; float16 (cuda) gets one per run below
+    if torch.cuda.is_available():
+        half = Trainer(views_pair, SMALL, [3, 8], device="cuda", precision="fp16", progress=False)
+        assert len({id(run.scaler) for run in half.runs}) == 2
+
+
 def test_a_runs_memory_estimate_grows_with_the_engine_and_shrinks_with_fused_kernels():
     from nerfaug.nerf.batch_size import estimated_run_bytes
     from nerfaug.nerf.trainer import seeded_model
