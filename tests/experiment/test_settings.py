@@ -75,7 +75,6 @@ def test_a_scenes_field_learning_rate_is_a_finite_positive_number(value):
         ({"methods": ("ours", "ours")}, "--methods ('ours', 'ours'): a method is listed twice"),
         ({"engine": "nope"}, "--engine 'nope': unknown engine preset 'nope'"),
         ({"engine": "cpu+hidden_dim=0"}, "--engine 'cpu+hidden_dim=0':"),
-        ({"engine": "cpu", "batch": 2}, "--batch 2: engine 'cpu': trial batches need the proposal sampler"),
         ({"steps": 200}, "--steps 200: must be greater than the step at which views are added (200)"),
         ({"rounds": 30}, "--rounds 30: the last round would come at step 3100"),
         ({"pool": 5}, "--pool 5: the pool must hold the 6 views to add"),

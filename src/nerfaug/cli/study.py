@@ -46,7 +46,7 @@ class Study(StudySpec):
             the study of rounds' (Q1-Q4), none, or auto (rounds when the runs added views in
             rounds, else chosen from the table's engines and scenes).
         budget_s: start no run that would end more than this many seconds from now (by the
-            longest run or trial batch so far); the same command goes on with the rest.
+            longest run or batch so far); the same command goes on with the rest.
         selection: options of the selection methods (every one is part of the runs' fingerprint;
             left at the preset's, they change nothing); a method's own settings (e.g.
             ours-authors') apply over them.

@@ -19,13 +19,7 @@ from nerfaug.device_choice import Device
 from nerfaug.experiment.fingerprints import defaults_of, engine_name, engine_record, surviving
 from nerfaug.experiment.schedule import check_schedule
 from nerfaug.nerf.bounds import Count, NonNegativeInt, Positive, Seed, Steps
-from nerfaug.nerf.config import (
-    BATCH_ENGINE_VERSION,
-    HASH_CPU_ENGINE_VERSION,
-    NerfConfig,
-    batch_support,
-    uses_hash_grid,
-)
+from nerfaug.nerf.config import HASH_CPU_ENGINE_VERSION, NerfConfig, uses_hash_grid
 from nerfaug.nerf.engine import ENGINE_OPTION, Engine
 from nerfaug.registry import Presets
 from nerfaug.schema import SCHEMA, RequestError, Settings, unchecked
@@ -49,10 +43,13 @@ LOW_FIELD_LR_SCENES = {"chair": 0.002, "materials": 0.002}
 # The fields no run's fingerprint holds: which runs a sweep makes, and what a run saves beside its
 # numbers. Every other field is fingerprinted, a field added later only when it differs from its
 # neutral value (`nerfaug.experiment.fingerprints`).
-NOT_FINGERPRINTED = frozenset({"scenes", "methods", "trials", "save_renders", "view_uncertainty", "hemisphere_map"})
-# Fingerprinted in another form: the device by its kind, `batch` by the engine version it chooses,
-# the selection options and the engine by each of their settings.
-_FINGERPRINTED_AS = frozenset({"device", "batch", "selection"})
+# `batch`: a run computes the same numbers in a batch of any size as alone (`nerfaug.nerf.trainer`).
+NOT_FINGERPRINTED = frozenset(
+    {"scenes", "methods", "trials", "save_renders", "view_uncertainty", "hemisphere_map", "batch"}
+)
+# Fingerprinted in another form: the device by its kind, the selection options and the engine by
+# each of their settings.
+_FINGERPRINTED_AS = frozenset({"device", "selection"})
 
 # Names given one or more times: a sweep needs at least one scene and one method.
 Names = Annotated[tuple[str, ...], MinLen(1)]
@@ -145,11 +142,10 @@ class ExperimentConfig(Settings):
     device: Device = "auto"
     """where runs train, select and evaluate."""
 
-    # Trial batches train K runs in lockstep, one kernel serving all (`nerfaug.nerf.batch`): on a
-    # GPU many times the runs a second; on a CPU about 1.1x (BENCHMARKS.md, "Trial batches"). Their
-    # engine rounds otherwise than a run alone, so it is fingerprinted as its own engine version.
+    # A batch trains K runs in lockstep in one process (`nerfaug.nerf.trainer.Trainer`), each
+    # computed as it would be alone: its size changes no number, only how runs share a process.
     batch: NonNegativeInt = 0
-    """runs trained together as one trial batch; 1: each run alone; 0: auto (1 on a CPU, more on a GPU)."""
+    """runs trained together as one batch; 1: each run alone; 0: auto (1 on a CPU, as many as memory holds on a GPU)."""
 
     selection: SelectionConfig = field(default_factory=SelectionConfig)
     """options of the selection methods (every one fingerprinted); a method's own settings apply over them."""
@@ -177,8 +173,6 @@ class ExperimentConfig(Settings):
         """The rules between settings (each setting's own bounds are in its annotation)."""
         if len(set(self.methods)) != len(self.methods):
             raise ValueError(f"--methods {self.methods!r}: a method is listed twice")
-        if self.batch > 1 and (reason := batch_support(self.engine.config)) is not None:
-            raise ValueError(f"--batch {self.batch}: engine {str(self.engine)!r}: {reason}")
         check_schedule(self)  # the steps, the rounds and the pool they draw on
         return self
 
@@ -186,7 +180,7 @@ class ExperimentConfig(Settings):
         """The settings that change a run's numbers; results made under others are not mixed.
 
         Flat, so a refusal names the setting: the protocol's settings by name (every field but
-        `NOT_FINGERPRINTED`; the device by its kind; trial batches as "engine_version"), every
+        `NOT_FINGERPRINTED`; the device by its kind; the engine's arithmetic as "engine_version"), every
         `SelectionConfig` field as "selection.<field>", and the engine preset's `NerfConfig` as
         "engine.<flat name>" ("engine" keeps the preset's name; per-scene overrides are
         "field_lr"). A setting added since fingerprint version 1 is left out at its neutral value
@@ -209,13 +203,12 @@ class ExperimentConfig(Settings):
         return surviving(record, defaults) | engine_record(self.engine.config)
 
     def engine_version(self) -> str | None:
-        """The arithmetic this config's runs train with, recorded with each run and fingerprinted:
-        trial batches' (`BATCH_ENGINE_VERSION`); a run alone on the CPU whose hash grids run the
-        fused C loop (`HASH_CPU_ENGINE_VERSION`: where a C compiler built it and
-        `NERFAUG_HASH_KERNEL` is not "torch", `nerfaug.nerf.encoding.HashEncoding.default_kernel`);
-        or None, the reference engine every run before either ran."""
-        if self.batched():
-            return BATCH_ENGINE_VERSION
+        """The arithmetic this config's runs train with, recorded with each run and fingerprinted: on
+        the CPU, where its hash grids run the fused C loop (`HASH_CPU_ENGINE_VERSION`: where a C
+        compiler built it and `NERFAUG_HASH_KERNEL` is not "torch",
+        `nerfaug.nerf.encoding.HashEncoding.default_kernel`), that version; else None, the reference
+        engine every run before it ran. A run in a batch of any size is computed as it would be alone
+        (`nerfaug.nerf.trainer.Trainer`), so the batch's size is no part of it."""
         from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
 
         if device_kind(self.device) != "cpu" or not uses_hash_grid(self.engine.config):
@@ -223,18 +216,6 @@ class ExperimentConfig(Settings):
         from nerfaug.nerf.encoding import HashEncoding  # torch, likewise
 
         return HASH_CPU_ENGINE_VERSION if HashEncoding.cpu_loop_selected() else None
-
-    def batched(self) -> bool:
-        """Whether runs train as trial batches: `batch` > 1, or 0 (auto) on a GPU with an engine
-        that batches (`nerfaug.nerf.config.batch_support`). The batch's size does not change a
-        run's numbers beyond rounding; only this choice is fingerprinted."""
-        if self.batch != 0:
-            return self.batch > 1
-        if self.rounds > 1:  # a trial batch adds views in one round only: auto trains such runs alone
-            return False
-        from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
-
-        return device_kind(self.device) == "cuda" and batch_support(self.engine.config) is None
 
     def replace(self, **changes) -> ExperimentConfig:
         return dataclasses.replace(self, **changes)

@@ -92,13 +92,6 @@ def check_schedule(config: ExperimentConfig) -> None:
             f"{' per view in the model' if config.round_growth == 'per-view' else ''}), not before the last step "
             f"(--steps {config.steps}); the views it adds would never be trained on",
         )
-    if config.rounds > 1 and config.batch > 1:
-        _refuse(
-            "rounds",
-            config.rounds,
-            f"trial batches (--batch {config.batch}) add views in one round only; use --batch 1 (or 0, which "
-            "trains runs of several rounds alone)",
-        )
     if config.pool < config.n_new:
         _refuse("pool", config.pool, f"the pool must hold the {config.n_new} views to add")
 

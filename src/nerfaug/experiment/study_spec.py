@@ -89,8 +89,8 @@ class StudySpec(Settings):
             at 100x100) or tiny (a smoke test: seconds per run, after the built-in scenes are rendered).
         table: the per-run table to record runs in and summarise; runs it records with their
             current fingerprint are not run again.
-        batch: runs trained together as one trial batch; 1: each run alone; 0: auto (1 on a
-            CPU, more on a GPU for engines that batch).
+        batch: runs trained together as one batch (each computed as it would be alone); 1: each
+            run alone; 0: auto (1 on a CPU, as many as memory holds on a GPU).
     """
 
     __pydantic_config__ = SCHEMA

@@ -25,7 +25,7 @@ from nerfaug.device import device_kind
 from nerfaug.experiment import protocol
 from nerfaug.experiment.budget import Budget
 from nerfaug.experiment.config import ExperimentConfig, check_workers
-from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, run_trial_batch, scene_folder
+from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trials, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.scene_views import split_captured
 from nerfaug.experiment.schedule import check_pool
@@ -266,17 +266,11 @@ def sweep_record(config: ExperimentConfig, command: list[str] | None = None, dat
 
 
 def _run_unit(keys: list[RunKey], datasets: dict[str, Path], config: ExperimentConfig, root: Path) -> list[tuple]:
-    """Runs as a backend executes them (top-level so process pools and Ray can pickle it): one run
-    alone, or a trial batch. Returns (key, result, None) or (key, None, (error text, traceback))
-    per run: a failed run fails alone."""
-    if not config.batched():
-        (key,) = keys
-        try:
-            return [(key, run_trial(key, datasets[key.scene], config, root, progress=False), None)]
-        except Exception as error:  # noqa: BLE001 (one failed run must not end the sweep)
-            return [(key, None, _failure_text(error))]
+    """Runs as a backend executes them (top-level so process pools and Ray can pickle it): one
+    batch (`run_trials`; one run is a batch of one). Returns (key, result, None) or
+    (key, None, (error text, traceback)) per run: a failed run fails alone."""
     try:
-        outcomes = run_trial_batch(keys, datasets, config, root, progress=False)
+        outcomes = run_trials(keys, datasets, config, root, progress=False)
     except Exception as error:  # noqa: BLE001 (the batch as a whole failed: each of its runs did)
         return [(key, None, _failure_text(error)) for key in keys]
     return [
@@ -292,10 +286,10 @@ def _failure_text(error: BaseException) -> tuple[str, str]:
 
 
 def plan_units(todo: list[RunKey], config: ExperimentConfig, size: int) -> list[list[RunKey]]:
-    """The runs to do as the backend's units of work: one run each, or, when `config.batched()`,
-    trial batches of at most `size` runs of one engine configuration (scenes whose field learning
-    rate differs train apart), in plan order, so a sweep stopped part-way leaves whole trials."""
-    if not config.batched():
+    """The runs to do as the backend's units of work: batches of at most `size` runs of one engine
+    configuration (scenes whose field learning rate differs train apart), in plan order, so a
+    sweep stopped part-way leaves whole trials; one run each when `size` is 1."""
+    if size <= 1:
         return [[key] for key in todo]
     groups: dict[str, list[RunKey]] = {}
     for key in todo:
@@ -305,12 +299,17 @@ def plan_units(todo: list[RunKey], config: ExperimentConfig, size: int) -> list[
 
 
 def batch_size(config: ExperimentConfig, runs: int) -> int:
-    """How many runs a trial batch holds: `config.batch` when set, else as many as the device's
-    free memory holds by `nerfaug.nerf.batch.estimated_run_bytes` (at most `runs` and
-    `MAX_AUTO_BATCH`), with a line saying so."""
-    if config.batch > 1:
+    """How many runs a batch holds, the one place this is decided: `config.batch` when set; auto
+    (0): 1 on a CPU (where a batch gains little: BENCHMARKS.md, "Trial batches"), on a GPU as
+    many as the device's free memory holds by `nerfaug.nerf.batch_size.estimated_run_bytes` (at
+    most `runs` and `MAX_AUTO_BATCH`), with a line saying so. The size changes no run's numbers."""
+    if config.batch >= 1:
         return config.batch
-    from nerfaug.nerf.batch import auto_batch_size  # torch, only where runs are batched
+    from nerfaug.device import device_kind  # torch: only where runs are planned
+
+    if device_kind(config.device) != "cuda" or runs <= 1:
+        return 1
+    from nerfaug.nerf.batch_size import auto_batch_size
 
     size, text = auto_batch_size(config.engine.config, config.device, runs)
     console.print(text)
@@ -383,9 +382,9 @@ def run_sweep(
         kept = f"{skipped} completed run(s) kept" + (f", {elsewhere} recorded in the table" if elsewhere else "")
         console.print(f"{kept}, {len(todo)} to run")
 
-    units = plan_units(todo, config, batch_size(config, len(todo)) if config.batched() and todo else 1)
-    if config.batched() and todo:
-        console.print(f"{len(todo)} run(s) in {len(units)} trial batch(es) of up to {max(map(len, units))}")
+    units = plan_units(todo, config, batch_size(config, len(todo)) if todo else 1)
+    if len(units) < len(todo):
+        console.print(f"{len(todo)} run(s) in {len(units)} batch(es) of up to {max(map(len, units))}")
     deadline = None if budget_s is None else began + budget_s
     if backend == "ray":
         new_results, failed = _execute_ray(units, datasets, config, root, workers, address, progress)

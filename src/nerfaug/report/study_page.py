@@ -106,8 +106,8 @@ def _header(study: Study) -> list[Block]:
         ),
         f"code versions of the runs: {', '.join(versions) or 'none'}",
         f"engines run: {', '.join(study.engines) or 'none'}",
-        "engine versions (runs trained alone: reference; in trial batches: batched-N; a cell never mixes "
-        f"two): {'; '.join(engine_versions) or 'none'}",
+        "engine versions (reference: today's engine, alone or in a batch; a cell never mixes two): "
+        f"{'; '.join(engine_versions) or 'none'}",
         _empty_runs(study),
         f"scenes: {', '.join(plan.get('scenes', []))}; methods: {', '.join(plan.get('methods', []))}",
         f"trials per (scene, engine, method): {plan.get('trials', '?')} "
