@@ -1,19 +1,23 @@
-"""Trial batches on the CPU: the study protocol's runs alone (the reference engine) against the same
-runs in trial batches (the batched engine), in one sitting: throughput side by side, and the
-batched engine's equivalence by paired seeds.
+"""An engine version's acceptance on the CPU by paired seeds: the study protocol's runs of one
+engine against recorded runs of another, seed by seed, by the planned TOST (docs/study-plan.md,
+"acceptance of a new CPU engine version").
 
 Each arm is one sweep of the study protocol (`nerfaug.experiment.config.STUDY_PRESETS["study"]`:
 100 px, 6 initial views, 6 added at step 200, 2000 steps, 50 test views) over the given datasets
-and seeds, with every core busy: the reference arm one run per core, the batched arm one batch per
-core. Run k of both arms shares its seed, its initial views and (with "uniform") its added views,
-so d = PSNR(batched) - PSNR(alone) isolates the engine. Acceptance: a TOST of the mean of d
-inside +-`--bound` dB at alpha 0.05, and no seed more than `--max-seed` dB apart.
+and seeds. Run k of every arm shares its seed, its initial views and (with "uniform") its added
+views, so d = PSNR(one arm) - PSNR(other) isolates the engine. Modes:
+
+- default: runs alone against the same runs in batches of `--batch` (throughput side by side; a
+  batch computes each run as alone, so d is 0 unless the engine's batches change a number);
+- `--candidate-against ARMS.json`: today's default engine alone against the recorded runs alone;
+- `--nudged-against ARMS.json`: the rounding null, the reference engine with a nudge (`--nudge`);
+- `--check-against ARMS.json`: whether today's engine reproduces recorded runs to every digit.
 
     python benchmarks/bench_batch_cpu.py --data data/lego100 data/chair100 --trials 10 \\
-        --out /tmp/batch-bench --json docs/benchmarks/batch-cpu.json
+        --out /tmp/accept --candidate-against docs/benchmarks/batch-cpu/arms.json --json accept.json
 
-Printed and written: per arm wall seconds, CPU seconds and runs per core-hour; per run both
-PSNRs; the equivalence test over all runs and per dataset.
+Printed and written: wall and CPU seconds, runs per core-hour, per run both PSNRs, the
+equivalence test over all runs and per dataset.
 """
 
 from __future__ import annotations
