@@ -115,13 +115,13 @@ def test_the_environment_chooses_the_default_kernel_and_a_bad_name_is_refused(mo
 
 def test_the_engine_version_names_the_arithmetic(monkeypatch):
     """A hash-grid engine alone on the CPU records the fused loop's version; the reference path
-    (NERFAUG_HASH_KERNEL=torch), engines without a hash grid and trial batches record theirs."""
+    (NERFAUG_HASH_KERNEL=torch) and engines without a hash grid record none; a batch is no other arithmetic."""
     study = ExperimentConfig(device="cpu", engine="nerfacto-cpu")
     monkeypatch.setattr(HashEncoding, "default_kernel", "auto")
     assert study.engine_version() == HASH_CPU_ENGINE_VERSION
     assert study.fingerprinted()["engine_version"] == HASH_CPU_ENGINE_VERSION
     assert ExperimentConfig(device="cpu", engine="cpu").engine_version() is None  # K-planes, occupancy grid
-    assert study.replace(batch=2).engine_version() == "batched-1"
+    assert study.replace(batch=2).engine_version() == HASH_CPU_ENGINE_VERSION  # a batch computes each run as alone
     monkeypatch.setattr(HashEncoding, "default_kernel", "torch")
     assert study.engine_version() is None
     assert "engine_version" not in study.fingerprinted()

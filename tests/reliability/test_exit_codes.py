@@ -23,14 +23,14 @@ def test_a_failure_of_the_work_exits_1_with_one_line(bases, tmp_path, monkeypatc
 def test_a_failed_run_of_a_sweep_exits_1_and_keeps_the_others(bases, tmp_path, monkeypatch):
     from nerfaug.experiment import sweep
 
-    run_trial = sweep.run_trial
+    run_trials = sweep.run_trials
 
-    def second_fails(key, *args, **kwargs):
-        if key.trial == 1:
+    def second_fails(keys, *args, **kwargs):
+        if any(key.trial == 1 for key in keys):
             raise RuntimeError("out of memory")
-        return run_trial(key, *args, **kwargs)
+        return run_trials(keys, *args, **kwargs)
 
-    monkeypatch.setattr(sweep, "run_trial", second_fails)
+    monkeypatch.setattr(sweep, "run_trials", second_fails)
     out = tmp_path / "results"
     outcome = run_cli(["run", "--data", bases.dataset, "--out", out, *TINY, "--trials", "2", "--workers", "1"])
     assert outcome.code == 1 and not outcome.traceback, outcome.err

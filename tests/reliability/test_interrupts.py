@@ -99,15 +99,15 @@ def test_ctrl_c_during_a_sweep_keeps_finished_runs_and_resumes(bases, tmp_path, 
 
     interrupted_run = 1  # the second run: the first is finished and must be kept
 
-    calls, run_trial = [], sweep.run_trial
+    calls, run_trials = [], sweep.run_trials
 
     def run_or_interrupt(*args, **kwargs):
         calls.append(args[0])
         if len(calls) == interrupted_run + 1:
             raise KeyboardInterrupt
-        return run_trial(*args, **kwargs)
+        return run_trials(*args, **kwargs)
 
-    monkeypatch.setattr(sweep, "run_trial", run_or_interrupt)
+    monkeypatch.setattr(sweep, "run_trials", run_or_interrupt)
     out = tmp_path / "results"
     argv = ["run", "--data", bases.dataset, "--out", out, *TINY, "--trials", "2", "--workers", "1"]
     line = _one_line(run_cli(argv))
@@ -115,7 +115,7 @@ def test_ctrl_c_during_a_sweep_keeps_finished_runs_and_resumes(bases, tmp_path, 
     kept = sorted(p.parent.name for p in out.glob("runs/*/*/*/result.json"))
     assert kept == ["trial_000"]
 
-    monkeypatch.setattr(sweep, "run_trial", run_trial)
+    monkeypatch.setattr(sweep, "run_trials", run_trials)
     again = run_cli(argv)
     assert again.code == 0, again.err
     assert "1 completed run(s) kept, 1 to run" in again.err
