@@ -88,7 +88,7 @@ def train_an_engine_setting_on_a_session_of_another_engine(tmp, bases):
     engine with the setting, never the default engine the user did not give."""
     run = _session(tmp, bases)
     argv = ["train", run, "--steps", "10", "--device", "cpu", "--engine.field.hidden-dim", "32"]
-    return Case(argv, [run], says=("--engine test+hidden_dim=32", "(the session's: test)"))
+    return Case(argv, [run], says=("--engine test --engine.field.hidden-dim 32", "(the session's: test)"))
 
 
 @case
