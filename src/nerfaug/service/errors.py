@@ -203,8 +203,8 @@ def public_text(text: str, root: Path) -> str:
     """`text` as a client may read it: a path under the service's `root` relative to it (as the
     client names files: sessions and datasets by their names), the root itself as "the service
     root", any other absolute path by its file name alone (the server's own layout is none of the
-    client's business); a quoted path is a value the client sent, kept as sent. The root counts as given (made absolute) and resolved, so a path shown
-    either way is relativised.
+    client's business); a quoted path is a value the client sent, kept as sent. The root counts
+    as given (made absolute) and resolved, so a path shown either way is relativised.
 
     Example:
         >>> public_text("weights from /srv/venv/lpips/alexnet.ckpt; data /srv/root/held-out/test", Path("/srv/root"))
