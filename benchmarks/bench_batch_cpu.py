@@ -1,19 +1,23 @@
-"""Trial batches on the CPU: the study protocol's runs alone (the reference engine) against the same
-runs in trial batches (the batched engine), in one sitting: throughput side by side, and the
-batched engine's equivalence by paired seeds.
+"""An engine version's acceptance on the CPU by paired seeds: the study protocol's runs of one
+engine against recorded runs of another, seed by seed, by the planned TOST (docs/study-plan.md,
+"acceptance of a new CPU engine version").
 
 Each arm is one sweep of the study protocol (`nerfaug.experiment.config.STUDY_PRESETS["study"]`:
 100 px, 6 initial views, 6 added at step 200, 2000 steps, 50 test views) over the given datasets
-and seeds, with every core busy: the reference arm one run per core, the batched arm one batch per
-core. Run k of both arms shares its seed, its initial views and (with "uniform") its added views,
-so d = PSNR(batched) - PSNR(alone) isolates the engine. Acceptance: a TOST of the mean of d
-inside +-`--bound` dB at alpha 0.05, and no seed more than `--max-seed` dB apart.
+and seeds. Run k of every arm shares its seed, its initial views and (with "uniform") its added
+views, so d = PSNR(one arm) - PSNR(other) isolates the engine. Modes:
+
+- default: runs alone against the same runs in batches of `--batch` (throughput side by side; a
+  batch computes each run as alone, so d is 0 unless the engine's batches change a number);
+- `--candidate-against ARMS.json`: today's default engine alone against the recorded runs alone;
+- `--nudged-against ARMS.json`: the rounding null, the reference engine with a nudge (`--nudge`);
+- `--check-against ARMS.json`: whether today's engine reproduces recorded runs to every digit.
 
     python benchmarks/bench_batch_cpu.py --data data/lego100 data/chair100 --trials 10 \\
-        --out /tmp/batch-bench --json docs/benchmarks/batch-cpu.json
+        --out /tmp/accept --candidate-against docs/benchmarks/batch-cpu/arms.json --json accept.json
 
-Printed and written: per arm wall seconds, CPU seconds and runs per core-hour; per run both
-PSNRs; the equivalence test over all runs and per dataset.
+Printed and written: wall and CPU seconds, runs per core-hour, per run both PSNRs, the
+equivalence test over all runs and per dataset.
 """
 
 from __future__ import annotations
@@ -120,6 +124,12 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--nudge", choices=sorted(NUDGES), default="every-parameter", help="the null's nudge")
     parser.add_argument(
+        "--candidate-against",
+        type=Path,
+        help="instead: run today's default engine alone (the candidate engine version) and judge it against the "
+        "runs alone of this earlier --json by the TOST (the acceptance of a new engine version)",
+    )
+    parser.add_argument(
         "--check-against",
         type=Path,
         help="instead: run the reference engine alone on the first --trials seeds and check it reproduces the "
@@ -137,6 +147,8 @@ def main(argv=None) -> int:
         return nudged_null(base, args, started)
     if args.check_against is not None:
         return reference_check(base, args)
+    if args.candidate_against is not None:
+        return candidate(base, args, started)
     arms = {
         "alone": arm(base.replace(batch=1), args.out / "alone", args.workers),
         "batched": arm(base.replace(batch=args.batch), args.out / "batched", args.workers),
@@ -222,6 +234,52 @@ def nudged_null(base, args, started: str) -> int:
         f"PSNR nudged - alone over {result['n_pairs']} seeds: mean {result['mean']:+.3f} dB, 90% CI "
         f"[{result['low']:+.3f}, {result['high']:+.3f}], TOST p = {result['p_value']:.4f}, largest |d| "
         f"{result['max_abs_difference']:.3f} dB; {figures['unchanged_runs']} of {len(pairs)} runs unchanged"
+    )
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(figures, indent=2) + "\n")
+    return 0
+
+
+def candidate(base, args, started: str) -> int:
+    """The acceptance of a new engine version: today's default engine alone against the recorded
+    reference runs alone, seed by seed (docs/study-plan.md, "acceptance of a new CPU engine version")."""
+    reference = json.loads(args.candidate_against.read_text())
+    before = {(r["scene"], r["trial"]): r["psnr_alone"] for r in reference["runs"]}
+    now = arm(base.replace(batch=1), args.out / "candidate", args.workers)
+    pairs = sorted(set(before) & set(now["results"]))
+    after = [now["results"][p]["metrics"]["psnr"] for p in pairs]
+    versions = sorted({str(now["results"][p].get("engine_version")) for p in pairs})
+    result = paired_equivalence(after, [before[p] for p in pairs], args.bound)
+    per_scene = {}
+    for scene in sorted({scene for scene, _ in pairs}):
+        index = [i for i, p in enumerate(pairs) if p[0] == scene]
+        per_scene[scene] = paired_equivalence([after[i] for i in index], [before[pairs[i]] for i in index], args.bound)
+    figures = {
+        "date": started,
+        "host": platform.node(),
+        "load_average_at_start": os.getloadavg(),
+        "torch": torch.__version__,
+        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
+        "engine_versions": versions,
+        "arm": {
+            "wall_s": now["wall_s"],
+            "cpu_s": now["cpu_s"],
+            "runs": now["runs"],
+            "runs_per_cpu_hour": now["runs"] / (now["cpu_s"] / 3600.0),
+        },
+        "runs": [
+            {"scene": s, "trial": t, "psnr_alone": b, "psnr_candidate": a, "difference": a - b}
+            for (s, t), a, b in zip(pairs, after, [before[p] for p in pairs])
+        ],
+        "equivalence": result,
+        "equivalence_per_scene": per_scene,
+    }
+    print(
+        f"PSNR candidate ({', '.join(versions)}) - reference over {result['n_pairs']} seeds: mean "
+        f"{result['mean']:+.3f} dB, 90% CI [{result['low']:+.3f}, {result['high']:+.3f}], TOST p = "
+        f"{result['p_value']:.4f} (bound +-{args.bound} dB), largest |d| {result['max_abs_difference']:.3f} dB: "
+        f"{'equivalent' if result['equivalent'] else 'NOT shown equivalent'}"
     )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

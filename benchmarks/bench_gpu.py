@@ -352,7 +352,7 @@ def trial(args) -> dict:
     configure_process(threads=args.threads)
     HashEncoding.default_kernel = args.hash_kernel  # the trial runs in this process (one worker)
     folder, meta = unpack(args.data, args.unpack_to)
-    # With --batch K: K seeds of the method, trained as one trial batch.
+    # With --batch K: K seeds of the method, trained as one batch.
     config = experiment_config(args, folder, meta, (args.method,), args.batch)
     warm = warm_up(folder, args.engine, device, args.warmup_steps, args.compile) if args.warmup_steps else 0.0
     _fresh(args.out)
@@ -467,10 +467,10 @@ def _print_trial(f: dict) -> None:
     )
     rows = [
         (
-            "trial batch",
+            "batch",
             f"{f['batch']} seeds ({f['engine_version']}), {f['trial_share_s']:.1f} s of the device a trial"
             if f["batch"] > 1
-            else "none (one run alone, the reference engine)",
+            else "none (one run alone)",
         ),
         ("s/step (training, both phases)", _fmt(f["s_per_step"], ".4f")),
         ("trial time (setup+train+select+eval)", f"{f['trial_s']:.1f} s"),
@@ -704,7 +704,7 @@ def parser() -> argparse.ArgumentParser:
             "--batch",
             type=int,
             default=1,
-            help="runs per trial batch (1: each alone, the reference engine); trial: this many seeds of the method",
+            help="runs per batch (1: each alone; a batch is the same engine); trial: this many seeds of the method",
         )
         if name == "trial":
             s.add_argument("--method", default="ours")

@@ -22,7 +22,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 PARTS = {  # a function of the run's code -> what it is
-    "run_trial_batch": "the whole batch",
+    "run_trials": "the whole batch",
     "train": "training (both runs)",
     "select_views": "selection",
     "evaluate_views": "evaluation (test views rendered and scored)",
@@ -47,9 +47,9 @@ def main(argv=None) -> dict:
     from nerfaug.cameras import image_rays
     from nerfaug.device import configure_process
     from nerfaug.experiment.config import PROTOCOL_PRESETS
-    from nerfaug.experiment.protocol import load_scene_data, run_trial_batch
+    from nerfaug.experiment.protocol import load_scene_data, run_trials
     from nerfaug.experiment.store import RunKey
-    from nerfaug.nerf.batch_trainer import BatchTrainer
+    from nerfaug.nerf.trainer import Trainer
 
     configure_process(threads=1)
     work = Path(tempfile.mkdtemp())
@@ -67,7 +67,7 @@ def main(argv=None) -> dict:
     keys = [RunKey("sphere", "uniform", 0), RunKey("sphere", "ours", 0)]
     profile = cProfile.Profile()
     profile.enable()
-    run_trial_batch(keys, {"sphere": work / "sphere"}, config, work / "runs")
+    run_trials(keys, {"sphere": work / "sphere"}, config, work / "runs")
     profile.disable()
     stats = pstats.Stats(profile).stats
     parts = {}
@@ -77,9 +77,9 @@ def main(argv=None) -> dict:
 
     # Test views one at a time against several per pass, on one trained run.
     data = load_scene_data(work / "sphere", config)
-    trainer = BatchTrainer([data.initial], config.engine_config("sphere"), [0], "cpu", progress=False)
+    trainer = Trainer(data.initial, config.engine_config("sphere"), 0, "cpu", progress=False)
     trainer.train(args.steps)
-    model, cameras = trainer.trained_run(0).model, data.test.cameras
+    model, cameras = trainer.model, data.test.cameras
     with torch.no_grad():
         start = time.perf_counter()
         alone = [model.render_image(cameras, i)["rgb"] for i in range(len(cameras))]

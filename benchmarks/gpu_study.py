@@ -174,8 +174,8 @@ def run(args) -> dict:
         device=args.device,
         preset=args.preset,
         table=table_path,
-        # Always trial batches (a batch of one included): every run of the study is of one engine version.
-        batch=max(2, most),
+        # The units' sizes are the scheduler's (`EngineSweep.run`); a batch's size changes no number.
+        batch=max(1, most),
     )
     plan = make_plan(spec, spec.command(), progress=False)
     sweep = EngineSweep(plan, args.engine, previous)
@@ -274,7 +274,7 @@ def _one_config(sweep, todo: list) -> list:
 
 def _memory_batch(args) -> int:
     """Runs a trial batch may hold on this GPU, by its free memory (`auto_batch_size`)."""
-    from nerfaug.nerf.batch import auto_batch_size
+    from nerfaug.nerf.batch_size import auto_batch_size
     from nerfaug.nerf.config import NerfConfig
 
     size, text = auto_batch_size(NerfConfig.preset(args.engine), args.device, 10**6)
@@ -291,7 +291,7 @@ def measure(sweep, key, most: int, args):
     from nerfaug.evaluation import psnr
     from nerfaug.experiment.budget import TimeModel
     from nerfaug.experiment.protocol import load_scene_data
-    from nerfaug.nerf.batch_trainer import BatchTrainer
+    from nerfaug.nerf.trainer import Trainer
 
     def sync():
         if sweep.config.device == "cuda" or str(sweep.config.device).startswith("cuda"):
@@ -303,14 +303,14 @@ def measure(sweep, key, most: int, args):
     engine = sweep.config.engine_config(key.scene)
     step_s, warm = {}, max(2, args.probe_steps // 4)
     for n in sorted({1, most}):
-        trainer = BatchTrainer([data.initial] * n, engine, list(range(n)), sweep.config.device, progress=False)
+        trainer = Trainer([data.initial] * n, engine, list(range(n)), sweep.config.device, progress=False)
         trainer.train(warm)
         sync()
         start = time.monotonic()
         trainer.train(warm + args.probe_steps)
         sync()
         step_s[n] = (time.monotonic() - start) / args.probe_steps
-    model = trainer.trained_run(0).model
+    model = trainer.runs[0].model
     start = time.monotonic()
     with torch.no_grad():
         render = model.render_image(data.test.cameras, 0)["rgb"].clamp(0, 1)

@@ -4,15 +4,21 @@ field, its value and the problem.
 
 Shared by every room that takes values from a user: the selection settings
 (`nerfaug.selection.config`), the capture core's requests (`nerfaug.capture.requests`) and, through
-them, the command line and the service. Nothing here imports torch or numpy.
+them, the command line and the service; the settings of a command checked when they are made
+(`Settings`: an experiment's protocol, a study's options). Nothing here imports torch or numpy.
 """
 
 from __future__ import annotations
 
-from dataclasses import fields
+from collections.abc import Callable
+from contextvars import ContextVar
+from dataclasses import fields, is_dataclass
 from functools import cache
+from typing import TypeVar
 
 from pydantic import ConfigDict, TypeAdapter, ValidationError, model_validator
+
+T = TypeVar("T")
 
 
 class RequestError(ValueError):
@@ -133,3 +139,79 @@ def is_checked(value: Schema) -> bool:
     return value.__dict__.get(_CHECKED, False) and all(
         is_checked(inner) for f in fields(value) if isinstance(inner := getattr(value, f.name), Schema)
     )
+
+
+# Set while a `Settings` instance is validated: pydantic builds its checked copy through the
+# dataclass's `__post_init__`, which must not validate again.
+_VALIDATING: ContextVar[bool] = ContextVar("nerfaug_settings_validating", default=False)
+
+
+def option_name(argument: str) -> str:
+    """A setting's path as its command-line option: "n_initial" -> "--n-initial",
+    "selection.min_polar" -> "--selection.min-polar", "methods[1]" -> "--methods"."""
+    return "--" + argument.partition("[")[0].replace("_", "-")
+
+
+class Settings:
+    """Base of the dataclasses of a command's settings (an experiment's protocol, a study's
+    options): each instance is validated when it is made (also by `dataclasses.replace` and by
+    tyro), by pydantic, from the bounds in its fields' annotations and the cross-field rules of its
+    `model_validator`s. A refused value is a `RequestError` (a ValueError) of one line naming the
+    setting as its option: "--n-initial 0: must be >= 1". A cross-field rule raises its own
+    ValueError, which already names the option.
+
+    Its fields' types are strict (`nerfaug.nerf.bounds`): an integer setting refuses 32.0, "32"
+    and True; a number refuses NaN, infinities and text.
+    """
+
+    def __post_init__(self) -> None:
+        if not _VALIDATING.get():
+            self.check()
+
+    def check(self) -> None:
+        """Validate this instance's fields, each against its annotation, then the rules between them.
+
+        Raises:
+            RequestError: a setting out of its bounds, named as its option.
+            ValueError: a rule between settings, in its own words.
+        """
+        token = _VALIDATING.set(True)
+        try:
+            adapter(type(self)).validate_python({f.name: getattr(self, f.name) for f in fields(self) if f.init})
+        except ValidationError as error:
+            first = error.errors()[0]
+            if not first.get("loc"):  # a cross-field rule: its message names the options
+                raise ValueError(problem_text(first)) from None
+            refused = RequestError.of(first)
+            raise RequestError(option_name(refused.argument), refused.value, refused.problem) from None
+        finally:
+            _VALIDATING.reset(token)
+
+
+def unchecked(build: Callable[[], T]) -> T:
+    """`build()`, with no `Settings` checked while it makes them: for presets made when a module
+    is imported (`--help` then builds no validator; each is checked when it is chosen, and a test
+    checks them all)."""
+    token = _VALIDATING.set(True)
+    try:
+        return build()
+    finally:
+        _VALIDATING.reset(token)
+
+
+def built_then_checked(build: Callable[[], T]) -> T:
+    """`build()` (a command-line parser's, which makes the `Settings` of the options given) with
+    no `Settings` checked while it makes them, then each one it returns checked: a refusal is then
+    the command's one line, not the parser's box (tyro draws its own around an error raised while
+    it makes its root class), and `--help`, which ends inside `build`, builds no validator."""
+    built = unchecked(build)
+    _check_inside(built)
+    return built
+
+
+def _check_inside(value) -> None:
+    if isinstance(value, Settings):
+        value.check()  # with the settings inside it
+    elif is_dataclass(value) and not isinstance(value, type):
+        for f in fields(value):
+            _check_inside(getattr(value, f.name))

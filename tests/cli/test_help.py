@@ -133,7 +133,9 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
 
     def make_plan(spec, command, **_):
         config = study_module.STUDY_PRESETS.choose(spec.preset, resolution=spec.resolution, device="cpu")
-        plan = study_module.StudyPlan(spec.out, config, ["test"], command=command)
+        plan = study_module.StudyPlan(
+            spec.out, config, ["test"], scenes=["lego"], datasets={"lego": "lego"}, command=command
+        )
         planned.append(plan)
         return plan
 

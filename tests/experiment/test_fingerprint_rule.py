@@ -102,14 +102,19 @@ def test_a_default_declared_not_neutral_is_hashed(monkeypatch):
     assert fingerprint(after) != fingerprint(before)
 
 
-def test_every_version_1_setting_is_hashed_at_every_value():
+def test_every_version_1_setting_is_hashed_at_every_value(monkeypatch):
     """The settings every recorded run hashed stay in the record at their defaults (a misspelt
     name in `VERSION_1` would drop one and move every recorded fingerprint)."""
+    from nerfaug.experiment import config as experiment_config
+
     record = ExperimentConfig(device="cpu").fingerprinted()
     assert VERSION_1 <= record.keys()
     assert record.keys() - VERSION_1 == set()  # compile, layouts, engine_version: at their neutral values
+    # A batch's size changes no number: it sets no run apart.
+    assert ExperimentConfig(device="cpu", batch=4).fingerprinted() == record
+    monkeypatch.setattr(experiment_config.ExperimentConfig, "engine_version", lambda self: "2")  # a new arithmetic
     assert {"compile", "layouts", "engine_version"} <= ExperimentConfig(
-        device="cpu", compile="inductor", layouts=2, batch=2
+        device="cpu", compile="inductor", layouts=2
     ).fingerprinted().keys()
 
 
@@ -122,7 +127,7 @@ def test_every_protocol_field_is_fingerprinted_unless_declared_not_to_be():
     names = {f.name for f in dataclasses.fields(ExperimentConfig)}
     assert NOT_FINGERPRINTED <= names
     record = base.fingerprinted()
-    for name in sorted(names - NOT_FINGERPRINTED - {"device", "batch", "selection", "round_every"}):
+    for name in sorted(names - NOT_FINGERPRINTED - {"device", "batch", "selection", "round_every", "round_growth"}):
         value = OTHER_VALUES[name] if name in OTHER_VALUES else getattr(base, name) + 1
         changed = base.replace(**{name: value}).fingerprinted()
         assert fingerprint(changed) != fingerprint(record), name
@@ -130,6 +135,9 @@ def test_every_protocol_field_is_fingerprinted_unless_declared_not_to_be():
     assert base.replace(round_every=50).fingerprinted() == record
     rounds = base.replace(rounds=3)
     assert fingerprint(rounds.replace(round_every=50).fingerprinted()) != fingerprint(rounds.fingerprinted())
+    assert base.replace(round_growth="per-view").fingerprinted() == record  # so does their growth
+    tight = rounds.replace(round_every=20)  # grown gaps of 100 steps a view would pass the last step
+    assert fingerprint(tight.replace(round_growth="per-view").fingerprinted()) != fingerprint(tight.fingerprinted())
     # What a run saves beside its numbers, and which runs a sweep makes, are not.
     for name, value in (("hemisphere_map", False), ("view_uncertainty", False), ("save_renders", 0), ("trials", 9)):
         assert name in NOT_FINGERPRINTED

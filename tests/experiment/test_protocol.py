@@ -43,7 +43,7 @@ def test_a_preset_is_a_fresh_copy_of_its_config_and_an_unknown_name_lists_the_kn
     assert tiny == PROTOCOL_PRESETS["tiny"] and tiny is not PROTOCOL_PRESETS["tiny"]
     tiny.field_lr["lego"] = 1.0  # a config is mutable: changing a copy leaves the preset alone
     assert "lego" not in PROTOCOL_PRESETS.choose("tiny").field_lr
-    assert (tiny.trials, tiny.steps, tiny.engine) == (2, 60, "test")
+    assert (tiny.trials, tiny.steps, str(tiny.engine)) == (2, 60, "test")
     assert PROTOCOL_PRESETS.choose("tiny", trials=3).trials == 3
     assert STUDY_PRESETS.choose("tiny") == PROTOCOL_PRESETS.choose("tiny").replace(view_uncertainty=False)
     with pytest.raises(ValueError, match="unknown preset 'fast'; choose one of: quick, paper, ablation, tiny"):

@@ -99,9 +99,9 @@ def test_one_round_keeps_the_record_and_fingerprint_it_always_had(toy_data, tmp_
     [
         ({"rounds": 7, "round_every": 1}, "--rounds 7: 7 rounds of --n-new 2 add 14 views, more than the 12"),
         ({"rounds": 4, "round_every": 10}, "--rounds 4: the last round would come at step 40"),
-        ({"rounds": 0}, "--rounds 0: must be an integer >= 1"),
-        ({"rounds": 2, "round_every": 0}, "--round-every 0: must be an integer >= 1"),
-        ({"rounds": 2, "batch": 2, "engine": "nerfacto-cpu"}, "--rounds 2: trial batches (--batch 2)"),
+        ({"rounds": 0}, "--rounds 0: must be >= 1"),
+        ({"rounds": 2, "round_every": 0}, "--round-every 0: must be >= 1"),
+        ({"rounds": 2.0}, "--rounds 2.0: Input should be a valid integer"),
     ],
 )
 def test_impossible_schedules_are_refused_in_one_line_naming_the_option(toy_data, changes, refusal):
@@ -115,9 +115,9 @@ def test_a_built_in_scenes_pool_bounds_the_views_all_rounds_add():
         check_config(tiny(rounds=5, n_new=3, round_every=5, scenes=("lego",)))
 
 
-def test_rounds_never_train_as_a_trial_batch_when_the_batch_is_chosen_automatically():
-    assert ExperimentConfig(rounds=3, device="cpu").batched() is False
-    assert ExperimentConfig(rounds=3, batch=1).batched() is False
+def test_rounds_are_checked_at_any_batch_size(toy_data):
+    """Runs of several rounds train in batches as alone: a batch passes the check a run alone passes."""
+    check_config(tiny(scenes=(str(toy_data),), rounds=2, round_every=5, batch=2, engine="nerfacto-cpu"))
 
 
 def test_the_time_estimate_covers_every_rounds_scoring_and_curve():
@@ -166,3 +166,62 @@ def test_run_and_study_take_the_schedule_on_the_command_line(monkeypatch, toy_da
     ]  # fmt: skip
     # A study of one round plans as it did: none of the schedule's options in its command.
     assert "--rounds" not in StudySpec(preset="tiny").command()
+
+
+# A batch of runs against the same runs alone: rounding that a CPU's kernels move (`make test-rounding`).
+@pytest.mark.rounding
+@pytest.mark.parametrize("engine", ["test", "nerfacto-cpu"])
+def test_a_batch_of_trials_records_what_each_run_records_alone(toy_data, tmp_path, engine):
+    """Runs of several rounds trained as one batch choose the same views and reach the same
+    metrics as each alone, with the same fingerprint; the record adds only the batch's size."""
+    config = tiny(rounds=2, n_new=2, round_every=10, steps=30, engine=engine)
+    keys = [RunKey("scene", "uniform", 0), RunKey("scene", "entropy", 1)]
+    together = protocol.run_trials(keys, {"scene": toy_data}, config.replace(batch=2), tmp_path / "batch")
+    for key in keys:
+        alone = protocol.run_trial(key, toy_data, config.replace(batch=1), tmp_path / "alone")
+        batched = together[key]
+        assert batched["chosen"] == alone["chosen"] and batched["fingerprint"] == alone["fingerprint"]
+        numbers = {name for name, value in alone["metrics"].items() if value is not None}  # LPIPS: no weights here
+        assert numbers >= {"psnr", "ssim"} and batched["metrics"].keys() == alone["metrics"].keys()
+        assert {n: batched["metrics"][n] for n in numbers} == pytest.approx(
+            {n: alone["metrics"][n] for n in numbers}, rel=1e-5
+        )
+        assert [r["chosen"] for r in batched["rounds"]] == [r["chosen"] for r in alone["rounds"]]
+        assert batched["batch_size"] == 2 and "batch_size" not in alone
+        assert batched.keys() - alone.keys() == {"batch_size"}
+    assert together[keys[0]]["metrics"] != together[keys[1]]["metrics"]
+
+
+def test_a_failing_run_of_a_batch_fails_alone(toy_data, tmp_path, monkeypatch):
+    original = protocol.select_views
+
+    def failing(method, *args, **kwargs):
+        if method == "entropy":
+            raise RuntimeError("this method broke")
+        return original(method, *args, **kwargs)
+
+    monkeypatch.setattr(protocol, "select_views", failing)
+    keys = [RunKey("scene", "uniform", 0), RunKey("scene", "entropy", 0)]
+    outcomes = protocol.run_trials(keys, {"scene": toy_data}, tiny(steps=20, batch=2), tmp_path)
+    assert isinstance(outcomes[keys[1]], RuntimeError) and outcomes[keys[0]]["method"] == "uniform"
+    # Alone, the run's failure is raised.
+    with pytest.raises(RuntimeError, match="this method broke"):
+        protocol.run_trial(keys[1], toy_data, tiny(steps=20), tmp_path / "alone")
+
+
+def test_a_batch_trains_with_the_compile_setting_it_is_fingerprinted_with(toy_data, tmp_path, monkeypatch):
+    built = []
+
+    class Recording(protocol.Trainer):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            built.append(self)
+
+    monkeypatch.setattr(protocol, "Trainer", Recording)
+    keys = [RunKey("scene", "uniform", 0), RunKey("scene", "uniform", 1)]
+    config = tiny(steps=12, add_at_step=6, batch=2, compile="eager")
+    outcomes = protocol.run_trials(keys, {"scene": toy_data}, config, tmp_path)
+    assert all(isinstance(outcome, dict) for outcome in outcomes.values())
+    (trainer,) = built
+    assert len(trainer) == 2 and trainer.compile_backend == "eager"
+    assert all(run.model.field._compiled_call_impl is not None for run in trainer.runs)

@@ -5,7 +5,9 @@ after 450, so only the same arithmetic keeps a whole run's losses within 1e-5)."
 
 import pytest
 
+from nerfaug.nerf import hash_cpu
 from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.encoding import HashEncoding
 
 # Recorded with the engine of commit e2511ee on an AMD EPYC (AVX2) CPU, torch 2.13.0, one
 # thread: `Trainer(views, preset, seed=3)` on the 4 sphere views, the loss of each of 12 steps,
@@ -48,7 +50,13 @@ RECORDED = {
 
 @pytest.mark.rounding
 @pytest.mark.parametrize("preset", list(RECORDED))
-def test_nerfacto_cpu_computes_the_numbers_recorded_before_its_speed_work(preset, engine_numbers):
+@pytest.mark.parametrize("kernel", ["torch", "cpu"])
+def test_nerfacto_cpu_computes_the_numbers_recorded_before_its_speed_work(preset, kernel, engine_numbers, monkeypatch):
+    """The reference path, and the fused CPU loop (`nerfaug.nerf.hash_cpu`: the same features,
+    gradients summed in another order) over these 12 steps too."""
+    if kernel == "cpu" and not hash_cpu.available():
+        pytest.skip("no C compiler built the fused CPU loop")
+    monkeypatch.setattr(HashEncoding, "default_kernel", kernel)
     got, _ = engine_numbers(NerfConfig.preset(preset), 12)
     # 1e-5 as the engine's other recorded numbers: CPUs with other vector units round differently.
     assert got == pytest.approx([float.fromhex(x) for x in RECORDED[preset]], rel=1e-5)

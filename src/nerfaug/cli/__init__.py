@@ -39,6 +39,7 @@ import tyro
 from nerfaug.cli.engine_options import ENGINE_COMMANDS, engine_settings_given, split_engine_options
 from nerfaug.errors import NerfaugError
 from nerfaug.registry import unknown
+from nerfaug.schema import built_then_checked
 
 # Each command's home, "module:function": a command's module is imported only when it runs, so
 # `nerfaug train --help` answers without loading torch (what the experiment commands' options need).
@@ -201,12 +202,14 @@ def parse(target, argv: list[str], prog: str):
     """tyro's parse of `argv` for the command `target`. A command with presets (a class with
     `PRESETS` and `from_preset`) is parsed twice: first for `--preset` alone, then in full with
     that preset's options as the default, so an option given changes the preset's value and one not
-    given keeps it. An unknown preset name starts from the default one, and the full parse refuses it."""
+    given keeps it. An unknown preset name starts from the default one, and the full parse refuses it.
+    The settings the options make (`nerfaug.schema.Settings`) are checked once tyro has built them,
+    so that a refusal is the command's one line."""
     if not hasattr(target, "from_preset"):
-        return tyro.cli(target, args=argv, prog=prog)
+        return built_then_checked(lambda: tyro.cli(target, args=argv, prog=prog))
     given, _ = tyro.cli(_Preset, args=argv, prog=prog, return_unknown_args=True, add_help=False)
     name = given.preset if given.preset in target.PRESETS else target.preset
-    return tyro.cli(target, args=argv, prog=prog, default=target.from_preset(name))
+    return built_then_checked(lambda: tyro.cli(target, args=argv, prog=prog, default=target.from_preset(name)))
 
 
 def _dispatch(argv: list[str]) -> None:

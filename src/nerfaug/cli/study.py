@@ -43,9 +43,10 @@ class Study(StudySpec):
         results_doc: also write this Markdown page (e.g. docs/results.md), figures beside it.
         hypotheses: whose planned hypotheses the summary judges (docs/study-plan.md): the
             procedural study's (H1-H4), the real-scene study's (R1-R4), the GPU study's (G1-G4),
-            none, or auto (chosen from the table's engines and scenes).
+            the study of rounds' (Q1-Q4), none, or auto (rounds when the runs added views in
+            rounds, else chosen from the table's engines and scenes).
         budget_s: start no run that would end more than this many seconds from now (by the
-            longest run or trial batch so far); the same command goes on with the rest.
+            longest run or batch so far); the same command goes on with the rest.
         selection: options of the selection methods (every one is part of the runs' fingerprint;
             left at the preset's, they change nothing); a method's own settings (e.g.
             ours-authors') apply over them.
@@ -59,7 +60,7 @@ class Study(StudySpec):
     force: bool = False
     summary_only: bool = False
     results_doc: ResultsDoc = None
-    hypotheses: Literal["auto", "procedural", "real", "gpu", "none"] = "auto"
+    hypotheses: Literal["auto", "procedural", "real", "gpu", "rounds", "none"] = "auto"
     budget_s: BudgetSeconds = None
     selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
     engine_settings: tyro.conf.Suppress[dict] = field(default_factory=dict)

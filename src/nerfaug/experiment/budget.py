@@ -1,6 +1,6 @@
-"""How long a sweep may go on: whether another unit of work (a run, or a trial batch) fits before
+"""How long a sweep may go on: whether another unit of work (a run, or a batch) fits before
 a deadline, judged by the longest unit so far (`Budget`), or by a model of this machine's times
-(`TimeModel`: how many runs the next trial batch may hold)."""
+(`TimeModel`: how many runs the next batch may hold)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ class Budget:
 
 @dataclass
 class TimeModel:
-    """How long a trial batch of given runs takes on this machine, from a measurement of the
+    """How long a batch of given runs takes on this machine, from a measurement of the
     machine itself (a few training steps at the study's size, one test view rendered) and then
     from the batches that finished: what a GPU slot's scheduler sizes its next batch by.
 
@@ -64,7 +64,7 @@ class TimeModel:
         return max(min(s0, s1), s0 + (s1 - s0) * (n - n0) / (n1 - n0))
 
     def predict(self, methods: list[str]) -> float:
-        """Seconds a trial batch of runs of `methods` (one entry per run) takes."""
+        """Seconds a batch of runs of `methods` (one entry per run) takes."""
         per_run = sum(
             self.n_test * self.view_s + self.overhead_s + self.select_s.get(m, self.default_select_s) for m in methods
         )

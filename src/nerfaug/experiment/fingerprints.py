@@ -17,7 +17,7 @@ would be a decision about the recorded studies. The rule:
 
 So a setting added with a neutral default moves no recorded fingerprint, and a run that sets it
 otherwise is never mixed with those that did not. A change of arithmetic that no setting names
-is a new engine version (`nerf.config.BATCH_ENGINE_VERSION` is one): recorded runs keep theirs.
+is a new engine version (`nerf.config.HASH_CPU_ENGINE_VERSION` is one): recorded runs keep theirs.
 
 Light: no torch (`nerfaug run --help` imports `experiment.config`, which imports this).
 """

@@ -47,9 +47,7 @@ from nerfaug.health import model_health
 from nerfaug.hemisphere import angles_from_pose
 from nerfaug.layouts import initial_in_half, layout_halves
 from nerfaug.maps import plot_hemisphere_map
-from nerfaug.nerf.batch_trainer import BatchTrainer
-from nerfaug.nerf.config import BATCH_ENGINE_VERSION
-from nerfaug.nerf.trainer import Trainer
+from nerfaug.nerf.trainer import Trainer, TrainingDiverged
 from nerfaug.oracle import PoolOracle
 from nerfaug.registry import did_you_mean
 from nerfaug.scenes import BUILTIN_SCENES
@@ -232,12 +230,14 @@ def cached_lpips():
     return load_lpips()
 
 
-def train_with_progress(trainer, until_step: int, folder: Path) -> None:
-    """Train to `until_step` in chunks, recording the step in `folder/progress.json` so a driver
-    in any process (or on any Ray node sharing the folder) can show it."""
+def train_with_progress(trainer, until_step: int, folders: list[Path]) -> None:
+    """Train to `until_step` in chunks, recording the step in each run's `folder/progress.json`
+    (`folders`, the runs still training) so a driver in any process (or on any Ray node sharing
+    the folder) can show it."""
     while trainer.step < until_step:
         trainer.train(min(until_step, trainer.step + PROGRESS_EVERY))
-        write_progress(folder, trainer.step)
+        for folder in folders:
+            write_progress(folder, trainer.step)
         if on_progress is not None:
             on_progress()
 
@@ -299,8 +299,8 @@ def choose_views(
     candidates: list[int] | None = None,
     generator: torch.Generator | None = None,
 ) -> tuple[object, list[int], Views]:
-    """The method's views for `run` at a round's step, from `trained` (a `Trainer` or a batch's
-    `TrainedRun`: the views it trains on now are those the method conditions on), and the
+    """The method's views for `run` at a round's step, from `trained` (its run of a `Trainer`,
+    `nerfaug.nerf.trainer.Run`: the views it trains on now are those the method conditions on), and the
     oracle's images of them; adds the seconds of both phases to `timing`.
 
     Args:
@@ -333,52 +333,131 @@ def choose_views(
 
 
 def run_trial(key: RunKey, dataset_dir: Path, config: ExperimentConfig, root: Path, progress: bool = False) -> dict:
-    """Run one (scene, method, trial) alone and write its folder; result.json is written last.
+    """Run one (scene, method, trial) alone (a batch of one, `run_trials`) and write its folder;
+    result.json is written last.
 
-    Returns the result record (also in result.json).
+    Returns the result record (also in result.json); raises what the run failed with.
+    """
+    outcome = run_trials([key], {key.scene: dataset_dir}, config, root, progress)[key]
+    if isinstance(outcome, BaseException):
+        raise outcome
+    return outcome
+
+
+@dataclass
+class _Trial:
+    """A run of a batch as the trial loop holds it: its start, index in the trainer, timing, and
+    its rounds with the one random source they draw from."""
+
+    run: RunStart
+    index: int
+    timing: dict
+    rounds: Rounds
+    generator: torch.Generator
+
+
+def run_trials(
+    keys: list[RunKey], dataset_dirs: dict[str, Path], config: ExperimentConfig, root: Path, progress: bool = False
+) -> dict[RunKey, dict | BaseException]:
+    """Run (scene, method, trial) runs of one engine configuration as one batch, trained in
+    lockstep by one `Trainer` (each run computed as it would be alone), and write each run's
+    folder: train on the initial views, add the method's views at each round's step, train on,
+    evaluate. A run that fails (at its start, in training, selection or evaluation) fails alone.
+
+    Args:
+        dataset_dirs: each scene's dataset folder, by the scene name in `keys`.
+
+    Returns:
+        Per key, its result record (also in its result.json, written last), or the exception it
+        failed with.
     """
     # A sweep worker's entry point (in-process, pool or Ray): its process-wide torch settings.
     configure_process(threads=config.threads_per_run)
-    timing: dict[str, float] = {}
-
+    outcomes: dict[RunKey, dict | BaseException] = {}
+    runs: list[RunStart] = []
     start = time.perf_counter()
-    run = start_run(key, dataset_dir, config, root)
+    for key in keys:
+        try:
+            runs.append(start_run(key, dataset_dirs[key.scene], config, root))
+        except Exception as error:  # noqa: BLE001 (one run's failure is its own)
+            if len(keys) == 1:
+                raise
+            outcomes[key] = error
+    if not runs:
+        return outcomes
+    if len({json.dumps(asdict(run.engine), sort_keys=True) for run in runs}) != 1:
+        raise ValueError("a batch trains runs of one engine configuration; group runs by engine first")
     trainer = Trainer(
-        run.data.initial, run.engine, seed=run.seed, device=config.device, progress=progress, compile=config.compile
+        [run.data.initial for run in runs],
+        runs[0].engine,
+        [run.seed for run in runs],
+        config.device,
+        progress=progress,
+        compile=config.compile,
     )
-    timing["setup"] = time.perf_counter() - start
+    setup = (time.perf_counter() - start) / len(runs)
+    # One random source for all rounds of a run: the first round draws as a run of one round always did.
+    trials = [
+        _Trial(run, k, {"setup": setup}, Rounds(len(run.data.pool), len(run.data.initial)), _generator(run.seed))
+        for k, run in enumerate(runs)
+    ]
 
-    steps = round_steps(config)
-    start = time.perf_counter()
-    train_with_progress(trainer, steps[0], run.folder)
-    timing["train_before"] = time.perf_counter() - start
+    def live() -> list[_Trial]:
+        for trial in trials:
+            failure = trainer.failure(trial.index)
+            if failure is not None and trial.run.key not in outcomes:
+                outcomes[trial.run.key] = failure
+        return [trial for trial in trials if trial.run.key not in outcomes]
 
-    # One random source for all rounds: the first round draws as a run of one round always did.
-    generator = torch.Generator().manual_seed(run.seed)
-    rounds = Rounds(len(run.data.pool), len(run.data.initial))
-    for index, step in enumerate(steps):
-        if index:
-            train_after(trainer, step, run.folder, timing)
+    def train_to(step: int, phase: str) -> None:
+        begin = time.perf_counter()
+        try:
+            train_with_progress(trainer, step, [trial.run.folder for trial in live()])
+        except TrainingDiverged as error:  # no run is left training
+            for trial in live():
+                outcomes[trial.run.key] = trainer.failure(trial.index) or error
+        for trial in live():  # each run's share of the batch's time
+            trial.timing[phase] = trial.timing.get(phase, 0.0) + (time.perf_counter() - begin) / len(trials)
+
+    def each(work) -> None:
+        for trial in live():
+            try:
+                work(trial)
+            except Exception as error:  # noqa: BLE001 (one run's failure is its own)
+                if len(trials) == 1:
+                    raise
+                outcomes[trial.run.key] = error
+
+    def choose(trial: _Trial, step: int) -> None:
+        run, rounds, trained = trial.run, trial.rounds, trainer.runs[trial.index]
         if config.rounds > 1:  # the curve's point before this round
-            rounds.measure(trainer.model, run.data.test, step, cached_lpips(), timing)
+            rounds.measure(trained.model, run.data.test, step, cached_lpips(), trial.timing)
         spent: dict[str, float] = {}
-        selection, chosen, new_views = choose_views(run, trainer, config, spent, rounds.remaining(), generator)
-        trainer.add_views(new_views)
+        selection, chosen, new_views = choose_views(run, trained, config, spent, rounds.remaining(), trial.generator)
+        trainer.add_views(new_views, trial.index)
         rounds.add(step, selection, chosen, [run.data.pool.names[i] for i in chosen], spent)
         for phase, seconds in spent.items():
-            timing[phase] = timing.get(phase, 0.0) + seconds
+            trial.timing[phase] = trial.timing.get(phase, 0.0) + seconds
 
-    train_after(trainer, config.steps, run.folder, timing)
-    # The first round's scores over the whole pool, with every view chosen in any round.
-    selection = dataclasses.replace(rounds.first, indices=torch.tensor(rounds.chosen, dtype=torch.long))
-    return finish_run(run, trainer, config, selection, rounds.chosen, timing, progress, rounds=rounds)
+    def finish(trial: _Trial) -> None:
+        rounds = trial.rounds
+        # The first round's scores over the whole pool, with every view chosen in any round.
+        selection = dataclasses.replace(rounds.first, indices=torch.tensor(rounds.chosen, dtype=torch.long))
+        trained, size = trainer.runs[trial.index], len(trials)
+        outcomes[trial.run.key] = finish_run(
+            trial.run, trained, config, selection, rounds.chosen, trial.timing, progress, size, rounds
+        )
+
+    for index, step in enumerate(round_steps(config)):
+        train_to(step, "train_after" if index else "train_before")
+        each(lambda trial, at=step: choose(trial, at))
+    train_to(config.steps, "train_after")
+    each(finish)
+    return outcomes
 
 
-def train_after(trainer, until_step: int, folder: Path, timing: dict) -> None:
-    """Training after the first round, to `until_step`, its seconds added to `timing["train_after"]`."""
-    start = time.perf_counter()
-    train_with_progress(trainer, until_step, folder)
-    timing["train_after"] = timing.get("train_after", 0.0) + time.perf_counter() - start
+def _generator(seed: int) -> torch.Generator:
+    return torch.Generator().manual_seed(seed)
 
 
 def finish_run(
@@ -389,14 +468,14 @@ def finish_run(
     chosen: list[int],
     timing: dict,
     progress: bool = False,
-    batch: dict | None = None,
+    batch_size: int = 1,
     rounds: Rounds | None = None,
 ) -> dict:
     """Evaluate a trained run on its test views and write its folder, result.json last.
 
     Args:
-        trained: a `Trainer`, or a trial batch's `TrainedRun` (model, train_views, history, device).
-        batch: for a run of a trial batch, {"size", "engine_version"}, kept in its record.
+        trained: the run of a `Trainer` (`nerfaug.nerf.trainer.Run`: model, train_views, history, device).
+        batch_size: the runs its batch trained (kept in its record when more than one).
         rounds: the run's rounds; with more than one, the record keeps each (`Rounds.record`).
 
     Returns the result record (also in result.json).
@@ -470,96 +549,11 @@ def finish_run(
         "device": describe_device(trained.device),
         "health": health.to_dict(),
     }
-    if batch is not None:
-        result["engine_version"], result["batch_size"] = batch["engine_version"], batch["size"]
+    if batch_size > 1:  # the batch's size changes no number: recorded, not fingerprinted
+        result["batch_size"] = batch_size
+    if config.engine_version() is not None:  # the reference engine's runs record none
+        result["engine_version"] = config.engine_version()
     if rounds is not None:
         result.update(rounds.record(evaluation.mean, len(data.test), config.steps))
     write_result(folder, result)
     return result
-
-
-def run_trial_batch(
-    keys: list[RunKey], dataset_dirs: dict[str, Path], config: ExperimentConfig, root: Path, progress: bool = False
-) -> dict[RunKey, dict | BaseException]:
-    """Run (scene, method, trial) runs of one engine as one trial batch, trained in lockstep
-    (`nerfaug.nerf.batch_trainer.BatchTrainer`), and write each run's folder as `run_trial` does.
-
-    Every run's record is what it would be alone (its seed, views, selection, evaluation and
-    fingerprint), with the batched engine's version and the batch's size. A run that fails
-    (at its start, in training, selection or evaluation) fails alone.
-
-    Args:
-        dataset_dirs: each scene's dataset folder, by the scene name in `keys`.
-
-    Returns:
-        Per key, its result record, or the exception it failed with.
-    """
-    if config.rounds > 1:  # the sweep refuses it before any run (`schedule.check_schedule`)
-        raise ValueError(f"--rounds {config.rounds}: trial batches add views in one round only")
-    configure_process(threads=config.threads_per_run)
-    outcomes: dict[RunKey, dict | BaseException] = {}
-    timings: dict[RunKey, dict] = {}
-    runs: list[RunStart] = []
-    start = time.perf_counter()
-    for key in keys:
-        try:
-            runs.append(start_run(key, dataset_dirs[key.scene], config, root))
-        except Exception as error:  # noqa: BLE001 (one run's failure is its own)
-            outcomes[key] = error
-    if not runs:
-        return outcomes
-    engines = {json.dumps(asdict(run.engine), sort_keys=True) for run in runs}
-    if len(engines) != 1:
-        raise ValueError("a trial batch trains runs of one engine configuration; group runs by engine first")
-    trainer = BatchTrainer(
-        [run.data.initial for run in runs], runs[0].engine, [run.seed for run in runs], config.device, progress=progress
-    )
-    batch = {"size": len(runs), "engine_version": BATCH_ENGINE_VERSION}
-    setup = (time.perf_counter() - start) / len(runs)
-    for run in runs:
-        timings[run.key] = {"setup": setup}
-
-    def train_to(step: int, phase: str) -> None:
-        begin = time.perf_counter()
-        trainer.train(step, callback=lambda at: _batch_progress(runs, trainer, at))
-        _batch_progress(runs, trainer, trainer.step)
-        for run in runs:  # each run's share of the batch's time
-            timings[run.key][phase] = (time.perf_counter() - begin) / len(runs)
-
-    def alive(index: int, run: RunStart) -> bool:
-        failure = trainer.failure(index)
-        if failure is not None and run.key not in outcomes:
-            outcomes[run.key] = failure
-        return run.key not in outcomes
-
-    train_to(config.add_at_step, "train_before")
-    chosen_by_run = {}
-    for index, run in enumerate(runs):
-        if not alive(index, run):
-            continue
-        try:
-            selection, chosen, new_views = choose_views(run, trainer.trained_run(index), config, timings[run.key])
-            trainer.add_views(index, new_views)
-            chosen_by_run[run.key] = (selection, chosen)
-        except Exception as error:  # noqa: BLE001
-            outcomes[run.key] = error
-    train_to(config.steps, "train_after")
-    for index, run in enumerate(runs):
-        if not alive(index, run):
-            continue
-        selection, chosen = chosen_by_run[run.key]
-        try:
-            outcomes[run.key] = finish_run(
-                run, trainer.trained_run(index), config, selection, chosen, timings[run.key], progress, batch
-            )
-        except Exception as error:  # noqa: BLE001
-            outcomes[run.key] = error
-    return outcomes
-
-
-def _batch_progress(runs: list[RunStart], trainer: BatchTrainer, step: int) -> None:
-    """Every run of a batch records the step in its folder, as `train_with_progress` does."""
-    for run in runs:
-        write_progress(run.folder, step)
-    if on_progress is not None:
-        on_progress()

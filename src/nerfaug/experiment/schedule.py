@@ -9,19 +9,47 @@ read it.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
-if TYPE_CHECKING:
-    from nerfaug.experiment.config import ExperimentConfig
+
+class Schedule(Protocol):
+    """The settings a schedule is made of, as an `ExperimentConfig` (`nerfaug.experiment.config`)
+    holds them. Named here without importing it: it imports this module, to check its schedule
+    with `check_schedule` whenever one is made."""
+
+    steps: int
+    add_at_step: int
+    n_new: int
+    rounds: int
+    round_every: int
+    pool: int
+    batch: int
+
+
+ExperimentConfig = Schedule  # what every function here is given
 
 CURVE_VIEWS = 8
 """Test views a learning curve's points are measured on between rounds (spread over the test
 views); the last point is the run's evaluation on all of them."""
 
 
+ROUND_GROWTH = ("fixed", "per-view")
+"""How the steps between two rounds are set: `round_every` each, or `round_every` per view in the
+model after the earlier round."""
+
+
 def round_steps(config: ExperimentConfig) -> list[int]:
-    """The training step of each round: `add_at_step`, then every `round_every` steps."""
-    return [config.add_at_step + r * config.round_every for r in range(config.rounds)]
+    """The training step of each round: `add_at_step`, then every `round_every` steps ("fixed"), or
+    `round_every` x the views in the model after the round before ("per-view").
+
+    Example: 4 initial views, one a round from step 200, `round_every` 20, per view: rounds at
+    200, 300 (+20 x 5 views), 420 (+20 x 6), ...
+    """
+    steps = [config.add_at_step]
+    for done in range(1, config.rounds):
+        views = config.n_initial + done * config.n_new if config.round_growth == "per-view" else 1
+        steps.append(steps[-1] + config.round_every * views)
+    return steps
 
 
 def added_views(config: ExperimentConfig) -> int:
@@ -40,17 +68,13 @@ def _refuse(name: str, value, problem: str) -> None:
 
 
 def check_schedule(config: ExperimentConfig) -> None:
-    """The schedule's settings against each other, the steps and a built-in scene's pool.
+    """The schedule's settings against each other, the steps and a built-in scene's pool: one of
+    `ExperimentConfig`'s rules between settings, run when a config is made (each setting's own
+    bounds, e.g. --rounds >= 1, are in its annotation).
 
     Raises:
         ValueError: one line naming the option, its value and what would be accepted.
     """
-    for name in ("rounds", "round_every"):
-        value = getattr(config, name)
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            _refuse(name, value, "must be an integer >= 1")
-    if config.add_at_step < 0:
-        _refuse("add_at_step", config.add_at_step, "must be >= 0")
     if config.steps <= config.add_at_step:
         _refuse(
             "steps",
@@ -63,16 +87,10 @@ def check_schedule(config: ExperimentConfig) -> None:
         _refuse(
             "rounds",
             config.rounds,
-            f"the last round would come at step {last} (--add-at-step {config.add_at_step} + "
-            f"{config.rounds - 1} x --round-every {config.round_every}), not before the last step (--steps "
-            f"{config.steps}); the views it adds would never be trained on",
-        )
-    if config.rounds > 1 and config.batch > 1:
-        _refuse(
-            "rounds",
-            config.rounds,
-            f"trial batches (--batch {config.batch}) add views in one round only; use --batch 1 (or 0, which "
-            "trains runs of several rounds alone)",
+            f"the last round would come at step {last} (--add-at-step {config.add_at_step}, then "
+            f"{config.rounds - 1} gaps of --round-every {config.round_every}"
+            f"{' per view in the model' if config.round_growth == 'per-view' else ''}), not before the last step "
+            f"(--steps {config.steps}); the views it adds would never be trained on",
         )
     if config.pool < config.n_new:
         _refuse("pool", config.pool, f"the pool must hold the {config.n_new} views to add")
@@ -92,4 +110,12 @@ def check_pool(config: ExperimentConfig, pool: int, where: str) -> None:
         )
 
 
-__all__ = ["CURVE_VIEWS", "added_views", "check_pool", "check_schedule", "curve_evaluations", "round_steps"]
+__all__ = [
+    "CURVE_VIEWS",
+    "ROUND_GROWTH",
+    "added_views",
+    "check_pool",
+    "check_schedule",
+    "curve_evaluations",
+    "round_steps",
+]

@@ -28,7 +28,7 @@ from nerfaug.data.prepare import PREPARED
 from nerfaug.device import resolve_device
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig, check_workers
 from nerfaug.experiment.layout import StudyFolder
-from nerfaug.experiment.protocol import prepare_scene, render_builtin, run_trial_batch, scene_folder
+from nerfaug.experiment.protocol import prepare_scene, render_builtin, run_trials, scene_folder
 from nerfaug.experiment.runfolder import write_error
 from nerfaug.experiment.store import RunKey, check_sweep, read_result, run_fingerprint
 from nerfaug.experiment.study_spec import PROCEDURAL_SCENES, StudySpec
@@ -235,13 +235,10 @@ class EngineSweep:
     """One engine's sweep of a study, opened for runs handed out a unit at a time by a caller that
     decides their number and order itself (a GPU slot's scheduler, `benchmarks/gpu_study.py`):
     study.json and sweep.json written and the datasets checked as `run_study` does; every unit
-    runs as a trial batch (its runs recorded with the batched engine's version, a batch of one
-    included), so a cell never mixes engine versions."""
+    runs as one batch (`run_trials`), each run computed as it would be alone."""
 
     def __init__(self, plan: StudyPlan, engine: str, table: dict | None = None):
         self.config = plan.engine_config(engine)
-        if not self.config.batched():
-            raise ValueError(f"--batch {self.config.batch}: an opened sweep runs trial batches; give --batch 2 or more")
         write_plan(plan)
         self.root = StudyFolder(plan.out).engine(engine).root
         self.record = sweep_record(self.config, plan.command, check_config(self.config))
@@ -257,10 +254,10 @@ class EngineSweep:
         return read_result(key.folder(self.root), expected) is None and self.recorded.get(key) != expected
 
     def run(self, keys: list[RunKey]) -> dict[RunKey, dict | str]:
-        """`keys` (runs of one engine configuration) as one trial batch. Per key, its result, or
+        """`keys` (runs of one engine configuration) as one batch. Per key, its result, or
         the one-line reason it failed (kept in its folder's error.json, as a sweep keeps it)."""
         try:
-            outcomes = run_trial_batch(keys, self.datasets, self.config, self.root)
+            outcomes = run_trials(keys, self.datasets, self.config, self.root)
         except Exception as error:  # noqa: BLE001 (the batch as a whole failed: each of its runs did)
             outcomes = dict.fromkeys(keys, error)
         done = {}
@@ -376,6 +373,7 @@ def make_plan(spec: StudySpec, command: list[str], progress: bool = True) -> Stu
         batch=spec.batch,
         rounds=spec.rounds,
         round_every=spec.round_every,
+        round_growth=spec.round_growth,
         **spec.schedule_changes(),
     )
     scenes = tuple(spec.scenes) if spec.scenes else PROCEDURAL_SCENES

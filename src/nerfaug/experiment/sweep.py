@@ -25,10 +25,10 @@ from nerfaug.device import device_kind
 from nerfaug.experiment import protocol
 from nerfaug.experiment.budget import Budget
 from nerfaug.experiment.config import ExperimentConfig, check_workers
-from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trial, run_trial_batch, scene_folder
+from nerfaug.experiment.protocol import builtin_dataset_digest, prepare_scene, run_trials, scene_folder
 from nerfaug.experiment.runfolder import FILES, read_progress, write_error
 from nerfaug.experiment.scene_views import split_captured
-from nerfaug.experiment.schedule import check_pool, check_schedule
+from nerfaug.experiment.schedule import check_pool
 from nerfaug.experiment.store import (
     IncompatibleResults,
     RunKey,
@@ -43,11 +43,9 @@ from nerfaug.experiment.store import (
     run_fingerprint,
 )
 from nerfaug.experiment.workers import worker_pool
-from nerfaug.nerf.config import batch_support
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
 from nerfaug.registry import did_you_mean
-from nerfaug.schema import RequestError
 from nerfaug.selection import METHODS, get_method
 
 Backend = Literal["local", "ray"]
@@ -108,7 +106,11 @@ def _need(ok: bool, name: str, value, problem: str) -> None:
 
 
 def check_config(config: ExperimentConfig) -> dict[str, dict]:
-    """Check every setting against the registries and the datasets, before any work starts.
+    """What a config's settings cannot say by themselves, checked before any work starts: each
+    setting's bounds and the rules between settings were checked when `config` was made
+    (`ExperimentConfig`). Here: the names looked up in registries that load torch (the methods,
+    the engine's encoding and sampler), and what needs the disk (each scene a built-in name or a
+    dataset folder, names apart in results, a built-in scene's size and pool, a dataset's views).
 
     Returns:
         Per scene (its name in results), what it runs on: {"builtin": name} or, for a user
@@ -119,7 +121,6 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
         ValueError: naming the setting, its value and what would be accepted.
         DatasetError: a user dataset is missing or malformed.
     """
-    _need(len(config.methods) > 0, "methods", config.methods, "give at least one selection method")
     for method in config.methods:
         _need(
             method in METHODS,
@@ -127,36 +128,10 @@ def check_config(config: ExperimentConfig) -> dict[str, dict]:
             method,
             f"unknown selection method; {did_you_mean(method, METHODS)}see `nerfaug methods`: {', '.join(METHODS)}",
         )
-    _need(len(set(config.methods)) == len(config.methods), "methods", config.methods, "a method is listed twice")
-    try:
-        config.selection.checked()  # the selection settings' one check
-    except RequestError as error:
-        option = "--selection." + error.argument.replace("_", "-")
-        raise ValueError(f"{option} {error.value!r}: {error.problem}") from None
     try:
         check_names(config.engine.config)
     except ValueError as error:
         raise ValueError(f"--engine {config.engine}: {error}") from None
-    _need(len(config.scenes) > 0, "scenes", config.scenes, "give at least one scene")
-    for name in (
-        "trials",
-        "n_new",
-        "n_initial",
-        "n_test",
-        "pool",
-        "resolution",
-        "render_samples",
-        "threads_per_run",
-        "layouts",
-    ):
-        value = getattr(config, name)
-        _need(isinstance(value, int) and value >= 1, name, value, "must be an integer >= 1")
-    _need(isinstance(config.batch, int) and config.batch >= 0, "batch", config.batch, "must be an integer >= 0")
-    if config.batch > 1:
-        reason = batch_support(config.engine.config)
-        _need(reason is None, "batch", config.batch, f"engine {str(config.engine)!r}: {reason}")
-    _need(config.seed >= 0, "seed", config.seed, "must be >= 0")
-    check_schedule(config)  # the steps, the rounds and the pool they draw on
     datasets: dict[str, dict] = {}
     for scene in config.scenes:
         name, folder = scene_name(scene), scene_folder(scene)
@@ -291,17 +266,11 @@ def sweep_record(config: ExperimentConfig, command: list[str] | None = None, dat
 
 
 def _run_unit(keys: list[RunKey], datasets: dict[str, Path], config: ExperimentConfig, root: Path) -> list[tuple]:
-    """Runs as a backend executes them (top-level so process pools and Ray can pickle it): one run
-    alone, or a trial batch. Returns (key, result, None) or (key, None, (error text, traceback))
-    per run: a failed run fails alone."""
-    if not config.batched():
-        (key,) = keys
-        try:
-            return [(key, run_trial(key, datasets[key.scene], config, root, progress=False), None)]
-        except Exception as error:  # noqa: BLE001 (one failed run must not end the sweep)
-            return [(key, None, _failure_text(error))]
+    """Runs as a backend executes them (top-level so process pools and Ray can pickle it): one
+    batch (`run_trials`; one run is a batch of one). Returns (key, result, None) or
+    (key, None, (error text, traceback)) per run: a failed run fails alone."""
     try:
-        outcomes = run_trial_batch(keys, datasets, config, root, progress=False)
+        outcomes = run_trials(keys, datasets, config, root, progress=False)
     except Exception as error:  # noqa: BLE001 (the batch as a whole failed: each of its runs did)
         return [(key, None, _failure_text(error)) for key in keys]
     return [
@@ -317,10 +286,10 @@ def _failure_text(error: BaseException) -> tuple[str, str]:
 
 
 def plan_units(todo: list[RunKey], config: ExperimentConfig, size: int) -> list[list[RunKey]]:
-    """The runs to do as the backend's units of work: one run each, or, when `config.batched()`,
-    trial batches of at most `size` runs of one engine configuration (scenes whose field learning
-    rate differs train apart), in plan order, so a sweep stopped part-way leaves whole trials."""
-    if not config.batched():
+    """The runs to do as the backend's units of work: batches of at most `size` runs of one engine
+    configuration (scenes whose field learning rate differs train apart), in plan order, so a
+    sweep stopped part-way leaves whole trials; one run each when `size` is 1."""
+    if size <= 1:
         return [[key] for key in todo]
     groups: dict[str, list[RunKey]] = {}
     for key in todo:
@@ -330,12 +299,17 @@ def plan_units(todo: list[RunKey], config: ExperimentConfig, size: int) -> list[
 
 
 def batch_size(config: ExperimentConfig, runs: int) -> int:
-    """How many runs a trial batch holds: `config.batch` when set, else as many as the device's
-    free memory holds by `nerfaug.nerf.batch.estimated_run_bytes` (at most `runs` and
-    `MAX_AUTO_BATCH`), with a line saying so."""
-    if config.batch > 1:
+    """How many runs a batch holds, the one place this is decided: `config.batch` when set; auto
+    (0): 1 on a CPU (where a batch gains little: BENCHMARKS.md, "Trial batches"), on a GPU as
+    many as the device's free memory holds by `nerfaug.nerf.batch_size.estimated_run_bytes` (at
+    most `runs` and `MAX_AUTO_BATCH`), with a line saying so. The size changes no run's numbers."""
+    if config.batch >= 1:
         return config.batch
-    from nerfaug.nerf.batch import auto_batch_size  # torch, only where runs are batched
+    from nerfaug.device import device_kind  # torch: only where runs are planned
+
+    if device_kind(config.device) != "cuda" or runs <= 1:
+        return 1
+    from nerfaug.nerf.batch_size import auto_batch_size
 
     size, text = auto_batch_size(config.engine.config, config.device, runs)
     console.print(text)
@@ -408,9 +382,9 @@ def run_sweep(
         kept = f"{skipped} completed run(s) kept" + (f", {elsewhere} recorded in the table" if elsewhere else "")
         console.print(f"{kept}, {len(todo)} to run")
 
-    units = plan_units(todo, config, batch_size(config, len(todo)) if config.batched() and todo else 1)
-    if config.batched() and todo:
-        console.print(f"{len(todo)} run(s) in {len(units)} trial batch(es) of up to {max(map(len, units))}")
+    units = plan_units(todo, config, batch_size(config, len(todo)) if todo else 1)
+    if len(units) < len(todo):
+        console.print(f"{len(todo)} run(s) in {len(units)} batch(es) of up to {max(map(len, units))}")
     deadline = None if budget_s is None else began + budget_s
     if backend == "ray":
         new_results, failed = _execute_ray(units, datasets, config, root, workers, address, progress)

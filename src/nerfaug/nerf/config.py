@@ -454,18 +454,17 @@ PRESETS["nerfacto-cpu-last-sample"] = dataclasses.replace(
 VARIANT_SEPARATOR = "+"
 
 
-BATCH_ENGINE_VERSION = "batched-1"
-"""The arithmetic of trial batches (`nerfaug.nerf.batch`), recorded with every run they train: a
-run alone (`Trainer`, the reference engine) rounds otherwise, so results of the two are never
-mixed in one cell of a study."""
+HASH_CPU_ENGINE_VERSION = "hash-cpu-1"
+"""The arithmetic of a run on the CPU whose hash grids (the field's, the proposal networks') run
+`nerfaug.nerf.hash_cpu`'s fused C loop: its sums in another order than the PyTorch path's, so its
+runs are never mixed with the reference engine's in one cell of a study. The reference engine
+(every run recorded before it; a run alone or in a batch of any size, `nerfaug.nerf.trainer`)
+records no version."""
 
 
-def batch_support(config: NerfConfig) -> str | None:
-    """Why engine `config` cannot train in trial batches (`nerfaug.nerf.batch`), or None when it can."""
-    if config.sampler.kind != "proposal":
-        kind = config.sampler.kind
-        return f"trial batches need the proposal sampler; this engine uses {kind!r}: run it with batch 1"
-    return None
+def uses_hash_grid(config: NerfConfig) -> bool:
+    """Whether engine `config` has a hash grid (its field's encoding, or proposal networks)."""
+    return config.field.encoding == "hash" or config.sampler.kind == "proposal"
 
 
 def _setting(base: NerfConfig, name: str, text: str, where: str):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import math
+import os
 
 import torch
 import torch.nn.functional as F
@@ -132,14 +133,17 @@ class HashEncoding(nn.Module):
 
     `kernel` picks how: "torch" (PyTorch operations, the reference: bit for bit the same on
     every run), "triton" (`nerfaug.nerf.hash_triton`'s fused kernels: one launch per pass
-    instead of ~25, gradients summed by atomic adds in no fixed order), or "auto" (Triton
-    on CUDA tensors where Triton is installed, else PyTorch; the default, `default_kernel`, which
-    a benchmark may set for the whole process). Points that need gradients of their own always
-    take the PyTorch path.
+    instead of ~25, gradients summed by atomic adds in no fixed order), "cpu"
+    (`nerfaug.nerf.hash_cpu`'s C loop on float32 CPU tensors, where a C compiler built it:
+    deterministic, about twice a training step's speed on one core), or "auto" (Triton on CUDA
+    tensors where Triton is installed, the C loop on CPU tensors where it is built, else
+    PyTorch; the default, `default_kernel`, which the environment variable
+    `NERFAUG_HASH_KERNEL` or a benchmark may set for the whole process). Points that need
+    gradients of their own always take the PyTorch path.
     """
 
-    KERNELS = ("auto", "torch", "triton")
-    default_kernel = "auto"
+    KERNELS = ("auto", "torch", "triton", "cpu")
+    default_kernel = os.environ.get("NERFAUG_HASH_KERNEL") or "auto"
 
     def __init__(
         self,
@@ -152,9 +156,10 @@ class HashEncoding(nn.Module):
         kernel: str | None = None,
     ):
         super().__init__()
+        where = "kernel" if kernel is not None else "the hash encoding's kernel (NERFAUG_HASH_KERNEL)"
         kernel = self.default_kernel if kernel is None else kernel
         if kernel not in self.KERNELS:
-            raise ValueError(f"kernel must be one of {', '.join(self.KERNELS)}, got {kernel!r}")
+            raise ValueError(f"{where} must be one of {', '.join(self.KERNELS)}, got {kernel!r}")
         self.kernel = kernel
         if (max_resolution + 1) * 2**log2_table_size >= 2**31:
             raise ValueError(
@@ -244,14 +249,35 @@ class HashEncoding(nn.Module):
             from nerfaug.nerf.hash_triton import FusedHashInterpolation  # needs Triton, an optional package
 
             return FusedHashInterpolation.apply(x, self.table, self)
+        if self.cpu_fused(x):
+            from nerfaug.nerf.hash_cpu import CpuHashInterpolation
+
+            return CpuHashInterpolation.apply(x, self.table, self)
         rows, weights = self.corners(x)
         return _HashInterpolation.apply(self.table, rows, weights)
 
     def fused(self, x: Tensor) -> bool:
         """Whether `forward(x)` runs the Triton kernels (see `kernel`)."""
-        if self.kernel == "torch" or x.requires_grad:
+        if self.kernel in ("torch", "cpu") or x.requires_grad:
             return False
         return self.kernel == "triton" or (x.is_cuda and triton_available())
+
+    @classmethod
+    def cpu_loop_selected(cls) -> bool:
+        """Whether an encoding of the default kernel runs the fused C loop on float32 CPU points:
+        the default ("auto" or "cpu", `default_kernel`) and the loop built (a C compiler present)."""
+        from nerfaug.nerf import hash_cpu
+
+        return cls.default_kernel in ("auto", "cpu") and hash_cpu.available()
+
+    def cpu_fused(self, x: Tensor) -> bool:
+        """Whether `forward(x)` runs the fused C loop (see `kernel`): float32 CPU points without
+        gradients of their own, where the loop is built; else the PyTorch path."""
+        if self.kernel not in ("auto", "cpu"):
+            return False
+        from nerfaug.nerf import hash_cpu
+
+        return hash_cpu.supports(x, self.table)
 
 
 class KPlanesEncoding(nn.Module):

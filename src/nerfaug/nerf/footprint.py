@@ -5,8 +5,8 @@ through creating a session.
 
 The estimate counts what grows with the settings: the parameters (with their gradients and Adam's
 two moments), the activations one training step keeps for its backward pass, and one render
-chunk's; not the dataset's images, which do not depend on the engine. (`nerf.batch`'s
-`estimated_run_bytes` sizes trial batches on a GPU the same way; it leaves out the MLPs' weights,
+chunk's; not the dataset's images, which do not depend on the engine. (`nerf.batch_size`'s
+`estimated_run_bytes` sizes batches on a GPU the same way; it leaves out the MLPs' weights,
 which are small at any sensible width.) Light: no torch.
 """
 

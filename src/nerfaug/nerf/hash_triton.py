@@ -107,7 +107,7 @@ def backward_kernel(
 
 def _launch(kernel, x: Tensor, tensor: Tensor, out: Tensor, encoding, per_run: int | None = None) -> None:
     """Run `kernel` over every (block of points, level) with the encoding's constants; points
-    `per_run` at a time belong to the successive runs of a trial batch (None: one run)."""
+    `per_run` at a time belong to the successive runs of a stacked table (None: one run)."""
     levels, features = encoding.num_levels, encoding.features_per_level
     if x.shape[0] == 0:  # no points (no live sample in a batch): nothing to launch
         return
@@ -135,8 +135,9 @@ class FusedHashInterpolation(torch.autograd.Function):
     """`HashEncoding`'s features of points (n, 3) in [0, 1] -> (n, levels * features), through
     the Triton kernels. Gradients reach the table only (the positions' are not computed).
 
-    For a trial batch's stacked encoding (`nerfaug.nerf.batch.StackedHashEncoding`), `per_run`
-    points at a time belong to the successive runs, each reading its own block of the table."""
+    With K runs' tables stacked into one (a batched GPU path; the engine trains each run through
+    its own encoding today, `nerfaug.nerf.trainer`), `per_run` points at a time belong to the
+    successive runs, each reading its own block of the table."""
 
     @staticmethod
     def forward(ctx, x: Tensor, table: Tensor, encoding, per_run: int | None = None) -> Tensor:

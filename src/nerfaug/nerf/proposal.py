@@ -61,17 +61,6 @@ def interlevel_loss(
     return loss
 
 
-def interlevel_loss_per_ray(
-    edges: Tensor, weights: Tensor, proposal_edges: list[Tensor], proposal_weights: list[Tensor]
-) -> Tensor:
-    """`interlevel_loss` of each ray alone: Tensor with shape (n_rays,), whose mean over rays is
-    `interlevel_loss` (up to rounding). For trial batches, whose runs each need their own loss."""
-    loss = weights.new_zeros(weights.shape[0])
-    for term in _interlevel_terms(edges, weights, proposal_edges, proposal_weights):
-        loss = loss + term.mean(dim=-1)
-    return loss
-
-
 def _interlevel_terms(edges, weights, proposal_edges, proposal_weights):
     """Per proposal level, the interlevel penalty of every final sample: Tensors (n_rays, n)."""
     edges, weights = edges.detach(), weights.detach()
@@ -154,8 +143,7 @@ def place_samples(
 
 
 class ProposalState(Protocol):
-    """What `place_samples_of` reads of a proposal sampler (`ProposalSampler`, or a trial batch's
-    `nerfaug.nerf.batch.BatchModel`)."""
+    """What `place_samples_of` reads of a proposal sampler (`ProposalSampler`)."""
 
     samples: tuple[int, ...]
     num_samples: int

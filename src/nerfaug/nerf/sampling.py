@@ -49,26 +49,8 @@ def unit_cube(points: Tensor, half_size: float) -> Tensor:
     return ((points + half_size) / (2.0 * half_size)).clamp(0.0, 1.0)
 
 
-class RunGenerators:
-    """The generators of the K runs of a trial batch, as one source of numbers for rows laid out
-    run-major: a draw of (K * n, ...) numbers takes run k's n rows from run k's generator, in the
-    order a run alone would draw them (`nerfaug.nerf.batch`)."""
-
-    def __init__(self, generators: list[torch.Generator]):
-        self.generators = list(generators)
-
-    def rand(self, shape: tuple[int, ...], device) -> Tensor:
-        """Uniform [0, 1) numbers with shape `shape` on `device`; shape[0] must be a multiple of K."""
-        rows, rest = divmod(shape[0], len(self.generators))
-        if rest:
-            raise ValueError(f"{shape[0]} rows do not split into {len(self.generators)} runs")
-        return torch.cat([_uniform((rows, *shape[1:]), g, device) for g in self.generators])
-
-
-def _uniform(shape: tuple[int, ...], generator: torch.Generator | RunGenerators | None, device) -> Tensor:
+def _uniform(shape: tuple[int, ...], generator: torch.Generator | None, device) -> Tensor:
     """Uniform [0, 1) numbers drawn on the generator's device, then moved to `device`."""
-    if isinstance(generator, RunGenerators):
-        return generator.rand(shape, device)
     gen_device = generator.device if generator is not None else device
     return torch.rand(shape, generator=generator, device=gen_device).to(device)
 

@@ -4,7 +4,8 @@ per scene), and a table per scene with each method's area under the curve, the s
 curve a comparison can use.
 
 Read from each run's result.json ("before_rounds" and "rounds", written by runs of more than one
-round); a results folder without such runs gets no section.
+round), or from a study table's row ("curve"); a results folder without such runs gets no section.
+The study page draws the same figure and tables per engine from its table alone.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import numpy as np
 
 from nerfaug.plotting import legend_below, new_figure, save_figure
 from nerfaug.report.collect import Results, Run
-from nerfaug.report.document import Block, Figure, Heading, Paragraph, Table, number
+from nerfaug.report.document import Block, Figure, Heading, Paragraph, Table, number, slug
 from nerfaug.statistics import summarise
 
 PSNR_DECIMALS = 2
@@ -25,6 +26,8 @@ def run_curve(run: Run) -> list[tuple[int, float]] | None:
     """A run's learning curve: (views in the model, test PSNR in dB) before its first round and
     after each round, views increasing; None for a run of one round or a record without the points."""
     result = run.result
+    if "curve" in result:  # a study table's row (`report.study_table`), already checked
+        return [(int(views), float(psnr)) for views, psnr in result["curve"]]
     rounds = result.get("rounds")
     start = result.get("before_rounds")
     if not isinstance(rounds, list) or len(rounds) < 2 or not isinstance(start, dict):
@@ -50,6 +53,17 @@ def curve_area(points: list[tuple[int, float]]) -> float:
     views = np.array([v for v, _ in points], dtype=float)
     psnr = np.array([p for _, p in points], dtype=float)
     return float(np.sum((views[1:] - views[:-1]) * (psnr[1:] + psnr[:-1]) / 2))
+
+
+def curve_mean(points) -> float:
+    """The area under a learning curve divided by the span of its views, dB: the curve's mean
+    height, the summary of a run's curve the study of rounds compares (its secondary outcome).
+
+    Example:
+        >>> curve_mean([(4, 20.0), (5, 22.0), (6, 22.0)])
+        21.5
+    """
+    return curve_area(points) / (points[-1][0] - points[0][0])
 
 
 def method_curves(results: Results, scene: str) -> dict[str, list[list[tuple[int, float]]]]:
@@ -115,32 +129,39 @@ def _table(results: Results, scene: str) -> Table | None:
     rows = []
     for method, runs in curves.items():
         area = summarise([curve_area(c) for c in runs])
+        mean = summarise([curve_mean(c) for c in runs])
         grouped = _by_views(runs)
         cells = [
             method,
             str(len(runs)),
             f"{number(area['median'], 1)} [{number(area['q1'], 1)}, {number(area['q3'], 1)}]",
+            f"{number(mean['median'], 2)} [{number(mean['q1'], 2)}, {number(mean['q3'], 2)}]",
         ]
         cells += [number(float(np.median(grouped[v])), PSNR_DECIMALS) if v in grouped else "" for v in counts]
         rows.append(cells)
     return Table(
-        ["method", "runs", "area, dB x views (median [q1, q3])"] + [f"PSNR at {v} views" for v in counts],
+        ["method", "runs", "area, dB x views (median [q1, q3])", "area / span of views, dB (median [q1, q3])"]
+        + [f"PSNR at {v} views" for v in counts],
         rows,
         [
             "Area under each run's curve of test PSNR against views in the model (trapezoidal), median and quartiles "
-            "over its runs; then the median PSNR at each view count. Points before the last are measured on a few "
+            "over its runs; the same divided by the span of views (the curve's mean height, the study of rounds' "
+            "secondary outcome); then the median PSNR at each view count. Points before the last are measured on a few "
             "test views spread over all of them (each round's record says how many), the last on every test view."
         ],
     )
 
 
-def learning_curve_section(results: Results, figure: Path | None) -> list[Block]:
-    """The learning curves' heading, figure and one table per scene; empty without runs in rounds."""
+def learning_curve_section(
+    results: Results, figure: Path | None, title: str = "Learning curves (views added in rounds)"
+) -> list[Block]:
+    """The learning curves' heading (`title`), figure and one table per scene; empty without runs
+    in rounds."""
     tables = [(scene, table) for scene in results.scenes if (table := _table(results, scene)) is not None]
     if not tables:
         return []
     blocks: list[Block] = [
-        Heading("Learning curves (views added in rounds)"),
+        Heading(title),
         Paragraph(
             "Each method chose its views in rounds, each round with the model trained on the views so far; "
             "after each round the runs were scored on test views. A curve starts at the initial views, before "
@@ -158,4 +179,32 @@ def learning_curve_section(results: Results, figure: Path | None) -> list[Block]
     return blocks
 
 
-__all__ = ["curve_area", "learning_curve_section", "method_curves", "plot_learning_curves", "run_curve"]
+def study_curve_figures(results: dict[str, Results], folder: Path) -> dict[str, Path]:
+    """A study's learning-curve figures, one per engine with runs in rounds (`results`: engine ->
+    its runs, as `report.study.Study.results`): engine -> FOLDER/learning_curves_<engine>.png."""
+    found = {}
+    for engine, runs in results.items():
+        if (path := plot_learning_curves(runs, Path(folder) / f"learning_curves_{slug(engine)}.png")) is not None:
+            found[engine] = path
+    return found
+
+
+def study_curve_blocks(results: dict[str, Results], figures: dict[str, Path]) -> list[Block]:
+    """The study page's learning curves: per engine with runs in rounds, its figure and per-scene
+    tables (each run's curve from the table's rows); empty for a study of one round."""
+    blocks: list[Block] = []
+    for engine, runs in results.items():
+        blocks += learning_curve_section(runs, figures.get(engine), f"Learning curves, engine {engine}")
+    return blocks
+
+
+__all__ = [
+    "curve_area",
+    "curve_mean",
+    "learning_curve_section",
+    "method_curves",
+    "plot_learning_curves",
+    "run_curve",
+    "study_curve_blocks",
+    "study_curve_figures",
+]

@@ -2,7 +2,8 @@
 computed from the study's cells and regimes, so the page never states one by hand. A hypothesis
 whose cells are not all run yet is "partial: n of m runs" unless the cells run already decide it;
 beside a real-scene "not supported" stands the smallest effect its test could have seen. The GPU
-study's G1-G4 are judged by `nerfaug.report.study_verdicts`.
+study's G1-G4 are judged by `nerfaug.report.study_verdicts`, the study of rounds' Q1-Q4 by
+`nerfaug.report.rounds_verdicts`.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import math
 import numpy as np
 
 from nerfaug.report.document import Block, Heading, Paragraph, Table, p_value
+from nerfaug.report.rounds_verdicts import rounds_blocks
 from nerfaug.report.study import OURS, REFERENCE, Study, regime_comparisons
 from nerfaug.report.study_verdicts import (
     GPU_ENGINES,
@@ -295,7 +297,7 @@ REAL_HYPOTHESES = (
 
 
 GPU_HEADERS = ["", "hypothesis", "test", "verdict", "evidence", "smallest effect it could have seen", "dead runs"]
-KINDS = ("auto", "procedural", "real", "gpu", "none")
+KINDS = ("auto", "procedural", "real", "gpu", "rounds", "none")
 """Which plan's hypotheses a page judges: `auto` chooses from the table's engines and scenes."""
 
 
@@ -304,14 +306,17 @@ def _base(engine: str) -> str:
 
 
 def plan_kind(study: Study, plan: str = "auto") -> str:
-    """The plan whose hypotheses the page judges: the GPU study's when the table holds only the
-    paper engine on that plan's scenes; the procedural plan's when only its three scenes; the
+    """The plan whose hypotheses the page judges: the study of rounds' when its runs added views in
+    more than one round; the GPU study's when the table holds only the paper engine on that plan's
+    scenes; the procedural plan's when only its three scenes; the
     real-scene plan's when only its scenes; else none (a study of a user's own scenes has no plan
     of this project's to judge). `plan` other than "auto" is taken as given."""
     if plan not in KINDS:
         raise ValueError(f"hypotheses: {plan!r} is not one of {', '.join(KINDS)}")
     if plan != "auto":
         return plan
+    if int(study.plan.get("config", {}).get("rounds", 1)) > 1:
+        return "rounds"
     scenes, engines = {c.scene for c in study.cells}, {_base(e) for e in study.engines}
     if engines and engines <= set(GPU_ENGINES) and scenes <= {*GPU_SCENES, GPU_HELD_BACK}:
         return "gpu"
@@ -400,6 +405,8 @@ def hypotheses_blocks(study: Study, plan: str = "auto") -> list[Block]:
     kind = plan_kind(study, plan)
     if kind == "gpu":
         return gpu_blocks(study)
+    if kind == "rounds":
+        return rounds_blocks(study)
     if kind not in ("procedural", "real"):
         return []
     if kind == "real":

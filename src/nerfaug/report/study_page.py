@@ -29,6 +29,7 @@ from nerfaug.report.document import (
     to_markdown,
 )
 from nerfaug.report.figures import method_colours, plot_boxplots
+from nerfaug.report.learning_curve import study_curve_blocks, study_curve_figures
 from nerfaug.report.pooled import plot_paired_differences
 from nerfaug.report.study import ALPHA, BOOTSTRAP_SEED, OURS, REFERENCE, Cell, Study, collect_study
 from nerfaug.report.study_hypotheses import hypotheses_blocks
@@ -105,8 +106,8 @@ def _header(study: Study) -> list[Block]:
         ),
         f"code versions of the runs: {', '.join(versions) or 'none'}",
         f"engines run: {', '.join(study.engines) or 'none'}",
-        "engine versions (runs trained alone: reference; in trial batches: batched-N; a cell never mixes "
-        f"two): {'; '.join(engine_versions) or 'none'}",
+        "engine versions (reference: today's engine, alone or in a batch; a cell never mixes two): "
+        f"{'; '.join(engine_versions) or 'none'}",
         _empty_runs(study),
         f"scenes: {', '.join(plan.get('scenes', []))}; methods: {', '.join(plan.get('methods', []))}",
         f"trials per (scene, engine, method): {plan.get('trials', '?')} "
@@ -436,6 +437,7 @@ def study_blocks(study: Study, figures: dict, plan: str = "auto") -> list[Block]
     blocks += _which_method(study) + _methods_section(study)
     blocks += [Heading("Per scene and engine: the paired test"), where_wins_table(study)]
     blocks += _regime_section(study, figures) + hypotheses_blocks(study, plan) + _incomplete_section(study)
+    blocks += study_curve_blocks(study.results, {e: p for (kind, e, _), p in figures.items() if kind == "curves"})
     blocks.append(Heading("Per scene and engine"))
     blocks.append(
         Paragraph(
@@ -516,6 +518,7 @@ def make_study_figures(study: Study, folder: Path) -> dict:
     cells = [(study.results[c.engine], c.scene, f"{c.scene}, {c.engine}") for c in study.cells]
     if (path := plot_paired_differences(cells, study.methods, REFERENCE, folder / "paired_psnr.png")) is not None:
         figures[("paired", "", "")] = path
+    figures |= {("curves", e, ""): p for e, p in study_curve_figures(study.results, folder).items()}
     return figures
 
 

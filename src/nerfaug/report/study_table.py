@@ -14,12 +14,14 @@ again). Written as JSON, one run per line, rows sorted by (engine, scene, method
                         "test_views": [name, ...], "views": {"test_rule": ..., ...}}},
      "runs": [{"engine", "scene", "method", "trial", "seed", "psnr", "ssim", "lpips",
                "lpips_status", "chosen", "chosen_poses", "code_version", "fingerprint",
-               "layout"?, "uniform_fill"?}, ...]}
+               "layout"?, "uniform_fill"?, "curve"?}, ...]}
 
 A scene's `initial_poses` are its first (or only) initial layout's; a study with several layouts
 lists the others under `layouts`, and a run started from one of them has its `layout` (absent: 0).
 A run whose sampler found fewer positive scores than views to choose has `uniform_fill`: how many
-of its views were drawn uniformly (absent: 0).
+of its views were drawn uniformly (absent: 0). A run that added its views in rounds has `curve`:
+its learning curve, [[views in the model, test PSNR], ...] before its first round and after each
+(absent for a run of one round).
 `halves` gives, per layout, the azimuth window its initial views were taken from; `test_views` and
 `views` record which views the runs were scored on and how they were chosen (each absent in tables
 of studies run before it was recorded).
@@ -41,6 +43,7 @@ from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.runfolder import read_selection
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.report.collect import ReportError, Results, Run, collect_results
+from nerfaug.report.learning_curve import curve_mean, run_curve
 
 TABLE_FORMAT, TABLE_VERSION = "nerfaug-study-table", 1
 POSE_DECIMALS = 6
@@ -59,7 +62,7 @@ ROW_FIELDS = (
     "code_version",
     "fingerprint",
 )
-OPTIONAL_ROW_FIELDS = ("layout", "uniform_fill", "engine_version", "empty")
+OPTIONAL_ROW_FIELDS = ("layout", "uniform_fill", "engine_version", "empty", "curve")
 # The reference engine (a run trained alone) has no recorded version: every earlier row is one.
 REFERENCE_ENGINE_VERSION = ""
 
@@ -93,6 +96,9 @@ class RunRow:
     empty: bool = False
     """Its NeRF rendered its training views as background only (`nerfaug.health`); runs made
     before the check read False."""
+    curve: tuple = ()
+    """Its learning curve, ((views in the model, test PSNR), ...), views increasing; empty for a
+    run of one round (`report.learning_curve.run_curve`)."""
 
     @property
     def key(self) -> tuple[str, str, str, int]:
@@ -100,6 +106,12 @@ class RunRow:
 
     def metric(self, name: str) -> float | None:
         return getattr(self, name)
+
+    @property
+    def auc(self) -> float | None:
+        """The area under its learning curve divided by the span of views (dB: the curve's mean
+        height, the rounds study's secondary outcome); None for a run of one round."""
+        return curve_mean(self.curve) if len(self.curve) >= 2 else None
 
     def poses(self) -> np.ndarray:
         """The chosen views' camera-to-world matrices, shape (k, 4, 4)."""
@@ -149,6 +161,7 @@ def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
         uniform_fill=int(selection.raw.get("uniform_fill", 0)),
         engine_version=str(result.get("engine_version", REFERENCE_ENGINE_VERSION)),
         empty=bool(result.get("health", {}).get("empty", False)),
+        curve=tuple((views, psnr) for views, psnr in run_curve(run) or ()),
     )
     return row, rounded_poses(selection.train_poses)
 
@@ -220,8 +233,9 @@ def row_dict(row: RunRow) -> dict:
     are not their defaults, so tables of one layout, whose methods always chose by their scores,
     trained by the reference engine, read as they always have."""
     record = asdict(row)
+    record["curve"] = [list(point) for point in record["curve"]]
     for optional in OPTIONAL_ROW_FIELDS:
-        if record[optional] == RunRow.__dataclass_fields__[optional].default:
+        if record[optional] in (RunRow.__dataclass_fields__[optional].default, []):
             del record[optional]
     return record
 
@@ -276,7 +290,12 @@ def make_table(
 
 
 def table_rows(table: dict) -> list[RunRow]:
-    return [RunRow(**run) for run in table["runs"]]
+    return [_row(run) for run in table["runs"]]
+
+
+def _row(run: dict) -> RunRow:
+    """A table's run as a row, its curve as tuples (a row is frozen: hashable to the last field)."""
+    return RunRow(**run | {"curve": tuple(tuple(point) for point in run.get("curve", ()))})
 
 
 def table_bytes(table: dict) -> bytes:
@@ -340,7 +359,21 @@ def _check_row(path: Path, index: int, run) -> RunRow:
         raise _refuse(path, f"{where}.chosen_poses", "not a list of 3x4 matrices") from None
     if poses.shape[0] != len(run["chosen"]) or not np.isfinite(poses).all():
         raise _refuse(path, f"{where}.chosen_poses", f"{poses.shape[0]} finite poses expected for {run['chosen']}")
-    return RunRow(**run)
+    if "curve" in run and not _is_curve(run["curve"]):
+        raise _refuse(path, f"{where}.curve", f"{run['curve']!r} is not [[views, PSNR], ...] with views increasing")
+    return _row(run)
+
+
+def _is_curve(curve) -> bool:
+    """[[views, PSNR], ...]: at least two points, views integers increasing, PSNR numbers."""
+    if not isinstance(curve, list) or len(curve) < 2:
+        return False
+    if not all(isinstance(p, list) and len(p) == 2 for p in curve):
+        return False
+    views = [p[0] for p in curve]
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in views) or views != sorted(set(views)):
+        return False
+    return all(_number(p[1]) is not None and not math.isnan(p[1]) for p in curve)
 
 
 def read_table(path: Path) -> dict:
@@ -387,7 +420,8 @@ def engine_results(table: dict, engine: str) -> Results:
             r.method,
             r.trial,
             Path("."),
-            {"metrics": {"psnr": r.psnr, "ssim": r.ssim, "lpips": r.lpips}, "lpips_status": r.lpips_status},
+            {"metrics": {"psnr": r.psnr, "ssim": r.ssim, "lpips": r.lpips}, "lpips_status": r.lpips_status}
+            | ({"curve": [list(point) for point in r.curve]} if r.curve else {}),
         )
         for r in rows
     ]

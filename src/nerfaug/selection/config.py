@@ -8,7 +8,7 @@ modes are `nerfaug.uncertainty.choices`'.
 
 Each field's bounds are in its annotation, checked by pydantic in one place, `checked()` (a
 `nerfaug.schema.Schema`): a proposal's request checks its settings with it (`ProposalRequest`), an
-experiment before its sweep (`experiment.sweep.check_config`). tyro builds the options without
+experiment's config when it is made (`experiment.config.ExperimentConfig`). tyro builds the options without
 checking them, so a refused value is one line naming its option.
 
 Nothing here imports torch, nor numpy until a metric is checked: `nerfaug run`, `study` and
