@@ -38,10 +38,16 @@ def mark(folder: Path, kind: str) -> Path:
 
 
 def marked(folder: Path, kind: str | None = None) -> bool:
-    """Whether `folder` holds nerfaug's marker (of `kind`, when given)."""
+    """Whether `folder` holds nerfaug's marker (of `kind`, when given).
+
+    Raises:
+        PathRefused: the marker leads out of `folder` (a link planted in its place, which would
+            lend the folder an outside file's ownership): one line naming it; nothing is read.
+    """
+    path = runfiles.path_in(folder, MARKER)  # before the read: its refusal is not an unreadable marker
     try:
-        data = json.loads(runfiles.read_text(folder, MARKER))
-    except (OSError, ValueError):  # PathRefused too: a marker leading outside the folder marks nothing
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
         return False
     return isinstance(data, dict) and (kind is None or data.get("kind") == kind)
 

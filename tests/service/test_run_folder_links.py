@@ -1,7 +1,7 @@
 """Over HTTP, nothing inside a session's folder leads out either (`nerfaug.runfiles`): a link
 planted in a session's folder in place of its candidate pool, proposals folder, session.json,
 checkpoint, lock, dataset copy or its image folder, leading to an outside copy, is answered 422 in
-one line naming the file (`ROOT/s/pool.json`), never where the link leads; nothing
+one line naming the file from the service root (`s/pool.json`), never where the link leads; nothing
 outside is read into an answer or written, and the session stays as it was.
 
 In process (FastAPI's test client over the app), on a session of 4 of 16 views of 8x8 pixels (a
@@ -81,7 +81,8 @@ def test_a_link_out_of_a_sessions_folder_is_answered_422_naming_it(root, tmp_pat
     assert answer.status_code == 422, answer.text
     detail = answer.json()["detail"]
     shown = {"proposals": "proposals/proposal_000.json", "dataset/train": "dataset/train/new_view.png"}
-    assert detail.startswith(f"{run / shown.get(name, name)}: ") and f"leads outside {run}" in detail, detail
+    # Named from the service root, as the client names the session: never the server's own layout.
+    assert detail.startswith(f"s/{shown.get(name, name)}: ") and "leads outside s" in detail, detail
     assert "\n" not in detail and str(outside) not in detail
     assert files_of(outside) == before_outside
     assert files_of(run, leave_out=(".lock",)) == before_run

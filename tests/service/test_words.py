@@ -69,7 +69,7 @@ def test_public_text_makes_paths_relative_to_the_root_and_hides_the_others():
     text = "from /srv/sessions/s1/dataset/transforms.json, weights /opt/venv/lpips/alexnet.ckpt, see https://x.org/a/b"
     shown = public_text(text, root)
     assert shown == "from s1/dataset/transforms.json, weights alexnet.ckpt, see https://x.org/a/b"
-    assert public_text("the root /srv/sessions", root) == "the root ."
+    assert public_text("leads outside /srv/sessions, the folder", root) == "leads outside the service root, the folder"
 
 
 def test_the_service_scores_the_views_a_sparse_start_kept_apart(tmp_path):

@@ -19,6 +19,11 @@ and a study folder (`nerfaug study --out`)::
       <engine>/                        a results folder per engine
       study-table.json                 the per-run table (unless --table names another file)
       study.md, figures/               the summary, generated from the table alone
+
+The folders a sweep or a study fills with data (`datasets/`, the cache, an engine's folder) are
+named here through `nerfaug.runfiles.checked`: one that leads out of the results or study folder
+(a symbolic link planted in place of `datasets/` or `<engine>/`) is refused in one line naming it
+(`PathRefused`) before anything is rendered, read or written through it.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from nerfaug import runfiles
 from nerfaug.containment import is_inside
 
 TRIAL_NAME = re.compile(r"trial_(\d+)")
@@ -71,13 +77,13 @@ class ResultsFolder:
         return self.root / "superseded"
 
     def dataset(self, scene: str, resolution: int) -> Path:
-        """Where a built-in scene is rendered for these runs."""
-        return self.root / "datasets" / f"{scene}-{resolution}px"
+        """Where a built-in scene is rendered for these runs (`PathRefused`: it leads out)."""
+        return runfiles.checked(self.root, Path("datasets", f"{scene}-{resolution}px"))
 
     @property
     def dataset_cache(self) -> Path:
-        """Where the runs share their downscaled datasets."""
-        return self.root / "datasets" / "cache"
+        """Where the runs share their downscaled datasets (`PathRefused`: it leads out)."""
+        return runfiles.checked(self.root, Path("datasets", "cache"))
 
     @property
     def report(self) -> tuple[Path, Path]:
@@ -120,10 +126,10 @@ class StudyFolder:
         return self.root / "figures"
 
     def engine(self, name: str) -> ResultsFolder:
-        """The results folder of one engine's runs."""
-        return ResultsFolder(self.root / name)
+        """The results folder of one engine's runs (`PathRefused`: it leads out of the study folder)."""
+        return ResultsFolder(runfiles.checked(self.root, name))
 
     def dataset(self, resolution: int, scene: str) -> Path:
         """Where a built-in scene is rendered once for every engine (named by the scene, so results
-        and per-scene settings know it by its name)."""
-        return self.root / "datasets" / f"{resolution}px" / scene
+        and per-scene settings know it by its name; `PathRefused`: it leads out)."""
+        return runfiles.checked(self.root, Path("datasets", f"{resolution}px", scene))

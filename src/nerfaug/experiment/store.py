@@ -266,6 +266,8 @@ def check_sweep(root: Path, sweep: dict, force: bool = False) -> Path | None:
             f"{root}: not empty and not a nerfaug results folder (no {path.name}), so nothing is "
             "written there; choose a new or empty folder for --out"
         )
+    # datasets/ or its cache leading out (a link): PathRefused, before anything is written.
+    runfiles.path_in(root, results.dataset_cache.relative_to(root))
     moved = None
     if force:
         if folders or previous is not None:

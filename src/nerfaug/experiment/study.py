@@ -347,8 +347,9 @@ def with_design(record: dict, out: Path) -> dict:
     settings = dict(record.get("engine_settings", {}))
     for engine in record.get("engines", []):
         try:
-            fingerprinted = json.loads(StudyFolder(out).engine(engine).sweep.read_text())["fingerprinted"]
-        except (OSError, ValueError, KeyError, TypeError):
+            results = StudyFolder(out).engine(engine)
+            fingerprinted = json.loads(runfiles.read_text(results.root, results.sweep.name))["fingerprinted"]
+        except (OSError, ValueError, KeyError, TypeError):  # PathRefused too: the sweep then refuses it
             continue
         found = {k.removeprefix("engine."): v for k, v in fingerprinted.items() if k.startswith("engine.")}
         settings[engine] = found or settings.get(engine, {})

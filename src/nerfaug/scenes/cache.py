@@ -17,6 +17,7 @@ from pathlib import Path
 
 import torch
 
+from nerfaug import runfiles
 from nerfaug.data import Views, load_dataset
 
 CACHE_FORMAT = 1
@@ -62,9 +63,13 @@ def load_split_cached(
 
     Returns:
         Views with every image in memory, equal (bit for bit) to an uncached load.
+
+    Raises:
+        PathRefused: the entry leads out of `cache_dir` (a link planted in its place): neither
+            read nor replaced.
     """
     digest = digest or folder_digest(folder)
-    path = cache_path(cache_dir, digest, split, downscale)
+    path = runfiles.path_in(cache_dir, cache_path(cache_dir, digest, split, downscale).name)
     if path.exists():
         lazy = load_dataset(folder, split, downscale=downscale, lazy=True)
         try:

@@ -54,8 +54,8 @@ from nerfaug.service.errors import (
     headers_of,
     meant,
     problems_line,
+    public_answer,
     public_text,
-    status_of,
 )
 from nerfaug.service.hub import SessionHub
 from nerfaug.service.limits import MAX_CAPTURES_PER_REQUEST, MEGABYTE, BodyLimit
@@ -97,7 +97,7 @@ def _answer(request: Request, error: Exception) -> JSONResponse:
     """A library error as its HTTP status and one line (`status_of`)."""
     if isinstance(error, ValidationError):
         return JSONResponse({"detail": problems_line(error.errors())}, 422)
-    status, message = status_of(error)
+    status, message = public_answer(error, _hub(request).root)  # no server path in an answer
     return JSONResponse({"detail": message}, status, headers=headers_of(error))
 
 
@@ -367,4 +367,5 @@ def _body_kind(request: Request):
 
 
 async def _http_error(request: Request, error: HTTPException) -> JSONResponse:
-    return JSONResponse({"detail": " ".join(str(error.detail).split())}, error.status_code)
+    detail = public_text(" ".join(str(error.detail).split()), _hub(request).root)
+    return JSONResponse({"detail": detail}, error.status_code)

@@ -194,27 +194,48 @@ def status_of(error: BaseException) -> tuple[int, str]:
     return 500, f"internal error ({type(error).__name__}: {text})"
 
 
-# An absolute path in a message (not the "//" of a URL, nor the second half of "a/b").
-_ABSOLUTE_PATH = re.compile(r"(?<![\w.:/])/(?:[^\s/,;'\"()]+/)*[^\s/,;'\"()]+")
+# An absolute path in a message (not the "//" of a URL, nor the second half of "a/b"), unquoted:
+# a quoted one is a value the client sent, shown as sent (`dataset '/etc': give a folder relative...`).
+_ABSOLUTE_PATH = re.compile(r"(?<![\w.:/'\"])/(?:[^\s/,;'\"()]+/)*[^\s/,;'\"()]+")
 
 
 def public_text(text: str, root: Path) -> str:
     """`text` as a client may read it: a path under the service's `root` relative to it (as the
-    client names files), any other absolute path by its file name alone (the server's own layout is
-    none of the client's business).
+    client names files: sessions and datasets by their names), the root itself as "the service
+    root", any other absolute path by its file name alone (the server's own layout is none of the
+    client's business); a quoted path is a value the client sent, kept as sent. The root counts
+    as given (made absolute) and resolved, so a path shown either way is relativised.
 
     Example:
         >>> public_text("weights from /srv/venv/lpips/alexnet.ckpt; data /srv/root/held-out/test", Path("/srv/root"))
         'weights from alexnet.ckpt; data held-out/test'
+        >>> public_text("/srv/root/s/pool.json: this path leads outside /srv/root/s", Path("/srv/root"))
+        's/pool.json: this path leads outside s'
     """
+    roots = list(dict.fromkeys([Path(root).absolute(), Path(root).resolve()]))
 
     def shown(match: re.Match) -> str:
         path = Path(match.group(0))
-        if path.is_relative_to(root):
-            return str(path.relative_to(root)) if path != root else "."
+        for real in roots:
+            if path == real:
+                return "the service root"
+            if path.is_relative_to(real):
+                return str(path.relative_to(real))
         return path.name
 
-    return _ABSOLUTE_PATH.sub(shown, text)
+    text = _ABSOLUTE_PATH.sub(shown, text)
+    if not Path(root).is_absolute():  # a root given relative to the server's folder is named so in messages too
+        given = re.escape(Path(root).as_posix())
+        text = re.sub(rf"(?<![\w./-]){given}/(?=\S)", "", text)
+        text = re.sub(rf"(?<![\w./-]){given}(?![\w./-])", "the service root", text)
+    return text
+
+
+def public_answer(error: BaseException, root: Path) -> tuple[int, str]:
+    """`status_of(error)` with its line as a client may read it (`public_text`): every answer the
+    service gives, a failed training job's record included, goes through here."""
+    status, message = status_of(error)
+    return status, public_text(message, root)
 
 
 def headers_of(error: BaseException) -> dict[str, str] | None:

@@ -13,7 +13,7 @@ from pathlib import Path
 from nerfaug.capture.pool import MAX_TRAINING, SessionPool
 from nerfaug.capture.requests import CHECKPOINT_EVERY_S, RequestError
 from nerfaug.nerf.engine import Engine
-from nerfaug.service.errors import status_of
+from nerfaug.service.errors import public_answer
 from nerfaug.service.work import PER_SESSION, TOTAL, WORKERS, WorkQueues
 
 
@@ -38,8 +38,8 @@ class SessionHub(SessionPool):
         max_training: int = MAX_TRAINING,
         engine_settings: dict | None = None,
     ):
-        # A failed job's error as a request's would be answered: never what a file holds.
-        super().__init__(root, device, checkpoint_every, max_training, describe=lambda error: status_of(error)[1])
+        # A failed job's error as a request's would be answered: never what a file holds, nor a server path.
+        super().__init__(root, device, checkpoint_every, max_training, describe=lambda e: public_answer(e, root)[1])
         self.work = WorkQueues(workers, per_session, total)
         self.engine_settings = dict(engine_settings or {})
 
