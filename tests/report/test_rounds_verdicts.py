@@ -1,6 +1,7 @@
 """The study of rounds' hypotheses Q1-Q4 (docs/study-plan.md, plan of 2026-11-28) computed from
 constructed tables whose answers are known: p values against an enumeration of every sign pattern,
-Q2's pairing with another table's one-shot runs by seed and layout (and only runs whose fingerprint
+Q2's pairing with the study's own one-shot arm (rows of one round in the same table) and with
+another table's one-shot runs, by seed, layout and engine version (and only runs whose fingerprint
 is current), Q3's three outcomes, the secondary curve area, and partial tables deciding nothing."""
 
 import itertools
@@ -112,7 +113,7 @@ def test_ours_ahead_everywhere_holds_with_the_enumerated_p_and_replicates_on_the
         assert f"{a} - {b}: mean {np.mean(seed_means(rounds, a, other=b)):+.2f} dB" in found["Q3"][4]
         assert f"p x 2 = {p:.3f}" in found["Q3"][4] or f"p x 2 = {p:.1e}" in found["Q3"][4]
     assert found["Q4"][3] == "**holds**"  # ours alone was found better; +2 dB on the held-back scene too
-    assert found["Q2"][3] == "**not judged**" and "no one-shot table" in found["Q2"][4]
+    assert found["Q2"][3] == "**not judged**" and "no one-shot runs in the table" in found["Q2"][4]
 
 
 def test_the_secondary_curve_area_is_shown_beside_q1_and_decides_nothing():
@@ -196,3 +197,36 @@ def test_a_dead_run_stays_in_the_test_and_leaves_the_sensitivity_line():
     assert found["Q1"][6].startswith("without the 1 dead run(s)' pairs: holds")
     text = to_markdown(rounds_blocks(collect_study(rounds)), None)
     assert "dead runs per cell, engine nerfacto-cpu: mic 0; maryRose 0; dtu_scan24 0; cow 1 (ours seed 3)" in text
+
+
+def both_arms(rounds: dict, one_shot: dict) -> dict:
+    """One table holding the study's runs in rounds and its own one-shot arm (uniform and ours)."""
+    arm = [r for r in one_shot["runs"] if r["method"] in ("uniform", "ours") and r["scene"] in ROUNDS_SCENES]
+    return rounds | {"runs": rounds["runs"] + arm}
+
+
+def test_q2_pairs_with_the_studys_own_one_shot_arm_and_leaves_q1_to_the_runs_in_rounds():
+    rounds, one_shot = table({"ours": 0.5}), table({"ours": 0.5}, shift=-1.5, rounds=1)
+    alone = verdicts(rounds)
+    found = verdicts(both_arms(rounds, one_shot))
+    for method in ("uniform", "ours"):
+        means = seed_means(rounds, method, one_shot, method)
+        p = min(1.0, 2 * sign_flip_by_enumeration(means))
+        assert f"{method}: rounds - one-shot: mean {np.mean(means):+.2f} dB" in found["Q2"][4]
+        assert f"p x 2 = {p:.3f}" in found["Q2"][4]
+    assert found["Q2"][3] == "**holds**"
+    # The one-shot rows are no part of Q1, Q3 or Q4: their rows read as in the table of rounds alone.
+    assert [found[q] for q in ("Q1", "Q3", "Q4")] == [alone[q] for q in ("Q1", "Q3", "Q4")]
+    # One-shot runs ahead of the runs in rounds: contradicted.
+    ahead = table({"ours": 0.5}, shift=1.5, rounds=1)
+    assert verdicts(both_arms(rounds, ahead))["Q2"][3] == "**contradicted**"
+    # An arm part-way decides nothing.
+    part = both_arms(rounds, one_shot)
+    part["runs"] = [r for r in part["runs"] if r.get("curve") or r["trial"] < 9]
+    assert verdicts(part)["Q2"][3] == "**partial: 72 of 80 one-shot runs**"
+    # One-shot runs of another engine version are not paired with the runs in rounds.
+    for run in one_shot["runs"]:
+        run["engine_version"] = "hash-cpu-1"
+    assert verdicts(both_arms(rounds, one_shot))["Q2"][3] == "**not judged: no current one-shot runs of uniform, ours**"
+    text = to_markdown(rounds_blocks(collect_study(both_arms(rounds, ahead))), None)
+    assert "in the study's own one-shot arm" in text and "dead one-shot runs, engine nerfacto-cpu: 0" in text

@@ -7,10 +7,12 @@ when neither side is significantly better than both of the other, "not supported
 
 The primary outcome is the PSNR over every test view at the end; the area under the learning
 curve divided by its span of views (`RunRow.auc`) is shown beside Q1, deciding nothing.
-Q2 compares each rounds run with the one-shot run of the same method, seed and layout in another
-table (the real-scene study's cells of the same engine); it is judged only when the caller says
-which one-shot fingerprints are current (the fingerprints those runs would have now): a row whose
-fingerprint is not among them was made with other settings and is no arm of the comparison.
+Q2 compares each rounds run with the one-shot run of the same method, seed, layout and engine
+version in the study's own one-shot arm (docs/study-plan.md, its amendment of 2026-11-28): the
+table's rows of one round (no learning curve) beside its rows in rounds. Those rows' fingerprints
+are the table's own, so they are current by construction. A caller may instead give another
+table's one-shot runs and the fingerprints they would have now: a row whose fingerprint is not
+among them was made with other settings and is no arm of the comparison.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import math
 from collections.abc import Iterable
 
 from nerfaug.report.document import Block, Heading, Paragraph, Table
-from nerfaug.report.study import REFERENCE, Cell, Study
+from nerfaug.report.study import REFERENCE, Cell, Study, collect_study
 from nerfaug.report.study_table import RunRow, table_rows
 from nerfaug.report.study_verdicts import (
     ALPHA,
@@ -45,6 +47,7 @@ ROUNDS_METHODS = GPU_METHODS  # uniform, ours, ours-batch-sharp, fisherrf, entro
 ROUNDS_TRIALS = 10
 Q1_K = 5  # Bonferroni over the five methods compared with uniform
 Q2_METHODS = ("uniform", "ours")
+Q2_ONE_SHOT_RUNS = len(ROUNDS_SCENES) * len(Q2_METHODS) * ROUNDS_TRIALS  # the one-shot arm: 80 runs
 Q3_PAIRS = (("furthest", "ours"), ("furthest", "fisherrf"))
 HEADERS = ["", "hypothesis", "test", "verdict", "evidence", "smallest effect it could have seen", "dead runs"]
 
@@ -136,22 +139,45 @@ def _dead_key(row: RunRow) -> tuple[str, str, str, int]:
     return (row.engine, row.scene, row.method, row.seed)
 
 
-def _by_pair(rows: list[RunRow]) -> dict[tuple[str, str, int, int], RunRow]:
-    return {(r.scene, r.method, r.seed, r.layout): r for r in rows}
+def _by_pair(rows: list[RunRow]) -> dict[tuple[str, str, int, int, str], RunRow]:
+    """Rows by what pairs them: (scene, method, seed, layout, engine version)."""
+    return {(r.scene, r.method, r.seed, r.layout, r.engine_version): r for r in rows}
+
+
+def own_one_shot_arm(study: Study) -> tuple[Study, dict | None]:
+    """The study split into its runs in rounds (what Q1-Q4 judge) and its own one-shot arm (Q2's
+    other side): a table holding both, the arm is its rows of one round, those without a learning
+    curve. (study, None) where the table holds runs of one kind only."""
+    runs = study.table["runs"]
+    rounds = [r for r in runs if r.get("curve")]
+    if not rounds or len(rounds) == len(runs):
+        return study, None
+    one_shot = study.table | {"runs": [r for r in runs if not r.get("curve")]}
+    return collect_study(study.table | {"runs": rounds}), one_shot
+
+
+def _arms(study: Study, one_shot: dict | None, current: set[str] | None) -> tuple[Study, dict | None, set | None]:
+    """(the rounds runs' study, the one-shot table, its current fingerprints): the caller's table,
+    else the study's own arm, whose fingerprints are the table's own."""
+    if one_shot is not None:
+        return study, one_shot, current
+    study, own = own_one_shot_arm(study)
+    return study, own, None if own is None else {r["fingerprint"] for r in own["runs"]}
 
 
 def q2_tests(study: Study, engine: str, one_shot: dict, current: set[str], drop: set | None = None) -> dict[str, dict]:
-    """Per method of Q2: rounds - one-shot PSNR on the same scene, seed and layout, each seed's
-    mean over the four scenes, exact sign-flip, x2. One-shot rows of `engine` in the table
-    `one_shot` count only with a fingerprint in `current`; `drop`: dead runs (of either table)
-    whose pairs are left out."""
+    """Per method of Q2: rounds - one-shot PSNR on the same scene, seed, layout and engine
+    version, each seed's mean over the four scenes, exact sign-flip, x2. `study`: the runs in
+    rounds; one-shot rows of `engine` in the table `one_shot` count only with a fingerprint in
+    `current`; `drop`: dead runs (of either arm) whose pairs are left out."""
     mine = _by_pair([r for r in table_rows(study.table) if r.engine == engine])
     theirs = _by_pair([r for r in table_rows(one_shot) if r.engine == engine and r.fingerprint in current])
     tests = {}
     for method in Q2_METHODS:
         per_scene: dict[str, dict[int, float]] = {}
-        for (scene, m, seed, layout), row in mine.items():
-            other = theirs.get((scene, m, seed, layout))
+        for key, row in mine.items():
+            scene, m, seed = key[:3]
+            other = theirs.get(key)
             if m != method or scene not in ROUNDS_SCENES or other is None:
                 continue
             if drop is not None and (_dead_key(row) in drop or _dead_key(other) in drop):
@@ -164,21 +190,38 @@ def q2_tests(study: Study, engine: str, one_shot: dict, current: set[str], drop:
     return tests
 
 
+def _arm_partial(arm: list[RunRow]) -> str | None:
+    """ "partial: n of 80 one-shot runs" while the one-shot arm's cells are incomplete."""
+    done = {
+        (r.scene, r.method, r.trial)
+        for r in arm
+        if r.scene in ROUNDS_SCENES and r.method in Q2_METHODS and r.trial < ROUNDS_TRIALS
+    }
+    return None if len(done) == Q2_ONE_SHOT_RUNS else f"partial: {len(done)} of {Q2_ONE_SHOT_RUNS} one-shot runs"
+
+
 def q2(study: Study, engine: str, one_shot: dict | None, current: set[str] | None) -> list[str]:
-    claim = "rounds beat one-shot at equal budget, for uniform and for ours (same seed and layout)"
+    """Q2's row. `study`: the runs in rounds; `one_shot`, `current`: the one-shot arm and its
+    current fingerprints (`_arms`)."""
+    claim = "rounds beat one-shot at equal budget, for uniform and for ours (same seed, layout and engine version)"
     test = "per-regime sign-flip on rounds - one-shot PSNR, x2"
     if one_shot is None or current is None:
-        why = "no one-shot table given" if one_shot is None else "the one-shot runs' fingerprints were not checked"
+        why = (
+            "no one-shot runs in the table (the study's own one-shot arm: uniform and ours, one round)"
+            if one_shot is None
+            else "the one-shot runs' fingerprints were not checked"
+        )
         return _row("Q2", claim, test, "not judged", [why], "", "")
     partial = _partial(study, engine, ROUNDS_SCENES)
     tests = q2_tests(study, engine, one_shot, current)
     arm = [r for r in table_rows(one_shot) if r.engine == engine and r.method in Q2_METHODS]
     stale = sum(r.fingerprint not in current for r in arm)
     missing = [m for m, t in tests.items() if t is None]
-    verdict = partial or (
-        f"not judged: no current one-shot runs of {', '.join(missing)}"
-        if missing
-        else _all([judged(t) for t in tests.values()])
+    verdict = (
+        partial
+        or (f"not judged: no current one-shot runs of {', '.join(missing)}" if missing else None)
+        or _arm_partial([r for r in arm if r.fingerprint in current])
+        or _all([judged(t) for t in tests.values()])
     )
     evidence = [says(f"{m}: rounds - one-shot", t) for m, t in tests.items() if t is not None]
     if stale:
@@ -263,8 +306,10 @@ def rounds_rows(
     study: Study, engine: str, one_shot: dict | None = None, current: set[str] | None = None
 ) -> list[list[str]]:
     """Q1-Q4 on `engine`: each with its test, verdict, evidence, the smallest effect it could have
-    seen (beside "not supported") and its line without dead runs. `one_shot`, `current`: Q2's
-    one-shot table and the fingerprints its runs would have now."""
+    seen (beside "not supported") and its line without dead runs. Q2 pairs with the study's own
+    one-shot arm (`own_one_shot_arm`) unless the caller gives `one_shot`, another one-shot table,
+    and `current`, the fingerprints its runs would have now."""
+    study, one_shot, current = _arms(study, one_shot, current)
     q1_row, better = q1(study, engine)
     partial = _partial(study, engine, ROUNDS_SCENES)
     return [q1_row, q2(study, engine, one_shot, current), q3(study, engine), q4(study, engine, better, partial)]
@@ -284,7 +329,10 @@ def rounds_blocks(study: Study, one_shot: dict | None = None, current: set[str] 
             'Stated before the runs in docs/study-plan.md ("Plan of 2026-11-28: the study of rounds"), with its '
             f"tests: per regime, each seed's mean over {', '.join(ROUNDS_SCENES)} of the paired differences in final "
             "PSNR (every test view, after the last step), the exact sign-flip test, Bonferroni x5 (Q2, Q3: x2); Q4 "
-            "per cell on the held-back scene. The area under the learning curve divided by its span of views is "
+            "per cell on the held-back scene. Q2 pairs each run in rounds with the run of the same method, seed, "
+            "layout and engine version in the study's own one-shot arm (uniform and ours under the paper's "
+            "schedule, one round, in the same table); one-shot runs of another engine version are not pooled "
+            "with them. The area under the learning curve divided by its span of views is "
             "shown beside Q1 and decides nothing. Every verdict is computed from the table: a hypothesis is judged "
             "only when its cells are complete (partial: n of m runs, the numbers as they stand, deciding nothing). "
             '"Not supported" says the test did not find the effect, not that there is none: beside it, the '
@@ -292,6 +340,7 @@ def rounds_blocks(study: Study, one_shot: dict | None = None, current: set[str] 
             "runs stay in their cells; the last column gives the same tests without the pairs holding one."
         ),
     ]
+    study, one_shot, current = _arms(study, one_shot, current)
     engines = list(study.engines)
     for engine in engines:
         rows = rounds_rows(study, engine, one_shot, current)
@@ -299,6 +348,12 @@ def rounds_blocks(study: Study, one_shot: dict | None = None, current: set[str] 
             rows = [[f"{r[0]} ({engine})", *r[1:]] for r in rows]
         scenes = (*ROUNDS_SCENES, ROUNDS_HELD_BACK)
         notes = [f"dead runs per cell, engine {engine}: {dead_per_cell(study, engine, scenes)}"]
+        if one_shot is not None:
+            dead = sorted((r.scene, r.method, r.seed) for r in table_rows(one_shot) if r.engine == engine and r.empty)
+            notes.append(
+                f"dead one-shot runs, engine {engine}: {len(dead)}"
+                + (f" ({'; '.join(f'{sc} {m} seed {k}' for sc, m, k in dead)})" if dead else "")
+            )
         blocks.append(Table(HEADERS, rows, notes))
     return blocks
 
@@ -311,6 +366,7 @@ __all__ = [
     "ROUNDS_TRIALS",
     "auc_test",
     "family",
+    "own_one_shot_arm",
     "planned_runs",
     "q2_tests",
     "rounds_blocks",
