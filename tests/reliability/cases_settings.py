@@ -83,6 +83,26 @@ def train_a_layout_without_a_sparse_start(tmp, bases):
 
 
 @case
+def run_an_unknown_engine(tmp, bases):
+    data = copy_dataset(tmp, bases)
+    argv = ["run", "--data", data, "--out", tmp / "results", *TINY, "--engine", "nope"]
+    return Case(argv, [data, tmp], says=("--engine 'nope'", "nerfacto-cpu"))
+
+
+@case
+def run_an_engine_by_an_earlier_records_flat_name(tmp, bases):
+    """The flat form is read from records only; on the command line the refusal gives the options."""
+    data = copy_dataset(tmp, bases)
+    argv = ["run", "--data", data, "--out", tmp / "results", *TINY, "--engine", "test+lr=0.005"]
+    return Case(argv, [data, tmp], says=("--engine 'test+lr=0.005'", "--engine test --engine.optimiser.lr 0.005"))
+
+
+@case
+def train_an_unknown_engine(tmp, bases):
+    return _train_with(tmp, bases, "--engine", "nope", says=("--engine", "'nope'"))
+
+
+@case
 def train_an_engine_setting_on_a_session_of_another_engine(tmp, bases):
     """The session's engine is `test`; the refusal names the engine asked for as the session's
     engine with the setting, never the default engine the user did not give."""

@@ -20,7 +20,7 @@ from nerfaug.experiment.fingerprints import defaults_of, engine_name, engine_rec
 from nerfaug.experiment.schedule import check_schedule
 from nerfaug.nerf.bounds import Count, NonNegativeInt, Positive, Seed, Steps
 from nerfaug.nerf.config import HASH_CPU_ENGINE_VERSION, NerfConfig, uses_hash_grid
-from nerfaug.nerf.engine import ENGINE_OPTION, Engine
+from nerfaug.nerf.engine import ENGINE_OPTION, Engine, RefusedEngine
 from nerfaug.registry import Presets
 from nerfaug.schema import SCHEMA, RequestError, Settings, unchecked
 from nerfaug.selection.config import SelectionConfig
@@ -154,14 +154,21 @@ class ExperimentConfig(Settings):
     """a torch.compile backend for the engine's networks ("inductor", on a GPU); off: plain PyTorch."""
 
     def __post_init__(self) -> None:
-        # An engine given by name, or read from an earlier record: read, and checked, once.
-        try:
-            self.engine = Engine.read(self.engine)
-        except RequestError:
-            raise  # it names the setting
-        except ValueError as error:
-            raise ValueError(f"--engine {self.engine!r}: {error}") from None
+        # An engine given by name, or read from an earlier record: read, and checked, once. One the
+        # command line named wrongly is refused when the settings are checked, after the parser.
+        if not isinstance(self.engine, RefusedEngine):
+            try:
+                self.engine = Engine.read(self.engine)
+            except RequestError:
+                raise  # it names the setting
+            except ValueError as error:
+                raise ValueError(f"--engine {self.engine!r}: {error}") from None
         super().__post_init__()
+
+    def check(self) -> None:
+        if isinstance(self.engine, RefusedEngine):
+            raise ValueError(f"--engine {self.engine.given!r}: {self.engine.why}")
+        super().check()
 
     def to_record(self) -> dict:
         """Every option as plain data, as config.json and sweep.json record them; the engine as

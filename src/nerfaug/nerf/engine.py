@@ -54,6 +54,8 @@ class Engine:
         """
         if isinstance(value, Engine):
             return value
+        if isinstance(value, RefusedEngine):
+            raise ValueError(f"engine {value.given!r}: {value.why}")
         if isinstance(value, str):
             base, flat = parse_variant(value)
             return cls.of(base, _nested({FLAT_NAMES[name]: v for name, v in flat.items()}))
@@ -124,19 +126,37 @@ class Engine:
         return self.options().removeprefix("--engine ")
 
 
-def _read_words(words: list[str]) -> Engine:
+@dataclass(frozen=True)
+class RefusedEngine:
+    """What `--engine` was given when it names no engine (an unknown preset, or an earlier record's
+    flat variant name), with why: handed on by the command-line parser and refused when the
+    settings are checked after it (`Engine.read`), so the refusal is the command's one line rather
+    than the parser's box."""
+
+    given: str
+    why: str
+
+    def __str__(self) -> str:
+        return self.given
+
+
+def _read_words(words: list[str]) -> Engine | RefusedEngine:
     """`--engine NAME`: a preset (an earlier flat variant name is refused with the options it means)."""
     name = words[0]
-    if VARIANT_SEPARATOR in name:
-        raise ValueError(f"{name!r}: give the preset and each setting as its own option: {Engine.read(name).options()}")
-    return Engine.of(name)
+    try:
+        if VARIANT_SEPARATOR in name:
+            options = Engine.read(name).options()
+            return RefusedEngine(name, f"give the preset and each setting as its own option: {options}")
+        return Engine.of(name)
+    except ValueError as error:
+        return RefusedEngine(name, str(error))
 
 
 ENGINE_OPTION = PrimitiveConstructorSpec(
     nargs=1,
     metavar="{" + ",".join(PRESETS) + "}",
     instance_from_str=_read_words,
-    is_instance=lambda value: value is None or isinstance(value, Engine),
+    is_instance=lambda value: value is None or isinstance(value, Engine | RefusedEngine),
     str_from_instance=lambda value: [str(value)],
 )
 """How tyro reads `--engine NAME` as an `Engine` (its settings are the --engine.GROUP.SETTING
