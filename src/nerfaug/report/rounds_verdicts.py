@@ -26,10 +26,11 @@ from nerfaug.report.study_table import RunRow, table_rows
 from nerfaug.report.study_verdicts import (
     ALPHA,
     GPU_METHODS,
-    cell_test,
+    all_hold,
     dead_per_cell,
     dead_runs,
     detectable,
+    held_back_row,
     judged,
     mean_interval,
     min_detectable_effect,
@@ -37,6 +38,7 @@ from nerfaug.report.study_verdicts import (
     says,
     sensitivity,
     touches,
+    verdict_row,
 )
 from nerfaug.statistics import seed_level_comparison
 
@@ -75,17 +77,6 @@ def _cells(study: Study, engine: str) -> list[Cell]:
     return [c for c in study.cells if c.engine == engine and c.scene in ROUNDS_SCENES]
 
 
-def _all(verdicts: list[str]) -> str:
-    """A claim made of several tests: contradicted if one is, holds if every one does."""
-    if "contradicted" in verdicts:
-        return "contradicted"
-    return "holds" if verdicts and set(verdicts) == {"holds"} else "not supported"
-
-
-def _row(name, claim, test, verdict, evidence, floor, dead) -> list[str]:
-    return [name, claim, test, f"**{verdict}**", "; ".join(evidence), floor, dead]
-
-
 def family(study: Study, engine: str, drop: set | None = None) -> dict[str, dict]:
     """Q1's family: every planned method against uniform, per regime over the four scenes, x5."""
     cells = _cells(study, engine)
@@ -117,7 +108,7 @@ def q1(study: Study, engine: str) -> tuple[list[str], list[str]]:
     secondary = auc_test(_cells(study, engine), "ours")
     if secondary is not None:
         evidence.append("secondary, deciding nothing: " + says("ours - uniform, curve area / span", secondary))
-    row = _row(
+    row = verdict_row(
         "Q1",
         "ours beats uniform in rounds (the other four methods against uniform reported beside it)",
         "per-regime sign-flip on final PSNR, x5",
@@ -211,7 +202,7 @@ def q2(study: Study, engine: str, one_shot: dict | None, current: set[str] | Non
             if one_shot is None
             else "the one-shot runs' fingerprints were not checked"
         )
-        return _row("Q2", claim, test, "not judged", [why], "", "")
+        return verdict_row("Q2", claim, test, "not judged", [why], "", "")
     partial = _partial(study, engine, ROUNDS_SCENES)
     tests = q2_tests(study, engine, one_shot, current)
     arm = [r for r in table_rows(one_shot) if r.engine == engine and r.method in Q2_METHODS]
@@ -221,7 +212,7 @@ def q2(study: Study, engine: str, one_shot: dict | None, current: set[str] | Non
         partial
         or (f"not judged: no current one-shot runs of {', '.join(missing)}" if missing else None)
         or _arm_partial([r for r in arm if r.fingerprint in current])
-        or _all([judged(t) for t in tests.values()])
+        or all_hold([judged(t) for t in tests.values()])
     )
     evidence = [says(f"{m}: rounds - one-shot", t) for m, t in tests.items() if t is not None]
     if stale:
@@ -230,14 +221,14 @@ def q2(study: Study, engine: str, one_shot: dict | None, current: set[str] | Non
     dead = dead_runs(study) | {_dead_key(r) for r in table_rows(one_shot) if r.empty}
     clean = {m: t for m, t in q2_tests(study, engine, one_shot, current, dead).items() if t is not None}
     n_dead = sum(e == engine and sc in ROUNDS_SCENES and m in Q2_METHODS for e, sc, m, _ in dead)
-    return _row(
+    return verdict_row(
         "Q2",
         claim,
         test,
         verdict,
         evidence,
         floor if verdict == "not supported" else "",
-        sensitivity(n_dead, _all([judged(t) for t in clean.values()]), [says(m, t) for m, t in clean.items()]),
+        sensitivity(n_dead, all_hold([judged(t) for t in clean.values()]), [says(m, t) for m, t in clean.items()]),
     )
 
 
@@ -258,7 +249,7 @@ def q3(study: Study, engine: str) -> list[str]:
     clean = {pair: regime_test(cells, *pair, len(Q3_PAIRS), dead) for pair in Q3_PAIRS}
     verdict = _partial(study, engine, ROUNDS_SCENES) or _q3_outcome(tests)
     floor = "; ".join(f"{a} - {b}: {detectable(t['seed_means'], len(Q3_PAIRS))}" for (a, b), t in tests.items())
-    return _row(
+    return verdict_row(
         "Q3",
         "coverage against uncertainty: furthest against ours and against fisherrf (two-sided; coverage wins only "
         "if furthest beats both, uncertainty wins only if both beat furthest)",
@@ -278,28 +269,11 @@ def q4(study: Study, engine: str, better: list[str], q1_partial: str | None) -> 
     claim = f"every method Q1's family finds better than uniform also beats it on the held-back {ROUNDS_HELD_BACK}"
     test = "per-cell Wilcoxon signed-rank, p < 0.05, x the methods so found"
     if q1_partial:
-        return _row("Q4", claim, test, q1_partial, ["Q1's family is not judged yet"], "", "")
+        return verdict_row("Q4", claim, test, q1_partial, ["Q1's family is not judged yet"], "", "")
     if not better:
-        return _row("Q4", claim, test, "not applicable", ["no method was found better than uniform"], "", "")
-    dead = dead_runs(study)
-    cell = next((c for c in study.cells if c.engine == engine and c.scene == ROUNDS_HELD_BACK), None)
-    tests = {m: cell_test(cell, m, len(better)) for m in better}
-    clean = {m: cell_test(cell, m, len(better), dead) for m in better}
-    verdict = _partial(study, engine, (ROUNDS_HELD_BACK,)) or _all([judged(t) for t in tests.values()])
-    floor = "; ".join(f"{m}: {detectable(t['values'], len(better))}" for m, t in tests.items() if t)
-    return _row(
-        "Q4",
-        claim,
-        test,
-        verdict,
-        [f"{ROUNDS_HELD_BACK}, " + says(f"{m} - uniform", t, "Wilcoxon") for m, t in tests.items()],
-        floor if verdict == "not supported" else "",
-        sensitivity(
-            touches(dead, engine, (ROUNDS_HELD_BACK,), (*better, REFERENCE)),
-            _all([judged(t) for t in clean.values()]),
-            [says(f"{m} - uniform", t, "Wilcoxon") for m, t in clean.items()],
-        ),
-    )
+        return verdict_row("Q4", claim, test, "not applicable", ["no method was found better than uniform"], "", "")
+    partial = _partial(study, engine, (ROUNDS_HELD_BACK,))
+    return held_back_row("Q4", claim, test, study, engine, ROUNDS_HELD_BACK, better, partial, dead_runs(study))
 
 
 def rounds_rows(

@@ -245,7 +245,11 @@ def _gpu_cells(study: Study, engine: str) -> list[Cell]:
     return [c for c in study.cells if c.engine == engine and c.scene in GPU_SCENES]
 
 
-def _row(name: str, claim: str, test: str, verdict: str, evidence: list[str], floor: str, dead: str) -> list[str]:
+def verdict_row(
+    name: str, claim: str, test: str, verdict: str, evidence: list[str], floor: str, dead: str
+) -> list[str]:
+    """One row of a plan's verdict table: the hypothesis, its claim and test, the verdict, the
+    evidence, the smallest effect it could have seen and the line without dead runs."""
     return [name, claim, test, f"**{verdict}**", "; ".join(evidence), floor, dead]
 
 
@@ -254,7 +258,7 @@ def _partial(study: Study, engine: str, scenes) -> str | None:
     return None if n == m else f"partial: {n} of {m} runs"
 
 
-def _both(verdicts: list[str]) -> str:
+def all_hold(verdicts: list[str]) -> str:
     """A claim made of several tests: contradicted if one is, holds if every one does."""
     if "contradicted" in verdicts:
         return "contradicted"
@@ -293,7 +297,7 @@ def gpu_rows(study: Study, engine: str) -> list[list[str]]:
 
     g1, g1_clean = family["ours"], cleaned["ours"]
     verdict = partial or judged(g1)
-    g1_row = _row(
+    g1_row = verdict_row(
         "G1",
         "ours beats uniform in PSNR on the paper engine (the paper's claim at its scale)",
         "per-regime sign-flip, x5",
@@ -305,9 +309,9 @@ def gpu_rows(study: Study, engine: str) -> list[list[str]]:
 
     g2 = {b: regime_test(cells, "ours", b, len(G2_BASELINES)) for b in G2_BASELINES}
     g2_clean = {b: regime_test(cells, "ours", b, len(G2_BASELINES), dead) for b in G2_BASELINES}
-    verdict = partial or _both([judged(t) for t in g2.values()])
+    verdict = partial or all_hold([judged(t) for t in g2.values()])
     floor = "; ".join(f"ours - {b}: {detectable(t['seed_means'], len(G2_BASELINES))}" for b, t in g2.items())
-    g2_row = _row(
+    g2_row = verdict_row(
         "G2",
         "ours beats both baselines it was compared with, entropy-sampling and fisherrf",
         "two per-regime sign-flip tests, x2",
@@ -316,7 +320,7 @@ def gpu_rows(study: Study, engine: str) -> list[list[str]]:
         floor if verdict == "not supported" else "",
         sensitivity(
             dead_in("ours", *G2_BASELINES),
-            _both([judged(t) for t in g2_clean.values()]),
+            all_hold([judged(t) for t in g2_clean.values()]),
             [says(f"ours - {b}", t) for b, t in g2_clean.items()],
         ),
     )
@@ -337,7 +341,7 @@ def gpu_rows(study: Study, engine: str) -> list[list[str]]:
             )
         )
     clean_better = [m for m, t in cleaned.items() if t["significant"] and t["better"]]
-    g3_row = _row(
+    g3_row = verdict_row(
         "G3",
         "no method beats uniform (the real-scene finding at the paper's scale)",
         "per-regime sign-flip, x5, each of the five methods",
@@ -357,28 +361,11 @@ def _g4(study: Study, engine: str, partial: str | None, better: list[str], dead:
     claim = f"every method G1's family finds better than uniform also beats it on the held-back {GPU_HELD_BACK}"
     test = "per-cell Wilcoxon signed-rank, x the methods so found"
     if partial:
-        return _row("G4", claim, test, partial, ["G1's family is not judged yet"], "", "")
+        return verdict_row("G4", claim, test, partial, ["G1's family is not judged yet"], "", "")
     if not better:
-        return _row("G4", claim, test, "not applicable", ["no method was found better than uniform"], "", "")
+        return verdict_row("G4", claim, test, "not applicable", ["no method was found better than uniform"], "", "")
     held_partial = _partial(study, engine, (GPU_HELD_BACK,))
-    cell = next((c for c in study.cells if c.engine == engine and c.scene == GPU_HELD_BACK), None)
-    tests = {m: cell_test(cell, m, len(better)) for m in better}
-    clean = {m: cell_test(cell, m, len(better), dead) for m in better}
-    verdict = held_partial or _both([judged(t) for t in tests.values()])
-    floor = "; ".join(f"{m}: {detectable(t['values'], len(better))}" for m, t in tests.items() if t)
-    return _row(
-        "G4",
-        claim,
-        test,
-        verdict,
-        [f"{GPU_HELD_BACK}, " + says(f"{m} - uniform", t, "Wilcoxon") for m, t in tests.items()],
-        floor if verdict == "not supported" else "",
-        sensitivity(
-            touches(dead, engine, (GPU_HELD_BACK,), (*better, REFERENCE)),
-            _both([judged(t) for t in clean.values()]),
-            [says(f"{m} - uniform", t, "Wilcoxon") for m, t in clean.items()],
-        ),
-    )
+    return held_back_row("G4", claim, test, study, engine, GPU_HELD_BACK, better, held_partial, dead)
 
 
 def gpu_engines(study: Study) -> list[str]:
@@ -402,3 +389,30 @@ __all__ = [
     "min_detectable_effect",
     "regime_test",
 ]
+
+
+def held_back_row(
+    name: str, claim: str, test: str, study: Study, engine: str, scene: str, better: list[str], partial, dead: set
+) -> list[str]:
+    """The replication row of a plan (G4, Q4): each method its family found better than uniform
+    against uniform in the held-back `scene`'s cell (Wilcoxon signed-rank, x the methods so found),
+    holding only if every one holds; `partial` when that cell is incomplete; its sensitivity line
+    without the `dead` runs."""
+    cell = next((c for c in study.cells if c.engine == engine and c.scene == scene), None)
+    tests = {m: cell_test(cell, m, len(better)) for m in better}
+    clean = {m: cell_test(cell, m, len(better), dead) for m in better}
+    verdict = partial or all_hold([judged(t) for t in tests.values()])
+    floor = "; ".join(f"{m}: {detectable(t['values'], len(better))}" for m, t in tests.items() if t)
+    return verdict_row(
+        name,
+        claim,
+        test,
+        verdict,
+        [f"{scene}, " + says(f"{m} - uniform", t, "Wilcoxon") for m, t in tests.items()],
+        floor if verdict == "not supported" else "",
+        sensitivity(
+            touches(dead, engine, (scene,), (*better, REFERENCE)),
+            all_hold([judged(t) for t in clean.values()]),
+            [says(f"{m} - uniform", t, "Wilcoxon") for m, t in clean.items()],
+        ),
+    )
