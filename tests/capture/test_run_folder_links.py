@@ -48,10 +48,14 @@ def files_of(folder: Path, leave_out: tuple[str, ...] = ()) -> dict[str, bytes |
 
 def plant(run: Path, name: str, outside: Path) -> Path:
     """Move the run's `name` (a file or folder; an empty folder when it has none) to `outside`, and
-    put a link to it in its place: the user's outside copy, which nothing may touch."""
+    put a link to it in its place: the user's outside copy, which nothing may touch. ".lock" links
+    to a file of the user's (which taking the lock would truncate and rewrite), never moved."""
     target = outside / Path(name).name
     outside.mkdir(parents=True, exist_ok=True)
-    if (run / name).exists():
+    if name == ".lock":
+        target.write_text("the user's own file\n")
+        (run / name).unlink(missing_ok=True)
+    elif (run / name).exists():
         shutil.move(run / name, target)
     else:
         target.mkdir()
@@ -89,13 +93,7 @@ def test_a_link_out_of_the_run_folder_is_refused_naming_it_and_nothing_outside_i
 ):
     outside = tmp_path / "outside"
     poses = tmp_path / "poses.json"
-    if name == ".lock":  # a lock file of the user's, which taking the lock would truncate and rewrite
-        outside.mkdir()
-        (outside / ".lock").write_text("the user's own file\n")
-        (run / ".lock").unlink(missing_ok=True)
-        (run / ".lock").symlink_to(outside / ".lock")
-    else:
-        plant(run, name, outside)
+    plant(run, name, outside)
     before_outside, before_run = files_of(outside), files_of(run, leave_out=(".lock",))
     argv = {
         "propose": ["propose", str(run), "--n", "1", "--n-candidates", "5", "--allow-empty", "--out", str(poses)],
