@@ -47,7 +47,7 @@ from nerfaug import camera_schema
 from nerfaug.camera_schema import MAX_IMAGE_SIDE
 from nerfaug.errors import DatasetError
 from nerfaug.nerf.config import PRESETS
-from nerfaug.nerf.engine import ENGINE_OPTION, Engine, RefusedEngine
+from nerfaug.nerf.engine import ENGINE_OPTION, Engine
 from nerfaug.nerf.footprint import check_engine_fits
 from nerfaug.registry import check_name
 from nerfaug.schema import SCHEMA, RequestError, Schema, adapter, problem_text, validated
@@ -342,15 +342,7 @@ def _engine(value) -> Engine:
     try:
         return check_engine_fits(Engine.read(value))
     except ValueError as error:  # the refusal names the field and value before the reason
-        named = (
-            value.preset
-            if isinstance(value, Engine)
-            else value.given
-            if isinstance(value, RefusedEngine)
-            else value.get("preset")
-            if isinstance(value, dict)
-            else value
-        )
+        named = value.get("preset") if isinstance(value, dict) else getattr(value, "preset", str(value))
         raise ValueError(str(error).removeprefix(f"engine {named!r}: ")) from None
 
 

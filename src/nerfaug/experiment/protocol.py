@@ -551,8 +551,8 @@ def finish_run(
     }
     if batch_size > 1:  # the batch's size changes no number: recorded, not fingerprinted
         result["batch_size"] = batch_size
-    if config.engine_version() is not None:  # the reference engine's runs record none
-        result["engine_version"] = config.engine_version()
+    if (version := config.engine_version()) is not None:  # the reference engine's runs record none
+        result["engine_version"] = version
     if rounds is not None:
         result.update(rounds.record(evaluation.mean, len(data.test), config.steps))
     write_result(folder, result)
