@@ -99,7 +99,7 @@ def test_a_bad_engine_setting_is_one_line_naming_it(capsys, tmp_path):
         ("--engine.field.hidden-dim", "0"),  # a width of 0 would build a field that cannot learn
         ("--engine.optimiser.lr", "-0.01"),
         ("--engine.field.sh-levels", "5"),  # the direction encoding has 4 levels
-        ("--engine.sampler.occupancy.ema-decay", "1.5"),
+        ("--engine.sampler.proposal.interlevel-loss-mult", "-0.5"),
     ],
 )
 def test_train_refuses_a_setting_out_of_its_bounds_before_reading_anything(capsys, tmp_path, setting):
@@ -107,6 +107,18 @@ def test_train_refuses_a_setting_out_of_its_bounds_before_reading_anything(capsy
         main(["train", str(tmp_path / "no-data"), "--out", str(tmp_path / "run"), "--engine", "paper", *setting])
     err = capsys.readouterr().err
     assert err.startswith(f"nerfaug: {setting[0]} {setting[1]}: must be ") and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_train_refuses_a_setting_of_a_part_its_engine_did_not_choose_in_one_line(capsys, tmp_path):
+    setting = ["--engine.sampler.occupancy.ema-decay", "0.5"]  # paper samples with proposal networks
+    with pytest.raises(SystemExit):
+        main(["train", str(tmp_path / "no-data"), "--out", str(tmp_path / "run"), "--engine", "paper", *setting])
+    err = capsys.readouterr().err
+    assert err == (
+        "nerfaug: --engine.sampler.occupancy.ema-decay 0.5: not used by this engine: its sampler.kind is "
+        "'proposal' (this setting is read with 'occupancy')\n"
+    )
     assert list(tmp_path.iterdir()) == []
 
 

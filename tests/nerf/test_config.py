@@ -24,23 +24,28 @@ from nerfaug.schema import RequestError
 OLD_SESSION = Path(__file__).parents[1] / "capture" / "data" / "session_v1.json"
 
 
-def leaves(config, path=()):
+def leaves(config):
+    """Every setting an engine object holds, by walking its dataclasses (not `nerf.names`)."""
     for f in fields(config):
         value = getattr(config, f.name)
-        yield from leaves(value, (*path, f.name)) if is_dataclass(value) else [((*path, f.name), value)]
+        yield from leaves(value) if is_dataclass(value) else [value]
 
 
 def test_every_setting_has_one_flat_name_and_the_flat_view_holds_each_once():
-    paths = [path for path, _ in leaves(NerfConfig())]
-    assert sorted(FLAT_NAMES.values()) == sorted(paths)  # each leaf exactly once
-    assert len(set(FLAT_NAMES)) == len(paths) == 47  # the 47 settings of the flat config it replaced
+    assert len(set(FLAT_NAMES)) == len(set(FLAT_NAMES.values())) == 47  # those of the flat config it replaced
+    for name, config in PRESETS.items():  # an engine holds its parts' settings, each once, and no other part's
+        choosers = 2  # the encoding's and the sampler's part: one object each, one name each
+        assert len(config.flat()) == len(list(leaves(config))) + choosers, name
+        parts = {"hash_", "plane_"} - {"hash_" if config.flat()["encoding"] == "hash" else "plane_"}
+        parts |= {"occupancy_", "proposal_"} - {f"{config.flat()['sampler']}_"}
+        assert not any(flat.startswith(tuple(parts)) for flat in config.flat()), name
     # Prefixed groups keep the names results were fingerprinted by.
     assert FLAT_NAMES["hash_levels"] == ("field", "hash", "levels")
     assert FLAT_NAMES["occupancy_warmup_steps"] == ("sampler", "occupancy", "warmup_steps")
     assert FLAT_NAMES["sampler"] == ("sampler", "kind")
     assert FLAT_NAMES["distortion_loss_mult"] == ("sampler", "proposal", "distortion_loss_mult")
     config = PRESETS["nerfacto-cpu"]
-    assert config.flat()["hash_levels"] == config.field.hash.levels == 6
+    assert config.flat()["hash_levels"] == config.field.encoding.levels == 6
 
 
 @pytest.mark.parametrize("name", sorted(PRESETS))
@@ -72,9 +77,7 @@ def test_each_group_checks_its_settings_and_changes_are_checked_together():
         PRESETS["nerfacto-cpu"].with_settings(proposal_samples=(8,))
     # Changed together, the pair is consistent: no intermediate state is checked.
     both = PRESETS["nerfacto-cpu"].with_settings(proposal_samples=(8,), proposal_max_resolutions=(32,))
-    assert both.sampler.proposal == ProposalConfig(
-        samples=(8,), hash_levels=3, max_resolutions=(32,), log2_table_size=12
-    )
+    assert both.sampler.kind == ProposalConfig(samples=(8,), hash_levels=3, max_resolutions=(32,), log2_table_size=12)
     with pytest.raises(ValueError, match="background_mode must be one of"):
         NerfConfig().with_settings(background_mode="grey")
 

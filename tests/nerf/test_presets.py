@@ -62,17 +62,17 @@ def test_nerfacto_cpu_has_nerfactos_structure():
         "hash_base_resolution",
     ):
         assert config.flat()[name] == paper.flat()[name], name
-    assert config.sampler.proposal.interlevel_loss_mult > 0 and config.sampler.proposal.distortion_loss_mult > 0
+    assert config.sampler.kind.interlevel_loss_mult > 0 and config.sampler.kind.distortion_loss_mult > 0
     # Shrunk: fewer levels, smaller tables, fewer samples and rays than the full preset.
     assert (
-        config.field.hash.levels < paper.field.hash.levels
-        and config.field.hash.log2_table_size < paper.field.hash.log2_table_size
+        config.field.encoding.levels < paper.field.encoding.levels
+        and config.field.encoding.log2_table_size < paper.field.encoding.log2_table_size
     )
     assert (
         config.sampler.num_samples < paper.sampler.num_samples
         and config.optimiser.batch_size < paper.optimiser.batch_size
     )
-    assert sum(config.sampler.proposal.samples) < sum(paper.sampler.proposal.samples)
+    assert sum(config.sampler.kind.samples) < sum(paper.sampler.kind.samples)
 
 
 def test_nerfacto_cpu_starts_at_nerfactos_average_density():
@@ -151,7 +151,7 @@ def test_engine_variants_type_their_values():
     config = NerfConfig.preset("nerfacto-cpu+batch_size=256+proposal_samples=16,8+random_background=true+lr=0.005")
     assert (
         config.optimiser.batch_size,
-        config.sampler.proposal.samples,
+        config.sampler.kind.samples,
         config.renderer.random_background,
         config.optimiser.lr,
     ) == (

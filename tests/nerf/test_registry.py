@@ -1,14 +1,16 @@
 """Swappable engine parts: registries that reject unknown names, a field passed in, a new
-encoding or sampler added by one registry entry, and the same numbers as before the sampler
+encoding or sampler added by its settings type and one registry entry, and the same numbers as before the sampler
 interface existed."""
 
 import re
+from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import pytest
 import torch
 from torch import nn
 
-from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.config import NerfConfig, ProposalConfig
 from nerfaug.nerf.model import NerfModel
 from nerfaug.nerf.registry import ENCODINGS, SAMPLERS, build_field, check_names
 from nerfaug.nerf.sampler import Sampler
@@ -87,6 +89,21 @@ def test_an_unknown_field_is_rejected():
         build_field(NerfConfig.preset("test"), "siren")
 
 
+@dataclass(frozen=True)
+class ConstantConfig:
+    """The settings of `ConstantEncoding` (none): a part of its own type, as every encoding's."""
+
+    NAME: ClassVar[str] = "constant"
+    GROUP: ClassVar[str] = "constant"
+    FLAT_PREFIX: ClassVar[str] = "constant_"
+
+
+def with_part(config: NerfConfig, group: str, part) -> NerfConfig:
+    """`config` with the part `part` chosen in its group `group` ("field" or "sampler")."""
+    chooser = "encoding" if group == "field" else "kind"
+    return replace(config, **{group: replace(getattr(config, group), **{chooser: part})})
+
+
 class ConstantEncoding(nn.Module):
     """A learnable constant feature, whatever the position: the smallest possible encoding."""
 
@@ -106,9 +123,8 @@ class ConstantEncoding(nn.Module):
 
 def test_an_encoding_added_by_one_registry_entry_trains(monkeypatch, sphere_views):
     monkeypatch.setitem(ENCODINGS, "constant", ConstantEncoding.from_config)
-    trainer = Trainer(
-        sphere_views([0.0], [1.0], size=6), NerfConfig.preset("test", encoding="constant"), progress=False
-    )
+    config = with_part(NerfConfig.preset("test"), "field", ConstantConfig())
+    trainer = Trainer(sphere_views([0.0], [1.0], size=6), config, progress=False)
     assert isinstance(trainer.model.field.encoding, ConstantEncoding)
     trainer.train(3)
     assert trainer.model.field.encoding.value.abs().sum() > 0  # it received gradients
@@ -127,7 +143,8 @@ class EvenSampler(Sampler):
 
 def test_a_sampler_added_by_one_registry_entry_renders(monkeypatch, generator):
     monkeypatch.setitem(SAMPLERS, "even", lambda config: EvenSampler(config.sampler.num_samples))
-    model = NerfModel(NerfConfig.preset("test", sampler="even"))
+    even = type("EvenConfig", (), {"NAME": "even", "GROUP": "even", "FLAT_PREFIX": "even_"})
+    model = NerfModel(with_part(NerfConfig.preset("test"), "sampler", dataclass(frozen=True)(even)()))
     model.before_step(0, generator)
     origins = torch.tensor([[0.0, 0.0, 4.0]]).expand(3, 3)
     out = model(origins, torch.tensor([[0.0, 0.0, -1.0]]).expand(3, 3), generator=generator)
@@ -159,7 +176,7 @@ def test_a_model_saved_before_the_sampler_interface_loads():
     )
     for config in (proposal, NerfConfig.preset("test")):
         saved = NerfModel(config)
-        saved.sampler.before_step(300 if config.sampler.kind == "proposal" else 8, saved.density)
+        saved.sampler.before_step(300 if isinstance(config.sampler.kind, ProposalConfig) else 8, saved.density)
         old = {}  # the layout of commit c8c1784: occupancy.*, proposals.*, anneal
         for key, value in saved.state_dict().items():
             key = key.replace("sampler.grid.", "occupancy.").replace("sampler.networks.", "proposals.")

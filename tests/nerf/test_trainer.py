@@ -147,7 +147,11 @@ def test_presets_and_config_round_trip():
         config = NerfConfig.preset(name)
         assert NerfConfig.from_dict(config.to_dict()) == config
     paper = NerfConfig.preset("paper")
-    assert (paper.field.hash.levels, paper.field.hash.features_per_level, paper.field.hash.log2_table_size) == (
+    assert (
+        paper.field.encoding.levels,
+        paper.field.encoding.features_per_level,
+        paper.field.encoding.log2_table_size,
+    ) == (
         16,
         2,
         19,

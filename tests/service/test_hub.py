@@ -68,7 +68,7 @@ def test_the_services_engine_settings_change_the_engine_of_each_session_it_creat
         assert plain.settings_of(request) is request
         status, message, _ = refusal(lambda: fitting_occupancy.settings_of(FromDataset(id="s", dataset="data")))
         assert status == 422 and message.startswith("engine: refuses this service's engine settings: field.planes")
-        assert fitting_occupancy.settings_of(request).engine.config.field.planes.resolutions == (32,)
+        assert fitting_occupancy.settings_of(request).engine.config.field.encoding.resolutions == (32,)
     finally:
         hub.shutdown()
         plain.shutdown()

@@ -277,7 +277,8 @@ class SessionState(Stored):
             raise ValueError(f"engine_config: {error}") from None
         named = Engine.read(self.engine).config
         if recorded != named:
-            differ = ", ".join(sorted(k for k, v in recorded.flat().items() if named.flat()[k] != v)[:3])
+            theirs = named.flat()
+            differ = ", ".join(sorted(k for k, v in recorded.flat().items() if theirs.get(k, v) != v)[:3])
             raise ValueError(
                 f"fields 'engine' and 'engine_config' disagree: engine {self.engine!r} is not the engine "
                 f"engine_config holds (they differ in {differ})"

@@ -59,15 +59,11 @@ def split_engine_options(args: list[str]) -> tuple[list[str], list[str]]:
 def _takes_a_list(option: str) -> bool:
     """Whether the engine setting `option` (`--engine.sampler.proposal.samples`) is a list of values;
     False for one no engine has (the settings' parser names it)."""
+    from nerfaug.nerf import names
     from nerfaug.nerf.config import NerfConfig
 
-    kind = NerfConfig
-    for part in option.removeprefix(PREFIX).replace("-", "_").split("."):
-        hints = typing.get_type_hints(kind) if dataclasses.is_dataclass(kind) else {}
-        if part not in hints:
-            return False
-        kind = hints[part]
-    return typing.get_origin(kind) is tuple
+    path = tuple(option.removeprefix(PREFIX).replace("-", "_").split("."))
+    return typing.get_origin(names.kind(NerfConfig, path)) is tuple
 
 
 def _options_type() -> type:

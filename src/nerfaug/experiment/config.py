@@ -207,7 +207,7 @@ class ExperimentConfig(Settings):
             record["round_every"] = defaults["round_every"]
             record["round_growth"] = defaults["round_growth"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
-        return surviving(record, defaults) | engine_record(self.engine.config)
+        return surviving(record, defaults) | engine_record(self.engine)
 
     def engine_version(self) -> str | None:
         """The arithmetic this config's runs train with, recorded with each run and fingerprinted: on

@@ -29,7 +29,8 @@ import json
 from types import MappingProxyType
 from typing import Any
 
-from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf import names
+from nerfaug.nerf.config import FLAT_NAMES, PRESETS, NerfConfig, preset_value
 from nerfaug.nerf.engine import Engine
 
 _PROTOCOL_1 = (
@@ -110,10 +111,32 @@ def engine_name(engine: Engine) -> str:
     return engine.flat_name()
 
 
-def engine_record(engine: NerfConfig) -> dict[str, Any]:
-    """The settings of `engine` a fingerprint hashes, as "engine.FLAT_NAME" (`NerfConfig.flat`); the
-    neutral value of a setting outside `VERSION_1` is its default in `NerfConfig()`."""
-    return surviving(_engine_names(engine.flat()), _engine_names(NerfConfig().flat()))
+def engine_settings(engine: Engine | NerfConfig) -> dict[str, Any]:
+    """Every engine setting by its flat name (`FLAT_NAMES`, in its order), every part's: those of
+    the parts `engine` chose as it holds them; those of a part it did not choose (a hash grid's on
+    a K-planes engine) as its preset holds them where the preset chose that part, else at their
+    defaults in the part's type.
+
+    Why the parts not chosen are there: fingerprint version 1 hashed every setting of every part,
+    because every engine then held every part's settings. A part no preset chose held its type's
+    defaults (every preset's did, and a change to one was refused as naming a new engine that
+    trains as the old one), and an engine that chose another part over its preset's kept the
+    preset's part's settings ("cpu+encoding=hash" held the cpu preset's plane_resolutions). Filled
+    in so, every recorded fingerprint and every study table's "engine_settings" keeps its value,
+    though an engine now holds only the settings of the parts it uses (`nerf.names`).
+    """
+    config = engine.config if isinstance(engine, Engine) else engine
+    preset = PRESETS[engine.preset] if isinstance(engine, Engine) else config
+    return {
+        flat: preset_value(preset, path) if names.unused(config, path) else names.get(config, path)
+        for flat, path in FLAT_NAMES.items()
+    }
+
+
+def engine_record(engine: Engine | NerfConfig) -> dict[str, Any]:
+    """The settings of `engine` a fingerprint hashes, as "engine.FLAT_NAME" (`engine_settings`);
+    the neutral value of a setting outside `VERSION_1` is its default in `NerfConfig()`."""
+    return surviving(_engine_names(engine_settings(engine)), _engine_names(engine_settings(NerfConfig())))
 
 
 def _engine_names(flat: dict[str, Any]) -> dict[str, Any]:

@@ -27,6 +27,7 @@ from nerfaug import runfiles
 from nerfaug.data.prepare import PREPARED
 from nerfaug.device import resolve_device
 from nerfaug.experiment.config import STUDY_PRESETS, ExperimentConfig, check_workers
+from nerfaug.experiment.fingerprints import engine_settings
 from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.protocol import prepare_scene, render_builtin, run_trials, scene_folder
 from nerfaug.experiment.runfolder import write_error
@@ -124,7 +125,7 @@ class StudyPlan:
     def record(self) -> dict:
         return {
             "engines": self.engines,
-            "engine_settings": {e: Engine.read(e).config.flat() for e in self.engines},
+            "engine_settings": {e: engine_settings(Engine.read(e)) for e in self.engines},
             "left_out": self.left_out,
             "scenes": self.scenes,
             "datasets": self.datasets,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import torch
 
-from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.config import HashGridConfig, NerfConfig, ProposalConfig
 
 # The most runs an automatic batch holds, until a GPU measures a batch's peak memory: the
 # per-run estimate below is computed, not measured.
@@ -22,20 +22,22 @@ def estimated_run_bytes(config: NerfConfig, fused: bool) -> int:
     its backward pass (without `fused` hash kernels also the PyTorch path's rows, weights and
     gathered features of every point's 8 vertices per level). An estimate for choosing a batch's
     size; the GPU benchmark measures the peak (`benchmarks/bench_gpu.py`)."""
-    field, proposal = config.field, config.sampler.proposal
-    if field.encoding == "hash":
-        grid = field.hash
+    field = config.field
+    if isinstance(grid := field.encoding, HashGridConfig):
         encoding_params = grid.levels * 2**grid.log2_table_size * grid.features_per_level
         encoding_width = grid.levels * grid.features_per_level
         corner_floats = 0 if fused else grid.levels * 8 * (2 + grid.features_per_level)
     else:
-        planes = field.planes
+        planes = field.encoding
         encoding_params = sum(3 * planes.features * r * r for r in planes.resolutions)
         encoding_width, corner_floats = planes.features * len(planes.resolutions), 0
-    levels = len(proposal.samples)
-    proposal_params = levels * proposal.hash_levels * 2**proposal.log2_table_size * 2
+    # An engine without proposal networks (an occupancy grid) counts none.
+    proposal = config.sampler.kind if isinstance(config.sampler.kind, ProposalConfig) else None
+    levels = len(proposal.samples) if proposal else 0
+    proposal_params = levels * proposal.hash_levels * 2**proposal.log2_table_size * 2 if proposal else 0
     rays = config.optimiser.batch_size
-    field_samples, proposal_samples = rays * config.sampler.num_samples, rays * sum(proposal.samples)
+    field_samples = rays * config.sampler.num_samples
+    proposal_samples = rays * sum(proposal.samples) if proposal else 0
     per_field_sample = (
         encoding_width
         + 2 * field.hidden_dim
@@ -46,6 +48,8 @@ def estimated_run_bytes(config: NerfConfig, fused: bool) -> int:
     )
     per_proposal_sample = (
         proposal.hash_levels * 2 + 2 * proposal.hidden_dim + 12 + (0 if fused else proposal.hash_levels * 32)
+        if proposal
+        else 0
     )
     distortion = 3 * rays * config.sampler.num_samples**2
     floats = 4 * (encoding_params + proposal_params) + field_samples * per_field_sample

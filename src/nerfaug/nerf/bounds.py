@@ -1,6 +1,5 @@
 """Settings' bounds, as types: the engine's (`nerfaug.nerf.config` declares each setting with one),
-an experiment's and a study's (`nerfaug.experiment.config`, `study_spec`); and which settings an
-engine uses at all.
+an experiment's and a study's (`nerfaug.experiment.config`, `study_spec`).
 
 Each setting's bounds are declared with its type and checked once, by pydantic, wherever settings
 are changed (`NerfConfig.with_settings`, `from_dict`): a width of 0, a negative learning rate or an
@@ -10,7 +9,7 @@ finite: an infinite learning rate or scene bound passes a `> 0` bound and then t
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 from annotated_types import Ge, Gt, Le, Lt, MinLen
 from pydantic import AllowInfNan, Strict
@@ -29,30 +28,3 @@ Fraction = Annotated[float, Strict(), Ge(0), Lt(1), _FINITE]  # in [0, 1)
 Share = Annotated[float, Strict(), Gt(0), Le(1), _FINITE]  # in (0, 1]
 Log2Size = Annotated[int, _INT, Ge(1), Le(30)]
 SHLevels = Annotated[int, _INT, Ge(1), Le(4)]  # 4 levels: 16 terms
-
-# The groups of settings only one kind of part reads: (path of the group, the setting that chooses
-# the part, the value under which the group is read). A change to a group the engine's part does
-# not read would name a new engine that trains exactly as the old one.
-_USED_WHEN = (
-    (("field", "hash"), ("field", "encoding"), "hash"),
-    (("field", "planes"), ("field", "encoding"), "kplanes"),
-    (("sampler", "occupancy"), ("sampler", "kind"), "occupancy"),
-    (("sampler", "proposal"), ("sampler", "kind"), "proposal"),
-)
-
-
-def get(config: Any, path: tuple[str, ...]) -> Any:
-    """The setting at `path` of `config` (a `NerfConfig`): get(config, ("field", "hidden_dim"))."""
-    for name in path:
-        config = getattr(config, name)
-    return config
-
-
-def unused(config: Any, path: tuple[str, ...]) -> str | None:
-    """Why the setting at `path` (e.g. ("field", "hash", "levels")) is not read by the engine
-    `config` (a `NerfConfig`), or None when it is: "the engine's field.encoding is 'kplanes'"."""
-    for group, chooser, value in _USED_WHEN:
-        if path[: len(group)] == group and get(config, chooser) != value:
-            chosen = f"{'.'.join(chooser)} is {get(config, chooser)!r}"
-            return f"not used by this engine: its {chosen} (this setting is read with {value!r})"
-    return None

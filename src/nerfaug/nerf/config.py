@@ -5,14 +5,16 @@ their field, sampler and renderer configs:
 
     NerfConfig
       scene       SceneConfig       the box the scene lives in and the ray's near/far
-      field       FieldConfig       the radiance field: encoding (hash grid or K-planes), MLPs
-        hash        HashGridConfig
-        planes      PlanesConfig
+      field       FieldConfig       the radiance field: its encoding, MLPs
+        encoding    HashGridConfig | PlanesConfig       (by name: "hash", field.hash.*; "kplanes", field.planes.*)
       sampler     SamplerConfig     where along a ray the field is evaluated
-        occupancy   OccupancyConfig
-        proposal    ProposalConfig
+        kind        OccupancyConfig | ProposalConfig    (by name: "occupancy", sampler.occupancy.*; "proposal", ...)
       optimiser   OptimiserConfig   rays per step, learning rates, Adam
       renderer    RendererConfig    what rays that pass through the scene see
+
+A component chosen among alternatives is an object of the chosen type, holding its own settings and
+no other's (`nerf.names`); readers dispatch on its type. By name, the choice and its settings are
+what they were: `field.encoding` "hash" and `field.hash.levels`.
 
 Every setting also has one flat name, the one results are fingerprinted by and a variant's name
 uses (`hash_levels` is `field.hash.levels`; the table is `FLAT_NAMES`): fingerprints and session
@@ -26,10 +28,10 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field, fields, is_dataclass
-from typing import Any, ClassVar, Literal, get_type_hints
+from typing import Any, ClassVar, Literal
 
-from nerfaug.nerf.bounds import Count, Counts, Fraction, Log2Size, NonNegative, Positive, Share, SHLevels, Steps, unused
-from nerfaug.nerf.bounds import get as _get
+from nerfaug.nerf import names
+from nerfaug.nerf.bounds import Count, Counts, Fraction, Log2Size, NonNegative, Positive, Share, SHLevels, Steps
 from nerfaug.registry import Presets, lookup, unknown
 from nerfaug.schema import RequestError, validated
 
@@ -65,8 +67,10 @@ class SceneConfig:
 
 @dataclass(frozen=True)
 class HashGridConfig:
-    """A multiresolution hash grid (nerfacto's encoding)."""
+    """A multiresolution hash grid (nerfacto's encoding): the field's encoding "hash"."""
 
+    NAME: ClassVar[str] = "hash"  # `FieldConfig.encoding` by name
+    GROUP: ClassVar[str] = "hash"  # its settings' group by name: field.hash.levels
     FLAT_PREFIX: ClassVar[str] = "hash_"
     levels: Count = 16
     """grid levels."""
@@ -82,8 +86,11 @@ class HashGridConfig:
 
 @dataclass(frozen=True)
 class PlanesConfig:
-    """A factorised multi-scale tri-plane grid (K-planes; much faster on a CPU)."""
+    """A factorised multi-scale tri-plane grid (K-planes; much faster on a CPU): the field's
+    encoding "kplanes"."""
 
+    NAME: ClassVar[str] = "kplanes"
+    GROUP: ClassVar[str] = "planes"
     FLAT_PREFIX: ClassVar[str] = "plane_"
     resolutions: Counts = (64, 256)
     """one tri-plane per resolution."""
@@ -95,12 +102,9 @@ class PlanesConfig:
 class FieldConfig:
     """The radiance field: a position encoding, a density MLP and a colour MLP."""
 
-    encoding: str = "kplanes"
-    """the position encoding: "hash" (a multiresolution hash grid, as nerfacto) or "kplanes"."""
-    hash: HashGridConfig = HashGridConfig()
-    """the hash grid (encoding "hash")."""
-    planes: PlanesConfig = PlanesConfig()
-    """the tri-planes (encoding "kplanes")."""
+    encoding: HashGridConfig | PlanesConfig = PlanesConfig()
+    """the position encoding: "hash" (a multiresolution hash grid, as nerfacto; its settings
+    field.hash.*) or "kplanes" (field.planes.*)."""
     hidden_dim: Count = 64
     """density MLP width."""
     geo_feat_dim: Count = 15
@@ -119,8 +123,10 @@ class FieldConfig:
 
 @dataclass(frozen=True)
 class OccupancyConfig:
-    """An occupancy grid whose empty cells the stratified samples skip."""
+    """An occupancy grid whose empty cells the stratified samples skip: the sampler "occupancy"."""
 
+    NAME: ClassVar[str] = "occupancy"  # `SamplerConfig.kind` by name
+    GROUP: ClassVar[str] = "occupancy"  # its settings' group by name: sampler.occupancy.resolution
     FLAT_PREFIX: ClassVar[str] = "occupancy_"
     resolution: Count = 64
     """grid cells per axis."""
@@ -138,7 +144,7 @@ class OccupancyConfig:
 
 @dataclass(frozen=True)
 class ProposalConfig:
-    """nerfacto's proposal density networks, and the losses that train them.
+    """nerfacto's proposal density networks, and the losses that train them: the sampler "proposal".
 
     The update schedule: the proposal networks get gradients (from the interlevel loss) only on
     update steps; on the others they run without a graph. Steps 0-9 all update; after that a step
@@ -147,6 +153,8 @@ class ProposalConfig:
     nerfstudio's ProposalNetworkSampler). `update_every = 0` updates every step.
     """
 
+    NAME: ClassVar[str] = "proposal"
+    GROUP: ClassVar[str] = "proposal"
     FLAT_PREFIX: ClassVar[str] = "proposal_"
     samples: Counts = (256, 96)
     """samples per proposal level (one entry per proposal network)."""
@@ -171,29 +179,29 @@ class ProposalConfig:
     warmup_steps: Count = 5000
     """steps over which the update interval grows to `update_every`."""
 
+    def __post_init__(self) -> None:
+        if len(self.samples) != len(self.max_resolutions):
+            raise ValueError(
+                f"proposal_samples {self.samples} and proposal_max_resolutions "
+                f"{self.max_resolutions} must have one entry per proposal network"
+            )
+
 
 @dataclass(frozen=True)
 class SamplerConfig:
     """Where along a ray the field is evaluated."""
 
-    kind: str = field(default="occupancy", metadata=_flat("sampler"))
-    """"occupancy" (stratified samples, empty cells of an occupancy grid skipped) or "proposal"
-    (nerfacto's proposal networks)."""
+    # By name the sampler's part's settings follow `transmittance_eps` ("parts_last"), as they did
+    # when every engine held both parts' settings: variant names list their changes in this order.
+    kind: OccupancyConfig | ProposalConfig = field(
+        default=OccupancyConfig(), metadata=_flat("sampler") | {"parts_last": True}
+    )
+    """"occupancy" (stratified samples, empty cells of an occupancy grid skipped; its settings
+    sampler.occupancy.*) or "proposal" (nerfacto's proposal networks, sampler.proposal.*)."""
     num_samples: Count = 48
     """colour samples per ray."""
     transmittance_eps: Fraction = 1e-4
     """colour is not evaluated where the transmittance is below this."""
-    occupancy: OccupancyConfig = OccupancyConfig()
-    """the occupancy grid (sampler "occupancy")."""
-    proposal: ProposalConfig = ProposalConfig()
-    """the proposal networks (sampler "proposal")."""
-
-    def __post_init__(self) -> None:
-        if self.kind == "proposal" and len(self.proposal.samples) != len(self.proposal.max_resolutions):
-            raise ValueError(
-                f"proposal_samples {self.proposal.samples} and proposal_max_resolutions "
-                f"{self.proposal.max_resolutions} must have one entry per proposal network"
-            )
 
 
 @dataclass(frozen=True)
@@ -257,8 +265,8 @@ class NerfConfig:
     renderer: RendererConfig = RendererConfig()
     """the background and render chunks."""
 
-    # `field.encoding` and `sampler.kind` are names in `nerf.registry`, which imports this module:
-    # they are checked there (`check_names`), where an engine is named and where parts are built.
+    # `field.encoding` and `sampler.kind` are parts whose types' `NAME`s are names in
+    # `nerf.registry`, which imports this module: an encoding or sampler is built from there.
 
     @classmethod
     def preset(cls, name: str, **settings) -> NerfConfig:
@@ -302,137 +310,137 @@ class NerfConfig:
         return lookup(PRESETS, PRESETS.kind, base).with_settings(**{**changes, **settings})
 
     def flat(self) -> dict[str, Any]:
-        """Every setting by its flat name (`FLAT_NAMES`), as results are fingerprinted."""
-        return {flat: _get(self, path) for flat, path in FLAT_NAMES.items()}
+        """Every setting this engine has by its flat name (`FLAT_NAMES`): its chosen parts', not
+        the others' (a fingerprint fills those in: `experiment.fingerprints.engine_settings`)."""
+        return {flat: names.get(self, path) for flat, path in FLAT_NAMES.items() if not names.unused(self, path)}
 
     def with_settings(self, **settings) -> NerfConfig:
         """A copy with the settings given by flat name changed, e.g. `with_settings(hash_levels=8)`.
 
         Raises:
-            ValueError: an unknown name (with the closest known ones), or a value a component refuses.
+            ValueError: an unknown name (with the closest known ones), a value a component refuses,
+                or a setting of a part the engine does not use (a RequestError naming it).
         """
-        data = self.to_dict()
-        for name, value in settings.items():
+        for name in settings:
             if name not in FLAT_NAMES:
                 raise ValueError(unknown("engine setting", name, sorted(FLAT_NAMES)))
-            *groups, leaf = FLAT_NAMES[name]
+        return self.changed({FLAT_NAMES[name]: value for name, value in settings.items()})
+
+    def changed(self, changes: dict[tuple[str, ...], Any]) -> NerfConfig:
+        """A copy with the settings at the nested names `changes` changed ({("field", "hash",
+        "levels"): 8}), checked once. A changed chooser (("field", "encoding"): "hash") takes its
+        part at that part's defaults, with the settings `changes` gives it.
+
+        Raises:
+            ValueError: an unknown name or part, a value out of its bounds (a RequestError naming
+                it by its path), or a setting of a part the result does not use: a change the
+                engine never reads would name a new engine that trains as the old one.
+        """
+        data = self.to_dict()
+        for path, value in changes.items():
             group = data
-            for step in groups:
-                group = group[step]
-            group[leaf] = value
-        return _checked(_build(NerfConfig, data, "engine"))  # built once: each group checks its settings together
+            for step in path[:-1]:
+                group = group.setdefault(step, {})
+                if not isinstance(group, dict):
+                    raise RequestError(".".join(path), value, f"{step} is a setting, not a group of settings")
+            group[path[-1]] = value
+        config = NerfConfig.from_dict(data)
+        for path, value in changes.items():
+            if why := names.unused(config, path):
+                raise RequestError(".".join(path), value, why)
+        return config
 
     def to_dict(self) -> dict:
-        """The nested settings as plain data (tuples stay tuples; JSON makes them lists)."""
-        return dataclasses.asdict(self)
+        """The settings nested by name, as records hold them: a choice as its part's name and that
+        part's settings ({"field": {"encoding": "hash", "hash": {...}, ...}}); tuples stay tuples."""
+        return names.to_names(self)
 
     @classmethod
     def from_dict(cls, data: dict) -> NerfConfig:
         """The inverse of `to_dict`; also reads the flat form (`flat()`) that files written before
-        the settings were nested hold. Lists, e.g. from JSON, become tuples.
+        the settings were nested hold, and records that hold every part's settings (those of the
+        parts not chosen are skipped). Lists, e.g. from JSON, become tuples.
 
         Raises:
-            ValueError: a setting no engine has.
+            ValueError: a setting no engine has, or a value out of its bounds.
         """
         if set(data) <= set(FLAT_NAMES) and data:
-            return cls().with_settings(**data)
-        return _checked(_build(cls, data, "engine"))
+            nested: dict = {}
+            for name, value in data.items():
+                *groups, leaf = FLAT_NAMES[name]
+                group = nested
+                for step in groups:
+                    group = group.setdefault(step, {})
+                group[leaf] = value
+            data = nested
+        return _checked(names.build(cls, data, "engine"))
 
 
-def _checked(config: NerfConfig) -> NerfConfig:
-    """`config`, once each setting has its type and bounds; else a RequestError (a ValueError)
-    naming the first refused one by its path: "field.hidden_dim 0: must be >= 1"."""
-    validated(NerfConfig, dataclasses.asdict(config))  # a check only: `config` keeps its values as given
-    return config
+def _checked(node: Any, where: tuple[str, ...] = ()) -> Any:
+    """`node` (a `NerfConfig` or one of its groups), once each setting has its type and bounds;
+    else a RequestError (a ValueError) naming the first refused one by its name:
+    "field.hidden_dim 0: must be >= 1". Each group is checked by pydantic with its own settings
+    (a part's under its group's name, "field.hash")."""
+    own = {f.name: getattr(node, f.name) for f in fields(node) if not is_dataclass(getattr(node, f.name))}
+    validated(type(node), own, ".".join(where))  # a check only: `node` keeps its values as given
+    for f in fields(node):
+        value = getattr(node, f.name)
+        if is_dataclass(value):
+            _checked(value, (*where, value.GROUP if names.choice(type(node), f.name) else f.name))
+    return node
 
 
-def _leaves(cls: type, path: tuple[str, ...] = (), prefix: str = "") -> dict[str, tuple[str, ...]]:
-    """flat name -> path of every setting under the dataclass `cls` (groups are dataclasses)."""
-    hints = get_type_hints(cls)
-    names: dict[str, tuple[str, ...]] = {}
-    for f in fields(cls):
-        kind = hints[f.name]
-        if is_dataclass(kind):
-            names |= _leaves(kind, (*path, f.name), getattr(kind, "FLAT_PREFIX", ""))
-        else:
-            names[f.metadata.get("flat", prefix + f.name)] = (*path, f.name)
-    return names
-
-
-FLAT_NAMES: dict[str, tuple[str, ...]] = _leaves(NerfConfig)
-"""Each setting's flat name -> its path in `NerfConfig`, e.g. "hash_levels" -> ("field", "hash",
-"levels"). The flat names are those of fingerprints, variants and files written before nesting."""
-
-
-def _build(cls: type, data: dict, where: str) -> Any:
-    """A nested config from nested plain data (missing settings keep their defaults)."""
-    hints, known = get_type_hints(cls), {f.name for f in fields(cls)}
-    extra = set(data) - known
-    if extra:
-        raise ValueError(f"{where}: {unknown('setting', sorted(extra)[0], sorted(known))}")
-    values = {}
-    for name, value in data.items():
-        kind = hints[name]
-        if is_dataclass(kind):
-            values[name] = _build(kind, value, f"{where}.{name}")
-        else:
-            values[name] = tuple(value) if isinstance(value, list) else value
-    return cls(**values)
+FLAT_NAMES: dict[str, tuple[str, ...]] = names.leaves(NerfConfig)
+"""Each setting's flat name -> its nested name in `NerfConfig`, e.g. "hash_levels" -> ("field",
+"hash", "levels"), every part's (an engine has its chosen parts' only). The flat names are those of
+fingerprints, variants and files written before nesting."""
 
 
 PRESETS: Presets[NerfConfig] = Presets(
     "engine preset",
     {
         "paper": NerfConfig(
-            field=FieldConfig(encoding="hash"),
-            sampler=SamplerConfig(
-                kind="proposal",
-                # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
-                proposal=ProposalConfig(update_every=5, warmup_steps=5000),
-            ),
+            field=FieldConfig(encoding=HashGridConfig()),
+            # nerfacto's proposal-update schedule (`proposal_update_every=5`, `proposal_warmup=5000`).
+            sampler=SamplerConfig(kind=ProposalConfig(update_every=5, warmup_steps=5000)),
             optimiser=OptimiserConfig(batch_size=4096),
             renderer=RendererConfig(background_mode="fixed"),
         ),
         "cpu": NerfConfig(
             field=FieldConfig(
-                encoding="kplanes",
-                planes=PlanesConfig(resolutions=(64, 128), features=8),
+                encoding=PlanesConfig(resolutions=(64, 128), features=8),
                 color_layers=1,
                 average_init_density=1.0,
             ),
-            sampler=SamplerConfig(kind="occupancy", num_samples=64, occupancy=OccupancyConfig(warmup_steps=64)),
+            sampler=SamplerConfig(kind=OccupancyConfig(warmup_steps=64), num_samples=64),
             optimiser=OptimiserConfig(batch_size=1024, lr_final=1e-3, lr_decay_steps=5000),
         ),
         "nerfacto-cpu": NerfConfig(
             field=FieldConfig(
-                encoding="hash",
-                hash=HashGridConfig(levels=6, log2_table_size=14, max_resolution=256),
+                encoding=HashGridConfig(levels=6, log2_table_size=14, max_resolution=256),
                 hidden_dim=32,
                 color_hidden_dim=32,
                 density_activation="trunc_exp",
                 average_init_density=0.01,
             ),
             sampler=SamplerConfig(
-                kind="proposal",
+                kind=ProposalConfig(samples=(32, 16), hash_levels=3, max_resolutions=(64, 128), log2_table_size=12),
                 num_samples=16,
-                proposal=ProposalConfig(samples=(32, 16), hash_levels=3, max_resolutions=(64, 128), log2_table_size=12),
             ),
             optimiser=OptimiserConfig(batch_size=512),
             renderer=RendererConfig(background_mode="fixed"),
         ),
         "test": NerfConfig(
             field=FieldConfig(
-                encoding="kplanes",
-                planes=PlanesConfig(resolutions=(16, 32), features=4),
+                encoding=PlanesConfig(resolutions=(16, 32), features=4),
                 hidden_dim=16,
                 geo_feat_dim=7,
                 color_hidden_dim=16,
                 color_layers=1,
             ),
             sampler=SamplerConfig(
-                kind="occupancy",
+                kind=OccupancyConfig(resolution=16, update_every=4, warmup_steps=8),
                 num_samples=16,
-                occupancy=OccupancyConfig(resolution=16, update_every=4, warmup_steps=8),
             ),
             optimiser=OptimiserConfig(batch_size=128),
             renderer=RendererConfig(render_chunk=4096),
@@ -464,14 +472,15 @@ records no version."""
 
 def uses_hash_grid(config: NerfConfig) -> bool:
     """Whether engine `config` has a hash grid (its field's encoding, or proposal networks)."""
-    return config.field.encoding == "hash" or config.sampler.kind == "proposal"
+    return isinstance(config.field.encoding, HashGridConfig) or isinstance(config.sampler.kind, ProposalConfig)
 
 
 def _setting(base: NerfConfig, name: str, text: str, where: str):
-    """`text` as a value of the setting `name` (a flat name), typed like the base preset's value."""
+    """`text` as a value of the setting `name` (a flat name), typed like the base preset's value
+    (a setting of a part the preset does not use: like that part's default)."""
     if name not in FLAT_NAMES:
         raise ValueError(f"{where}: {unknown('setting', name, sorted(FLAT_NAMES))}")
-    current = _get(base, FLAT_NAMES[name])
+    current = preset_value(base, FLAT_NAMES[name])
     try:
         if isinstance(current, bool):
             if text.lower() not in ("true", "false"):
@@ -504,19 +513,18 @@ def parse_variant(name: str) -> tuple[str, dict]:
         changes[field_name] = _setting(preset, field_name, text, f"engine {name!r}")
     if changes:
         try:  # the components' own checks (e.g. background_mode's values), and what the engine reads
-            _used(preset.with_settings(**changes), changes)
+            preset.with_settings(**changes)
         except ValueError as error:
             raise ValueError(f"engine {name!r}: {error}") from None
     return base, changes
 
 
-def _used(config: NerfConfig, changes: dict) -> NerfConfig:
-    """`config`, once every setting of `changes` (flat names) is one it reads (else a RequestError
-    naming it: a change the engine never reads would name a new engine that trains as the old)."""
-    for flat, value in changes.items():
-        if why := unused(config, FLAT_NAMES[flat]):
-            raise RequestError(".".join(FLAT_NAMES[flat]), value, why)
-    return config
+def preset_value(config: NerfConfig, path: tuple[str, ...]) -> Any:
+    """The setting at `path` of `config`; of a part `config` does not use, that part's default:
+    what every engine held there when each held every part's settings (`NerfConfig.changed` takes a
+    newly chosen part at its defaults), so a variant that chooses a part and sets one of its
+    settings to its default names the engine the part's choice alone names."""
+    return names.part_default(NerfConfig, path) if names.unused(config, path) else names.get(config, path)
 
 
 def _variant_text(value: Any) -> str:

@@ -188,13 +188,10 @@ class HashEncoding(nn.Module):
 
     @classmethod
     def from_config(cls, config) -> HashEncoding:
-        """The field's hash grid as a `NerfConfig`'s hash_* fields describe it."""
+        """The field's hash grid as a `NerfConfig` whose encoding is a `HashGridConfig` describes it."""
+        grid = config.field.encoding
         return cls(
-            config.field.hash.levels,
-            config.field.hash.features_per_level,
-            config.field.hash.log2_table_size,
-            config.field.hash.base_resolution,
-            config.field.hash.max_resolution,
+            grid.levels, grid.features_per_level, grid.log2_table_size, grid.base_resolution, grid.max_resolution
         )
 
     @property
@@ -298,8 +295,8 @@ class KPlanesEncoding(nn.Module):
 
     @classmethod
     def from_config(cls, config) -> KPlanesEncoding:
-        """The field's tri-planes as a `NerfConfig`'s plane_* fields describe them."""
-        return cls(config.field.planes.resolutions, config.field.planes.features)
+        """The field's tri-planes as a `NerfConfig` whose encoding is a `PlanesConfig` describes them."""
+        return cls(config.field.encoding.resolutions, config.field.encoding.features)
 
     @property
     def output_dim(self) -> int:

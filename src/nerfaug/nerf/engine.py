@@ -19,10 +19,18 @@ from typing import Any
 
 from tyro.constructors import PrimitiveConstructorSpec
 
-from nerfaug.nerf.bounds import get, unused
-from nerfaug.nerf.config import FLAT_NAMES, PRESETS, VARIANT_SEPARATOR, NerfConfig, _build, _variant_text, parse_variant
+from nerfaug.nerf import names
+from nerfaug.nerf.config import (
+    FLAT_NAMES,
+    PRESETS,
+    VARIANT_SEPARATOR,
+    NerfConfig,
+    _variant_text,
+    parse_variant,
+    preset_value,
+)
 from nerfaug.registry import lookup
-from nerfaug.schema import RequestError, validated
+from nerfaug.schema import RequestError
 
 PRESET_KEY = "preset"
 
@@ -74,18 +82,9 @@ class Engine:
         changes = _leaves(settings or {})
         if not changes:
             return cls(preset, {}, base)
-        merged = base.to_dict()
-        for path, value in changes.items():
-            group = merged
-            for step in path[:-1]:
-                group = group[step]
-            group[path[-1]] = tuple(value) if isinstance(value, list) else value
-        _build(NerfConfig, merged, "engine")  # an unknown setting: named with its group
-        config = validated(NerfConfig, merged)  # the one check of bounds and types
-        for path, value in changes.items():
-            if why := unused(config, path):
-                raise RequestError(".".join(path), value, why)
-        own = {path: get(config, path) for path in changes if get(config, path) != get(base, path)}
+        config = base.changed(changes)  # the one check of names, bounds, types and parts used
+        own = {path: names.get(config, path) for path in changes}
+        own = {path: value for path, value in own.items() if value != preset_value(base, path)}
         return cls(preset, _nested(own), config)
 
     def with_settings(self, settings: dict) -> Engine:

@@ -14,11 +14,14 @@ from typing import Annotated, Any, Literal, get_args, get_origin, get_type_hints
 
 import tyro
 
-from nerfaug.nerf.config import FLAT_NAMES, NerfConfig, _get
+from nerfaug.nerf import names
+from nerfaug.nerf.config import FLAT_NAMES, NerfConfig
 
 
 def _given_form(cls: type, path: tuple[str, ...] = ()) -> type:
-    """A frozen dataclass with `cls`'s fields, each leaf None unless given, for tyro to read.
+    """A frozen dataclass with `cls`'s settings by name, each leaf None unless given, for tyro to
+    read: a component choice is its chooser (`--engine.field.encoding hash`) and every part's
+    settings under its group (`--engine.field.hash.levels 8`), as names give them.
 
     Hand-written because tyro's own ways to override a preset's fields (subcommands per preset,
     `tyro.extras.overridable_config_cli`) choose the preset by a positional subcommand, and every
@@ -29,14 +32,18 @@ def _given_form(cls: type, path: tuple[str, ...] = ()) -> type:
 
     hints, form = get_type_hints(cls), []
     for f in fields(cls):
-        kind = hints[f.name]
-        if is_dataclass(kind):
+        kind, groups = hints[f.name], []
+        if parts := names.choice(cls, f.name):
+            groups = [(part.GROUP, _given_form(part, (*path, part.GROUP))) for part in parts]
+            kind = Literal[tuple(part.NAME for part in parts)]  # type: ignore[valid-type]
+        elif is_dataclass(kind):
             sub = _given_form(kind, (*path, f.name))
             form.append((f.name, sub, field(default_factory=sub)))
             continue
         help_text = " ".join((get_field_docstring(cls, f.name, ()) or "").split())
         marks = tyro.conf.arg(help=help_text, metavar=_metavar(kind), help_behavior_hint="(default: the engine's)")
         form.append((f.name, Annotated[kind | None, marks], None))  # type: ignore[valid-type]
+        form += [(group, sub, field(default_factory=sub)) for group, sub in groups]
     namespace = {"__doc__": cls.__doc__}
     if not path:
         namespace["given"] = _given_settings
@@ -60,7 +67,10 @@ def _given_settings(form: Any) -> dict[str, Any]:
     nests them: {"field": {"hidden_dim": 32}}."""
     given: dict[str, Any] = {}
     for path in FLAT_NAMES.values():
-        if (value := _get(form, path)) is not None:
+        value = form
+        for name in path:
+            value = getattr(value, name)
+        if value is not None:
             group = given
             for step in path[:-1]:
                 group = group.setdefault(step, {})

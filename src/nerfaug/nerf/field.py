@@ -117,14 +117,9 @@ class DensityField(nn.Module):
         super().__init__()
         field = config.field
         self.density_kind, self.average_init_density = field.density_activation, field.average_init_density
-        self.encoding = HashEncoding(
-            config.sampler.proposal.hash_levels,
-            2,
-            config.sampler.proposal.log2_table_size,
-            16,
-            max_resolution,
-        )
-        self.mlp = mlp(self.encoding.output_dim, config.sampler.proposal.hidden_dim, 1, 1)
+        proposal = config.sampler.kind  # a `ProposalConfig`
+        self.encoding = HashEncoding(proposal.hash_levels, 2, proposal.log2_table_size, 16, max_resolution)
+        self.mlp = mlp(self.encoding.output_dim, proposal.hidden_dim, 1, 1)
         with torch.no_grad():
             self.mlp[-1].bias.zero_()
 

@@ -13,12 +13,10 @@ which are small at any sensible width.) Light: no torch.
 from __future__ import annotations
 
 import os
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from nerfaug.nerf.bounds import get
-from nerfaug.nerf.config import PRESETS
+from nerfaug.nerf.config import PRESETS, HashGridConfig, ProposalConfig
 from nerfaug.nerf.engine import Engine
 from nerfaug.schema import RequestError
 
@@ -38,20 +36,18 @@ def parameters(config: Any) -> int:
     """The engine `config`'s (a `NerfConfig`) parameter count, an upper bound (a hash level that
     is dense at its resolution holds fewer entries than the table)."""
     field, sampler = config.field, config.sampler
-    if field.encoding == "hash":
-        grid = field.hash
+    if isinstance(grid := field.encoding, HashGridConfig):
         encoding, width = (
             grid.levels * 2**grid.log2_table_size * grid.features_per_level,
             grid.levels * grid.features_per_level,
         )
     else:
-        planes = field.planes
+        planes = field.encoding
         encoding = sum(3 * planes.features * r * r for r in planes.resolutions)
         width = planes.features * len(planes.resolutions)
     count = encoding + _mlp(width, field.hidden_dim, 1 + field.geo_feat_dim, 1)
     count += _mlp(field.sh_levels**2 + field.geo_feat_dim, field.color_hidden_dim, 3, field.color_layers)
-    if sampler.kind == "proposal":
-        proposal = sampler.proposal
+    if isinstance(proposal := sampler.kind, ProposalConfig):
         each = proposal.hash_levels * 2**proposal.log2_table_size * 2 + _mlp(
             proposal.hash_levels * 2, proposal.hidden_dim, 1, 1
         )
@@ -63,11 +59,10 @@ def _per_sample(config: Any) -> int:
     """Floats one colour sample keeps for the backward pass: its encoding (with the interpolated
     corners), the MLPs' activations, and the compositing's."""
     field = config.field
-    if field.encoding == "hash":
-        grid = field.hash
+    if isinstance(grid := field.encoding, HashGridConfig):
         encoding = grid.levels * grid.features_per_level + grid.levels * 8 * (2 + grid.features_per_level)
     else:
-        planes = field.planes
+        planes = field.encoding
         encoding = len(planes.resolutions) * planes.features * (1 + 3 * 4)  # 3 planes, 4 corners each
     return (
         encoding
@@ -85,12 +80,11 @@ def estimated_bytes(config: Any) -> int:
     sampler, rays = config.sampler, config.optimiser.batch_size
     samples = sampler.num_samples
     step = rays * samples * _per_sample(config) + 3 * rays * samples**2  # the distortion loss's pairs
-    if sampler.kind == "proposal":
-        proposal = sampler.proposal
+    if isinstance(proposal := sampler.kind, ProposalConfig):
         per = proposal.hash_levels * (2 + 32) + 2 * proposal.hidden_dim + 12
         step += rays * sum(proposal.samples) * per
     else:
-        step += 2 * sampler.occupancy.resolution**3  # the grid and its opacities
+        step += 2 * sampler.kind.resolution**3  # the grid and its opacities
     render = config.renderer.render_chunk * samples * _per_sample(config) // 4  # no gradients: a few layers' at a time
     return PER_PARAMETER * parameters(config) + FLOAT * max(step, render)
 
@@ -118,8 +112,8 @@ def check_fits(config: Any, changes: dict[tuple[str, ...], Any], base: Any, limi
     Args:
         config: the engine (a `NerfConfig`).
         changes: the settings the engine changes from its preset, path -> value.
-        base: the preset (a `NerfConfig`); a setting restored to its value there shows how much of
-            the estimate it is to blame for.
+        base: the preset (a `NerfConfig`); the engine with one change left out shows how much of
+            the estimate that change is to blame for.
     """
     limit = machine_memory() if limit is None else limit
     need = estimated_bytes(config)
@@ -128,8 +122,8 @@ def check_fits(config: Any, changes: dict[tuple[str, ...], Any], base: Any, limi
     blame, path, value = need, (), None
     for where, given in changes.items():
         try:
-            restored = estimated_bytes(_with(config, where, get(base, where)))
-        except (ValueError, ZeroDivisionError):
+            restored = estimated_bytes(base.changed({p: v for p, v in changes.items() if p != where}))
+        except (ValueError, ZeroDivisionError):  # e.g. a part's setting without the choice of the part
             continue
         if restored < blame:
             blame, path, value = restored, where, given
@@ -137,13 +131,6 @@ def check_fits(config: Any, changes: dict[tuple[str, ...], Any], base: Any, limi
         f"one run of this engine needs about {gib(need)} of memory by estimate, more than this machine's {gib(limit)}"
     )
     raise RequestError(".".join(path), value, problem)
-
-
-def _with(config: Any, path: tuple[str, ...], value: Any) -> Any:
-    """`config` (nested frozen dataclasses) with the setting at `path` replaced, unchecked."""
-    if len(path) == 1:
-        return replace(config, **{path[0]: value})
-    return replace(config, **{path[0]: _with(getattr(config, path[0]), path[1:], value)})
 
 
 def check_engine_fits(engine: Engine, limit: int | None = None) -> Engine:

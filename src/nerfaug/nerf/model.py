@@ -46,7 +46,7 @@ class NerfModel(nn.Module):
     Attributes:
         config: the hyperparameters.
         field: the field (density and colour).
-        sampler: the `Sampler` named by `config.sampler.kind` (occupancy grid or proposal networks).
+        sampler: the `Sampler` `config.sampler.kind` chooses (occupancy grid or proposal networks).
         background: buffer with shape (3,).
     """
 

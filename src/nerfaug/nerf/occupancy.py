@@ -133,14 +133,15 @@ class OccupancySampler(Sampler):
 
     @classmethod
     def from_config(cls, config: NerfConfig) -> OccupancySampler:
+        occupancy = config.sampler.kind  # an `OccupancyConfig`
         grid = OccupancyGrid(
             config.scene.box_half_size,
-            config.sampler.occupancy.resolution,
-            config.sampler.occupancy.update_every,
-            config.sampler.occupancy.warmup_steps,
-            config.sampler.occupancy.ema_decay,
-            config.sampler.occupancy.threshold,
-            config.sampler.occupancy.update_fraction,
+            occupancy.resolution,
+            occupancy.update_every,
+            occupancy.warmup_steps,
+            occupancy.ema_decay,
+            occupancy.threshold,
+            occupancy.update_fraction,
         )
         return cls(grid, config.sampler.num_samples)
 

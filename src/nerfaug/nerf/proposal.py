@@ -247,16 +247,17 @@ class ProposalSampler(Sampler):
 
     @classmethod
     def from_config(cls, config: NerfConfig) -> ProposalSampler:
+        proposal = config.sampler.kind  # a `ProposalConfig`
         return cls(
-            [DensityField(config, r) for r in config.sampler.proposal.max_resolutions],
-            config.sampler.proposal.samples,
+            [DensityField(config, r) for r in proposal.max_resolutions],
+            proposal.samples,
             config.sampler.num_samples,
             config.scene.box_half_size,
-            ProposalSchedule(config.sampler.proposal.update_every, config.sampler.proposal.warmup_steps),
-            config.sampler.proposal.anneal_steps,
-            config.sampler.proposal.anneal_slope,
-            config.sampler.proposal.interlevel_loss_mult,
-            config.sampler.proposal.distortion_loss_mult,
+            ProposalSchedule(proposal.update_every, proposal.warmup_steps),
+            proposal.anneal_steps,
+            proposal.anneal_slope,
+            proposal.interlevel_loss_mult,
+            proposal.distortion_loss_mult,
         )
 
     @property

@@ -1,8 +1,10 @@
 """Registries of the engine's swappable parts: position encodings, fields and samplers by name.
 
-`NerfConfig.encoding` and `NerfConfig.sampler` name entries here; an unknown name is an error
-that lists the known ones. Adding an encoding is one module defining it (an `nn.Module` with
-`output_dim` and `from_config(config)`) and one line in `ENCODINGS`.
+The parts `NerfConfig.field.encoding` and `NerfConfig.sampler.kind` choose are built from here,
+by their types' `NAME`s; a name with no entry is an error that lists the known ones. Adding an
+encoding is its settings' type (`nerf.config`, one more alternative of `FieldConfig.encoding`),
+one module defining it (an `nn.Module` with `output_dim` and `from_config(config)`) and one line
+in `ENCODINGS`.
 """
 
 from __future__ import annotations
@@ -40,23 +42,16 @@ DEFAULT_FIELD = "nerfacto"
 
 
 def check_names(config: NerfConfig) -> NerfConfig:
-    """`config`, once its encoding and sampler are names in the registries; a ValueError naming
-    the value and the valid choices otherwise (before any part is built or any run starts).
-
-    Example:
-        >>> check_names(NerfConfig().with_settings(encoding="nope"))
-        Traceback (most recent call last):
-        ...
-        ValueError: unknown encoding 'nope'; choose one of: hash, kplanes
-    """
-    lookup(ENCODINGS, "encoding", config.field.encoding)
-    lookup(SAMPLERS, "sampler", config.sampler.kind)
+    """`config`, once its encoding and sampler have entries in the registries; a ValueError naming
+    the part and the valid choices otherwise (before any part is built or any run starts)."""
+    lookup(ENCODINGS, "encoding", config.field.encoding.NAME)
+    lookup(SAMPLERS, "sampler", config.sampler.kind.NAME)
     return config
 
 
 def build_encoding(config: NerfConfig, name: str | None = None) -> nn.Module:
-    """The position encoding `name` (default: `config.field.encoding`), sized by `config`."""
-    return lookup(ENCODINGS, "encoding", config.field.encoding if name is None else name)(config)
+    """The position encoding `name` (default: `config.field.encoding`'s), sized by `config`."""
+    return lookup(ENCODINGS, "encoding", config.field.encoding.NAME if name is None else name)(config)
 
 
 def build_field(config: NerfConfig, name: str = DEFAULT_FIELD, encoding: nn.Module | None = None) -> nn.Module:
@@ -66,5 +61,5 @@ def build_field(config: NerfConfig, name: str = DEFAULT_FIELD, encoding: nn.Modu
 
 
 def build_sampler(config: NerfConfig) -> Sampler:
-    """The sampler `config.sampler.kind`, sized by `config`."""
-    return lookup(SAMPLERS, "sampler", config.sampler.kind)(config)
+    """The sampler `config.sampler.kind` is, sized by `config`."""
+    return lookup(SAMPLERS, "sampler", config.sampler.kind.NAME)(config)
