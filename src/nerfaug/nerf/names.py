@@ -176,9 +176,10 @@ def build(cls: type, data: dict, where: str) -> Any:
             f, part = groups[name]
             if not isinstance(value, dict):
                 raise ValueError(f"{where}.{name}: {value!r} is not a group of settings")
-            built = build(part, value, f"{where}.{name}")
             if chosen[f.name] is part:
-                values[f.name] = built
+                values[f.name] = build(part, value, f"{where}.{name}")
+            elif extra := set(value) - set(hints(part)):  # another part's: its names checked, no more
+                raise ValueError(f"{where}.{name}: {unknown('setting', sorted(extra)[0], sorted(hints(part)))}")
         elif choice(cls, name):
             continue
         elif is_dataclass(hints(cls)[name]):
