@@ -190,8 +190,9 @@ class ExperimentConfig(Settings):
         `NOT_FINGERPRINTED`; the device by its kind; the engine's arithmetic as "engine_version"), every
         `SelectionConfig` field as "selection.<field>", and the engine preset's `NerfConfig` as
         "engine.<flat name>" ("engine" keeps the preset's name; per-scene overrides are
-        "field_lr"). A setting added since fingerprint version 1 is left out at its neutral value
-        (`nerfaug.experiment.fingerprints`), so adding one moves no recorded fingerprint. Values
+        "field_lr"). A setting added since fingerprint version 1 is left out at its neutral value,
+        and one another setting leaves unused is taken at it (with one round, the spacing of
+        rounds; `nerfaug.experiment.fingerprints`), so adding one moves no recorded fingerprint. Values
         are as JSON stores them (tuples become lists), so a setting read back from sweep.json
         compares equal to the same setting in code.
         """
@@ -203,9 +204,6 @@ class ExperimentConfig(Settings):
         record["engine_version"] = self.engine_version()
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         defaults = defaults_of(type(self)) | {"engine_version": None}
-        if self.rounds == 1:  # one round: `round_every` changes nothing, so it splits no results
-            record["round_every"] = defaults["round_every"]
-            record["round_growth"] = defaults["round_growth"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
         return surviving(record, defaults) | engine_record(self.engine.config)
 
