@@ -142,7 +142,7 @@ def test_study_selection_options_apply_and_leave_the_fingerprint_alone_at_their_
     monkeypatch.setattr(study_module, "make_plan", make_plan)
     monkeypatch.setattr(study_module, "run_study", lambda plan, **kw: {})
     monkeypatch.setattr(study_cli, "record_table", lambda out, path, previous: {"runs": []})
-    monkeypatch.setattr(study_page, "write_study", lambda out, recorded, plan="auto": [])
+    monkeypatch.setattr(study_page, "write_study", lambda out, recorded, plan="auto", one_shot=None: [])
     base = ["study", "--out", str(tmp_path / "s"), "--preset", "tiny", "--workers", "1"]
     main(base)
     main([*base, "--selection.temperature", "1.0", "--selection.entropy-resolution", "40"])

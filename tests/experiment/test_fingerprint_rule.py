@@ -142,3 +142,41 @@ def test_every_protocol_field_is_fingerprinted_unless_declared_not_to_be():
     for name, value in (("hemisphere_map", False), ("view_uncertainty", False), ("save_renders", 0), ("trials", 9)):
         assert name in NOT_FINGERPRINTED
         assert base.replace(**{name: value}).fingerprinted() == record, name
+
+
+# Fingerprints of the study preset's protocol (engine "cpu": no hash grid, so no engine version on
+# any machine), computed before the spacing of rounds was declared unused with one round in
+# `fingerprints.UNUSED_WHEN` (it was a special case in `ExperimentConfig.fingerprinted`).
+PINNED = [
+    ({}, "8c7a5d141f01bcf4"),
+    ({"round_every": 50}, "8c7a5d141f01bcf4"),
+    ({"round_every": 50, "round_growth": "per-view"}, "8c7a5d141f01bcf4"),
+    ({"rounds": 8, "n_initial": 4, "n_new": 1, "round_every": 100}, "2b5849cdf84b19f7"),
+    ({"rounds": 8, "n_initial": 4, "n_new": 1, "round_every": 50}, "39edde32b700570e"),
+    ({"rounds": 3, "n_new": 2, "round_every": 20, "round_growth": "per-view"}, "04d48b78822d718d"),
+]
+
+
+@pytest.mark.parametrize(("changes", "expected"), PINNED)
+def test_the_declared_unused_settings_move_no_fingerprint(changes, expected):
+    from nerfaug.experiment.config import STUDY_PRESETS
+
+    config = STUDY_PRESETS.choose("study", device="cpu", **changes)
+    assert config.engine_version() is None
+    assert fingerprint(config.fingerprinted()) == expected
+
+
+def test_with_one_round_the_spacing_of_rounds_is_hashed_by_the_declared_rule(monkeypatch):
+    one = ExperimentConfig(device="cpu")
+    spaced = one.replace(round_every=50, round_growth="per-view")
+    assert spaced.fingerprinted() == one.fingerprinted()
+    # Without the declaration the same settings would split runs of one round.
+    monkeypatch.setattr(fingerprints, "UNUSED_WHEN", ())
+    record = spaced.fingerprinted()
+    assert {"round_every": 50, "round_growth": "per-view"}.items() <= record.items()
+    assert fingerprint(record) != fingerprint(one.fingerprinted())
+    # Declared for another value of the condition, it leaves runs in rounds unsplit by their spacing.
+    monkeypatch.setattr(fingerprints, "UNUSED_WHEN", (("rounds", 3, ("round_every",)),))
+    three = ExperimentConfig(device="cpu", rounds=3, n_new=1, round_every=20)
+    assert "round_every" not in three.fingerprinted()
+    assert three.replace(round_every=30).fingerprinted() == three.fingerprinted()

@@ -51,3 +51,20 @@ def test_every_committed_run_keeps_its_fingerprint(name):
                 sweeps[key] = fingerprint(plan_config(table["plan"], *key).fingerprinted())
         assert run_fingerprint(sweeps[key], get_method(run["method"]).definition()) == run["fingerprint"], run
     assert len(table["runs"]) >= 720
+
+
+@pytest.mark.parametrize("name", TABLES)
+def test_a_table_re_derives_its_runs_fingerprints_from_its_plan_alone(name, monkeypatch):
+    """`rederived_fingerprints` (what `nerfaug study --one-shot-table` counts a run by) gives every
+    committed run its recorded fingerprint, from the table's plan and the run's recorded engine
+    version, whatever this machine's engine version is; a changed setting of the plan gives none."""
+    from nerfaug.experiment.study import rederived_fingerprints
+
+    table = json.loads((RESULTS / name).read_text())
+    key = {id(r): (r["engine"], r.get("engine_version") or None, r["method"]) for r in table["runs"]}
+    keys = set(key.values())
+    monkeypatch.setattr(ExperimentConfig, "engine_version", lambda self: "a later arithmetic")
+    now = rederived_fingerprints(table["plan"], keys)
+    assert all(now[key[id(r)]] == r["fingerprint"] for r in table["runs"])
+    plan = table["plan"] | {"config": table["plan"]["config"] | {"n_test": 49}}
+    assert not set(rederived_fingerprints(plan, keys).values()) & {r["fingerprint"] for r in table["runs"]}

@@ -143,6 +143,16 @@ def test_table_rows_are_the_run_folders(study_out):
             np.testing.assert_allclose(row["chosen_poses"], np.asarray(selection["chosen_poses"])[:, :3], atol=1e-6)
 
 
+def test_the_tables_runs_re_derive_their_fingerprints_from_its_plan(study_out):
+    """What `nerfaug study --one-shot-table` counts a run by: the fingerprint the table's recorded
+    plan gives it now, with its recorded engine version, equals the one the run recorded."""
+    from nerfaug.experiment.study import rederived_fingerprints
+
+    table = table_of(study_out[0])
+    keys = {(r["engine"], r.get("engine_version") or None, r["method"]): r["fingerprint"] for r in table["runs"]}
+    assert rederived_fingerprints(table["plan"], keys) == keys and len(keys) == 2
+
+
 def test_summary_numbers_equal_a_recomputation(study_out):
     from nerfaug.report.study import BOOTSTRAP_SEED, collect_study
 

@@ -230,3 +230,6 @@ def test_q2_pairs_with_the_studys_own_one_shot_arm_and_leaves_q1_to_the_runs_in_
     assert verdicts(both_arms(rounds, one_shot))["Q2"][3] == "**not judged: no current one-shot runs of uniform, ours**"
     text = to_markdown(rounds_blocks(collect_study(both_arms(rounds, ahead))), None)
     assert "in the study's own one-shot arm" in text and "dead one-shot runs, engine nerfacto-cpu: 0" in text
+    assert "one round, in the same table)" in text  # where the arm was read from
+    text = to_markdown(rounds_blocks(collect_study(rounds), ahead, {"fp-uniform-1"}, "rounds-oneshot-table.json"), None)
+    assert "one round, read from the table rounds-oneshot-table.json)" in text and "same table" not in text

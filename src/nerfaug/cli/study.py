@@ -20,6 +20,7 @@ Workers = Annotated[
     int | None, tyro.conf.arg(metavar="INT", help_behavior_hint="(default: one run per core; one on a GPU)")
 ]
 ResultsDoc = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")]
+OneShotTable = Annotated[Path | None, tyro.conf.arg(metavar="PATH", help_behavior_hint="(default: none)")]
 BudgetSeconds = Annotated[float | None, tyro.conf.arg(metavar="SECONDS", help_behavior_hint="(default: no limit)")]
 
 
@@ -45,6 +46,10 @@ class Study(StudySpec):
             procedural study's (H1-H4), the real-scene study's (R1-R4), the GPU study's (G1-G4),
             the study of rounds' (Q1-Q4), none, or auto (rounds when the runs added views in
             rounds, else chosen from the table's engines and scenes).
+        one_shot_table: the one-shot arm's table, for the study of rounds' Q2: the table of a
+            study of one round (uniform and ours under the paper's schedule) run apart, whose runs
+            the runs in rounds are paired with; read, never written. A run of it counts only with
+            the fingerprint the settings its plan records give it now.
         budget_s: start no run that would end more than this many seconds from now (by the
             longest run or batch so far); the same command goes on with the rest.
         selection: options of the selection methods (every one is part of the runs' fingerprint;
@@ -61,6 +66,7 @@ class Study(StudySpec):
     summary_only: bool = False
     results_doc: ResultsDoc = None
     hypotheses: Literal["auto", "procedural", "real", "gpu", "rounds", "none"] = "auto"
+    one_shot_table: OneShotTable = None
     budget_s: BudgetSeconds = None
     selection: SelectionConfig = field(default_factory=lambda: STUDY_PRESETS.choose(DEFAULT_PRESET).selection)
     engine_settings: tyro.conf.Suppress[dict] = field(default_factory=dict)
@@ -83,6 +89,7 @@ class Study(StudySpec):
             summary_only=self.summary_only,
             results_doc=self.results_doc,
             hypotheses=self.hypotheses,
+            one_shot_table=self.one_shot_table,
             budget_s=self.budget_s,
             engine_settings=self.engine_settings,
         )

@@ -24,6 +24,10 @@ from nerfaug.experiment.study import default_engines, table_keys
 from nerfaug.experiment.study_spec import StudySpec
 from nerfaug.experiment.sweep import default_workers
 from nerfaug.report import study_page, study_table
+from nerfaug.report.collect import ReportError
+from nerfaug.report.rounds_verdicts import OneShotArm, own_one_shot_arm
+from nerfaug.report.study import collect_study
+from nerfaug.report.study_hypotheses import plan_kind
 from nerfaug.selection import METHODS
 from nerfaug.selection.config import SelectionConfig
 
@@ -38,12 +42,22 @@ def study(
     budget_s: float | None,
     engine_settings: dict | None = None,
     hypotheses: str = "auto",
+    one_shot_table: Path | None = None,
 ) -> None:
     """`nerfaug study`: the runs of `spec` with `selection` (none with `summary_only`), then the
     table and the page (and `results_doc`); `engine_settings` (flat name -> value) change every
-    engine the study runs; `hypotheses` names the plan whose hypotheses the pages judge."""
+    engine the study runs; `hypotheses` names the plan whose hypotheses the pages judge;
+    `one_shot_table` the study of rounds' one-shot arm (Q2), read and checked before any run."""
     if engine_settings:
         spec = with_engine_settings(spec, engine_settings)
+    arm = None
+    if one_shot_table is not None:
+        if hypotheses not in ("auto", "rounds") or (hypotheses == "auto" and not summary_only and spec.rounds == 1):
+            given = f"--hypotheses {hypotheses}" if hypotheses != "auto" else "a study of one round (--rounds 1)"
+            raise SystemExit(
+                f"--one-shot-table {one_shot_table}: read for the study of rounds' Q2 only, not with {given}"
+            )
+        arm = one_shot_arm(one_shot_table)
     out = Path(spec.out)
     # The table's default place is in OUT, held to it (a link planted there is refused); --table
     # names a file of the user's choosing, anywhere.
@@ -52,15 +66,68 @@ def study(
     failed = {} if summary_only else run(spec, selection, previous, workers, force, budget_s)
     recorded = record_table(out, table_path, previous)
     print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
-    paths = study_page.write_study(out, recorded, hypotheses)
+    if arm is not None:
+        check_rounds_table(recorded, table_path, hypotheses, arm)
+    paths = study_page.write_study(out, recorded, hypotheses, arm)
     print("study summary: " + ", ".join(str(p) for p in paths))
     if results_doc is not None:
-        print(f"results: {study_page.write_results_doc(recorded, table_path, results_doc, hypotheses)}")
+        print(f"results: {study_page.write_results_doc(recorded, table_path, results_doc, hypotheses, arm)}")
     if failed:
         print(f"{len(failed)} run(s) failed; re-run the same command to retry them:", file=sys.stderr)
         for key, why in failed.items():
             print(f"  {key}: {why}", file=sys.stderr)
         raise SystemExit(1)
+
+
+def one_shot_arm(path: Path) -> OneShotArm:
+    """The table at `path` as the study of rounds' one-shot arm: read with the checks every table
+    has (`study_table.read_table`), holding runs of one round only, and with the fingerprints its
+    runs would have now, re-derived from the settings its plan records
+    (`experiment.study.rederived_fingerprints`): a run whose recorded fingerprint differs counts
+    for nothing.
+
+    Raises:
+        SystemExit: one line naming the file and the field refused.
+    """
+    try:
+        table = study_table.read_table(path)
+    except ReportError as error:
+        raise SystemExit(f"--one-shot-table {error}") from None
+    for index, run in enumerate(table["runs"]):
+        if run.get("curve"):
+            raise SystemExit(
+                f"--one-shot-table {path}: runs[{index}].curve: a run in rounds (it has a learning curve); this "
+                "table must hold the one-shot arm's runs of one round"
+            )
+    rows = study_table.table_rows(table)
+    try:
+        now = study_runs.rederived_fingerprints(table["plan"], {_version_key(r) for r in rows})
+    except ValueError as error:  # RequestError: a setting of its plan this nerfaug refuses
+        raise SystemExit(f"--one-shot-table {path}: {error}") from None
+    current = frozenset(r.fingerprint for r in rows if now[_version_key(r)] == r.fingerprint)
+    return OneShotArm(table, current, str(path))
+
+
+def _version_key(row: study_table.RunRow) -> tuple[str, str | None, str]:
+    """(engine, engine version or None for the reference engine, method): what sets a run's fingerprint."""
+    return (row.engine, row.engine_version or None, row.method)
+
+
+def check_rounds_table(table: dict, path: Path, hypotheses: str, arm: OneShotArm) -> None:
+    """Refuse (one line) a one-shot arm given for a table that is not the study of rounds' or that
+    holds a one-shot arm of its own (the page would not say which arm Q2 read)."""
+    study = collect_study(table)
+    kind = plan_kind(study, hypotheses)
+    if kind != "rounds":
+        raise SystemExit(
+            f"--one-shot-table {arm.source}: read for the study of rounds' Q2 only; the table {path} is judged "
+            f"by the {kind} plan (plan.config.rounds: {study.plan.get('config', {}).get('rounds', 1)})"
+        )
+    if own_one_shot_arm(study)[1] is not None:
+        raise SystemExit(
+            f"--one-shot-table {arm.source}: the table {path} holds a one-shot arm of its own (runs without a "
+            "learning curve beside its runs in rounds); give one arm or the other"
+        )
 
 
 def with_engine_settings(spec: StudySpec, settings: dict) -> StudySpec:

@@ -51,6 +51,9 @@ NOT_FINGERPRINTED = frozenset(
 # each of their settings.
 _FINGERPRINTED_AS = frozenset({"device", "selection"})
 
+# `fingerprinted`'s default: the engine version of this machine's runs.
+_THIS_MACHINE = object()
+
 # Names given one or more times: a sweep needs at least one scene and one method.
 Names = Annotated[tuple[str, ...], MinLen(1)]
 
@@ -183,29 +186,29 @@ class ExperimentConfig(Settings):
         check_schedule(self)  # the steps, the rounds and the pool they draw on
         return self
 
-    def fingerprinted(self) -> dict:
+    def fingerprinted(self, engine_version: str | None | object = _THIS_MACHINE) -> dict:
         """The settings that change a run's numbers; results made under others are not mixed.
 
         Flat, so a refusal names the setting: the protocol's settings by name (every field but
         `NOT_FINGERPRINTED`; the device by its kind; the engine's arithmetic as "engine_version"), every
         `SelectionConfig` field as "selection.<field>", and the engine preset's `NerfConfig` as
         "engine.<flat name>" ("engine" keeps the preset's name; per-scene overrides are
-        "field_lr"). A setting added since fingerprint version 1 is left out at its neutral value
-        (`nerfaug.experiment.fingerprints`), so adding one moves no recorded fingerprint. Values
+        "field_lr"). A setting added since fingerprint version 1 is left out at its neutral value,
+        and one another setting leaves unused is taken at it (with one round, the spacing of
+        rounds; `nerfaug.experiment.fingerprints`), so adding one moves no recorded fingerprint. Values
         are as JSON stores them (tuples become lists), so a setting read back from sweep.json
-        compares equal to the same setting in code.
+        compares equal to the same setting in code. `engine_version`: the arithmetic hashed, this
+        machine's (`engine_version()`) unless given (a recorded run's, to re-derive its fingerprint
+        on any machine: `experiment.study.rederived_fingerprints`).
         """
         from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
 
         own = [f.name for f in dataclasses.fields(self) if f.name not in NOT_FINGERPRINTED | _FINGERPRINTED_AS]
         record = {name: getattr(self, name) for name in own} | {"device": device_kind(self.device)}
         record["engine"] = engine_name(self.engine)
-        record["engine_version"] = self.engine_version()
+        record["engine_version"] = self.engine_version() if engine_version is _THIS_MACHINE else engine_version
         record.update({f"selection.{k}": v for k, v in self.selection.to_dict().items()})
         defaults = defaults_of(type(self)) | {"engine_version": None}
-        if self.rounds == 1:  # one round: `round_every` changes nothing, so it splits no results
-            record["round_every"] = defaults["round_every"]
-            record["round_growth"] = defaults["round_growth"]
         defaults |= {f"selection.{k}": v for k, v in defaults_of(type(self.selection)).items()}
         return surviving(record, defaults) | engine_record(self.engine)
 

@@ -16,7 +16,9 @@ would be a decision about the recorded studies. The rule:
   default changes the numbers, e.g. a new kernel on by default, is hashed at that default).
 
 So a setting added with a neutral default moves no recorded fingerprint, and a run that sets it
-otherwise is never mixed with those that did not. A change of arithmetic that no setting names
+otherwise is never mixed with those that did not. A setting that another setting's value leaves
+unused (`UNUSED_WHEN`: with one round, the spacing of rounds) is hashed as its neutral value, so
+it splits no results either. A change of arithmetic that no setting names
 is a new engine version (`nerf.config.HASH_CPU_ENGINE_VERSION` is one): recorded runs keep theirs.
 
 Light: no torch (`nerfaug run --help` imports `experiment.config`, which imports this).
@@ -70,6 +72,17 @@ under which runs compute what they computed before the setting existed. None so 
 added since version 1 defaults to its neutral value."""
 
 
+UNUSED_WHEN: tuple[tuple[str, Any, tuple[str, ...]], ...] = (
+    # One round adds its views at add_at_step and never again: there is no second round to space,
+    # so the steps between rounds and how they grow compute nothing, and runs of one round that
+    # differ only in them are the same runs (`experiment.schedule`).
+    ("rounds", 1, ("round_every", "round_growth")),
+)
+"""(setting, value, the settings that value leaves unused), by their names in a fingerprint's
+record: while `setting` has `value`, each unused setting is hashed as its neutral value (`NEUTRAL`,
+else its default), whatever it is set to; so it is left out when it is outside `VERSION_1`."""
+
+
 def as_stored(value: Any) -> Any:
     """`value` as JSON stores it (tuples become lists), so that a setting read back from sweep.json
     compares equal to the same setting in code."""
@@ -90,13 +103,17 @@ def defaults_of(cls: type) -> dict[str, Any]:
 def surviving(settings: dict[str, Any], defaults: dict[str, Any]) -> dict[str, Any]:
     """The settings a fingerprint hashes: `settings` (every setting that changes a run's numbers,
     by its name in the record) as JSON stores them, without those outside `VERSION_1` that equal
-    their neutral value (`NEUTRAL`, else their entry in `defaults`). A setting with neither is kept.
+    their neutral value (`NEUTRAL`, else their entry in `defaults`), those another setting leaves
+    unused (`UNUSED_WHEN`) taken at their neutral value first. A setting with neither is kept.
 
     Equal means the same JSON text, so a setting is left out only when hashing it would hash its
     neutral value: 1 and 1.0, or 0 and false, are not taken for each other.
     """
     stored = as_stored(settings)
     neutral = as_stored({**defaults, **NEUTRAL})
+    for setting, value, unused in UNUSED_WHEN:
+        if setting in stored and _text(stored[setting]) == _text(as_stored(value)):
+            stored |= {name: neutral[name] for name in unused if name in stored and name in neutral}
     return {
         name: value
         for name, value in stored.items()

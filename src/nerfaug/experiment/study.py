@@ -18,6 +18,7 @@ import platform
 import sys
 import time
 import traceback
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,13 +32,15 @@ from nerfaug.experiment.fingerprints import engine_settings
 from nerfaug.experiment.layout import StudyFolder
 from nerfaug.experiment.protocol import prepare_scene, render_builtin, run_trials, scene_folder
 from nerfaug.experiment.runfolder import write_error
-from nerfaug.experiment.store import RunKey, check_sweep, read_result, run_fingerprint
+from nerfaug.experiment.store import RunKey, check_sweep, fingerprint, read_result, run_fingerprint
 from nerfaug.experiment.study_spec import PROCEDURAL_SCENES, StudySpec
 from nerfaug.experiment.sweep import check_config, run_sweep, scene_name, sweep_record
 from nerfaug.jsonio import read_json
 from nerfaug.nerf.config import PRESETS
 from nerfaug.nerf.engine import Engine
 from nerfaug.nerf.registry import check_names
+from nerfaug.schema import RequestError, validated
+from nerfaug.selection import METHODS
 from nerfaug.selection.families import FAMILIES
 from nerfaug.statistics import min_attainable_paired_p
 
@@ -319,6 +322,33 @@ def table_keys(table: dict | None, engine: str) -> dict[RunKey, str]:
     }
 
 
+def rederived_fingerprints(plan: dict, runs: Iterable[tuple[str, str | None, str]]) -> dict[tuple, str | None]:
+    """The fingerprint each of `runs` ((engine, engine version or None for the reference engine,
+    method)) of the study whose plan record (study.json's, as its table keeps it) is `plan` has now:
+    the settings the plan records (`plan["config"]`) for that engine, hashed by this code with the
+    engine version the run records (not this machine's), and the method's definition today; None
+    for a method this code no longer has. A recorded run whose fingerprint is not this one was made
+    with other settings than those it records (or before a change of how they hash).
+
+    Raises:
+        RequestError: naming the field of `plan["config"]` that this code refuses.
+    """
+    settings = plan.get("config")
+    if not isinstance(settings, dict):
+        raise RequestError("plan.config", settings, "missing or not an object")
+    sweeps: dict[tuple[str, str | None], str] = {}
+    found: dict[tuple, str | None] = {}
+    for engine, version, method in runs:
+        if (engine, version) not in sweeps:
+            config = validated(ExperimentConfig, {**settings, "engine": engine}, "plan.config")
+            sweeps[engine, version] = fingerprint(config.fingerprinted(engine_version=version))
+        spec = METHODS.get(method)
+        found[engine, version, method] = (
+            None if spec is None else run_fingerprint(sweeps[engine, version], spec.definition())
+        )
+    return found
+
+
 def with_design(record: dict, out: Path) -> dict:
     """`record` (a study.json) with what its summary needs beyond the sittings run: "design", the
     cells a full study runs on its device (the default engines x the built-in scenes), so cells not
@@ -424,6 +454,7 @@ __all__ = [
     "merged_record",
     "min_trials",
     "prepare_datasets",
+    "rederived_fingerprints",
     "run_study",
     "study_methods",
     "table_keys",

@@ -11,14 +11,17 @@ Q2 compares each rounds run with the one-shot run of the same method, seed, layo
 version in the study's own one-shot arm (docs/study-plan.md, its amendment of 2026-11-28): the
 table's rows of one round (no learning curve) beside its rows in rounds. Those rows' fingerprints
 are the table's own, so they are current by construction. A caller may instead give another
-table's one-shot runs and the fingerprints they would have now: a row whose fingerprint is not
-among them was made with other settings and is no arm of the comparison.
+table's one-shot runs and the fingerprints they would have now (`OneShotArm`; `nerfaug study
+--one-shot-table` re-derives them from that table's plan): a row whose fingerprint is not among
+them was made with other settings and is no arm of the comparison.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import PurePath
 
 from nerfaug.report.document import Block, Heading, Paragraph, Table
 from nerfaug.report.study import REFERENCE, Cell, Study, collect_study
@@ -52,6 +55,26 @@ Q2_METHODS = ("uniform", "ours")
 Q2_ONE_SHOT_RUNS = len(ROUNDS_SCENES) * len(Q2_METHODS) * ROUNDS_TRIALS  # the one-shot arm: 80 runs
 Q3_PAIRS = (("furthest", "ours"), ("furthest", "fisherrf"))
 HEADERS = ["", "hypothesis", "test", "verdict", "evidence", "smallest effect it could have seen", "dead runs"]
+
+
+@dataclass(frozen=True)
+class OneShotArm:
+    """The one-shot arm of the study of rounds kept in a table of its own (Q2's other side).
+
+    Attributes:
+        table: that table, as `study_table.read_table` gives it (runs of one round).
+        current: the fingerprints its runs would have now; a row with another counts for nothing.
+        source: the table's path as the command was given it (the page's command names it so).
+    """
+
+    table: dict
+    current: frozenset[str]
+    source: str
+
+    @property
+    def name(self) -> str:
+        """The table file's name: what the page's text calls it (never a path of this machine)."""
+        return PurePath(self.source).name
 
 
 def planned_runs(study: Study, engine: str, scenes: Iterable[str]) -> tuple[int, int]:
@@ -295,8 +318,13 @@ def smallest_effect_note() -> str:
     return f"{mde:.2f} per-seed SDs at x{Q1_K} with {ROUNDS_TRIALS} seeds" if math.isfinite(mde) else "none"
 
 
-def rounds_blocks(study: Study, one_shot: dict | None = None, current: set[str] | None = None) -> list[Block]:
-    """The page's section: Q1-Q4 per engine of the table, with the dead runs per cell."""
+def rounds_blocks(
+    study: Study, one_shot: dict | None = None, current: set[str] | None = None, source: str | None = None
+) -> list[Block]:
+    """The page's section: Q1-Q4 per engine of the table, with the dead runs per cell. `one_shot`,
+    `current`: another table's one-shot arm and its current fingerprints (else the study's own
+    arm); `source`: that table's file name, which the page names."""
+    where = "in the same table" if one_shot is None else f"read from the table {source or 'given'}"
     blocks: list[Block] = [
         Heading("The planned hypotheses (the study of rounds)"),
         Paragraph(
@@ -305,7 +333,7 @@ def rounds_blocks(study: Study, one_shot: dict | None = None, current: set[str] 
             "PSNR (every test view, after the last step), the exact sign-flip test, Bonferroni x5 (Q2, Q3: x2); Q4 "
             "per cell on the held-back scene. Q2 pairs each run in rounds with the run of the same method, seed, "
             "layout and engine version in the study's own one-shot arm (uniform and ours under the paper's "
-            "schedule, one round, in the same table); one-shot runs of another engine version are not pooled "
+            f"schedule, one round, {where}); one-shot runs of another engine version are not pooled "
             "with them. The area under the learning curve divided by its span of views is "
             "shown beside Q1 and decides nothing. Every verdict is computed from the table: a hypothesis is judged "
             "only when its cells are complete (partial: n of m runs, the numbers as they stand, deciding nothing). "
@@ -333,6 +361,7 @@ def rounds_blocks(study: Study, one_shot: dict | None = None, current: set[str] 
 
 
 __all__ = [
+    "OneShotArm",
     "Q1_K",
     "ROUNDS_HELD_BACK",
     "ROUNDS_METHODS",

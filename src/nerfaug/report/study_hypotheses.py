@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from nerfaug.report.document import Block, Heading, Paragraph, Table, p_value
-from nerfaug.report.rounds_verdicts import rounds_blocks
+from nerfaug.report.rounds_verdicts import OneShotArm, rounds_blocks
 from nerfaug.report.study import OURS, REFERENCE, Study, regime_comparisons
 from nerfaug.report.study_verdicts import (
     GPU_ENGINES,
@@ -401,12 +401,20 @@ def _real_dead(study: Study, name: str) -> str:
     return " | ".join(parts)
 
 
-def hypotheses_blocks(study: Study, plan: str = "auto") -> list[Block]:
+def hypotheses_blocks(study: Study, plan: str = "auto", one_shot: OneShotArm | None = None) -> list[Block]:
+    """The page's section on the planned hypotheses of `plan` (`KINDS`); `one_shot`: the study of
+    rounds' one-shot arm from a table of its own (Q2), judged only with the study of rounds'."""
     kind = plan_kind(study, plan)
+    if one_shot is not None and kind != "rounds":
+        raise ValueError(
+            f"--one-shot-table {one_shot.name}: read for the study of rounds' Q2 only, not the {kind} plan's"
+        )
     if kind == "gpu":
         return gpu_blocks(study)
     if kind == "rounds":
-        return rounds_blocks(study)
+        if one_shot is None:
+            return rounds_blocks(study)
+        return rounds_blocks(study, one_shot.table, set(one_shot.current), one_shot.name)
     if kind not in ("procedural", "real"):
         return []
     if kind == "real":

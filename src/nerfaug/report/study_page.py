@@ -31,6 +31,7 @@ from nerfaug.report.document import (
 from nerfaug.report.figures import method_colours, plot_boxplots
 from nerfaug.report.learning_curve import study_curve_blocks, study_curve_figures
 from nerfaug.report.pooled import plot_paired_differences
+from nerfaug.report.rounds_verdicts import OneShotArm
 from nerfaug.report.study import ALPHA, BOOTSTRAP_SEED, OURS, REFERENCE, Cell, Study, collect_study
 from nerfaug.report.study_hypotheses import hypotheses_blocks
 from nerfaug.report.study_verdicts import floor_text, verdict_line
@@ -430,13 +431,14 @@ def cell_tables(cell: Cell) -> list[Block]:
     return [Heading(f"{cell.scene}, engine {cell.engine}", 3), Table(headers, metrics_rows, notes), coverage]
 
 
-def study_blocks(study: Study, figures: dict, plan: str = "auto") -> list[Block]:
-    """The page's blocks; `plan` chooses the planned hypotheses judged (`study_hypotheses.KINDS`)."""
+def study_blocks(study: Study, figures: dict, plan: str = "auto", one_shot: OneShotArm | None = None) -> list[Block]:
+    """The page's blocks; `plan` chooses the planned hypotheses judged (`study_hypotheses.KINDS`),
+    `one_shot` the study of rounds' one-shot arm kept in a table of its own."""
     blocks: list[Block] = [Heading("nerfaug study: where each method wins", 1), Paragraph(verdict_line(study))]
     blocks += _header(study)
     blocks += _which_method(study) + _methods_section(study)
     blocks += [Heading("Per scene and engine: the paired test"), where_wins_table(study)]
-    blocks += _regime_section(study, figures) + hypotheses_blocks(study, plan) + _incomplete_section(study)
+    blocks += _regime_section(study, figures) + hypotheses_blocks(study, plan, one_shot) + _incomplete_section(study)
     blocks += study_curve_blocks(study.results, {e: p for (kind, e, _), p in figures.items() if kind == "curves"})
     blocks.append(Heading("Per scene and engine"))
     blocks.append(
@@ -525,16 +527,17 @@ def make_study_figures(study: Study, folder: Path) -> dict:
 # ----------------------------------------------------------------------------- pages
 
 
-def write_study(root: Path, table: dict, plan: str = "auto") -> list[Path]:
+def write_study(root: Path, table: dict, plan: str = "auto", one_shot: OneShotArm | None = None) -> list[Path]:
     """Write ROOT/study.md and its figures (ROOT/figures/) from the study's table, judging the
-    hypotheses of `plan` (`study_hypotheses.KINDS`). Returns study.md, then the figures."""
+    hypotheses of `plan` (`study_hypotheses.KINDS`; `one_shot`: `study_blocks`). Returns study.md,
+    then the figures."""
     study = collect_study(table)
     folder = StudyFolder(Path(root))
     # study.md and figures/ linked out of the study folder are refused (`PathRefused`) before
     # anything is drawn; the paths stay as shown, so the page links its figures relative to ROOT.
     path = runfiles.checked(folder.root, folder.summary.relative_to(folder.root))
     figures = make_study_figures(study, runfiles.checked(folder.root, folder.figures.relative_to(folder.root)))
-    markdown = to_markdown(study_blocks(study, figures, plan), folder.root)
+    markdown = to_markdown(study_blocks(study, figures, plan, one_shot), folder.root)
     runfiles.write_text(folder.root, path.relative_to(folder.root), markdown)
     return [path, *figures.values()]
 
@@ -553,26 +556,35 @@ def kept_reading(path: Path) -> str | None:
     return text[start : end + len(READING_END)] if 0 <= start < end else None
 
 
-def write_results_doc(table: dict, table_path: Path, path: Path = Path("docs/results.md"), plan: str = "auto") -> Path:
+def write_results_doc(
+    table: dict,
+    table_path: Path,
+    path: Path = Path("docs/results.md"),
+    plan: str = "auto",
+    one_shot: OneShotArm | None = None,
+) -> Path:
     """Write the study's page at `path` (e.g. docs/results.md) from its table (at `table_path`, named
-    on the page), with its figures in a folder beside it (`<stem>/`). A hand-written reading of
-    the numbers, between `READING_START` and `READING_END`, is kept (after the header) when the
-    page is regenerated."""
+    on the page; `one_shot`: `study_blocks`), with its figures in a folder beside it (`<stem>/`). A
+    hand-written reading of the numbers, between `READING_START` and `READING_END`, is kept (after
+    the header) when the page is regenerated."""
     from datetime import UTC, datetime
 
     study = collect_study(table)
     path = Path(path)
     folder = path.parent / path.stem
     figures = make_study_figures(study, folder)
-    blocks = study_blocks(study, figures, plan)
+    blocks = study_blocks(study, figures, plan, one_shot)
     blocks[0] = Heading("Results: where each selection method wins", 1)
-    option = "" if plan == "auto" else f" --hypotheses {plan}"
+    option, tables, it = "" if plan == "auto" else f" --hypotheses {plan}", f"table `{table_path}`", "it"
+    if one_shot is not None:  # the study of rounds' one-shot arm, read from a table of its own
+        option += f" --one-shot-table {one_shot.source}"
+        tables, it = f"tables `{table_path}` and `{one_shot.source}`", "them"
     blocks.insert(
         2,
         Paragraph(
             f"Generated on {datetime.now(UTC):%Y-%m-%d %H:%M UTC} by `nerfaug study --summary-only --table "
-            f"{table_path} --results-doc {path}{option}` from the per-run table `{table_path}` alone; every number "
-            "below is computed from it, and the same command re-derives this page."
+            f"{table_path} --results-doc {path}{option}` from the per-run {tables} alone; every number below is "
+            f"computed from {it}, and the same command re-derives this page."
         ),
     )
     markdown = to_markdown(blocks, path.parent)
