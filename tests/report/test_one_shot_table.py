@@ -70,7 +70,7 @@ def arm_of(one_shot: dict, path: Path) -> OneShotArm:
 
 
 def q2(rounds: dict, arm: OneShotArm) -> list[str]:
-    return rounds_rows(collect_study(rounds), ENGINE, arm.table, set(arm.current))[1]
+    return rounds_rows(collect_study(rounds), ENGINE, arm)[1]
 
 
 def test_the_other_tables_runs_count_with_the_fingerprints_their_plan_gives(tmp_path, monkeypatch):
@@ -163,14 +163,8 @@ def test_a_table_that_cannot_be_the_one_shot_arm_is_refused_in_one_line(tmp_path
         code, err = nerfaug([*summary, *args], capsys)
         assert code == 2 and message in err and err.count("\n") == 1 and "--one-shot-table" in err, (args, err)
         assert not (tmp_path / "gone").exists()
-    # A table holding its own one-shot arm beside its runs in rounds (trials numbered apart, as a
-    # table keeps one run per engine, scene, method and trial): one arm or the other.
-    apart = dict(one_shot, runs=[r | {"trial": r["trial"] + 10} for r in one_shot["runs"]])
-    write_table(tmp_path / "both.json", verdicts.both_arms(rounds, apart))
-    given = ["--one-shot-table", str(tmp_path / "oneshot.json")]
-    code, err = nerfaug([*summary, str(tmp_path / "both.json"), *given], capsys)
-    assert code == 2 and "holds a one-shot arm of its own" in err, err
     # A study run with one round and no plan named is refused before any run.
+    given = ["--one-shot-table", str(tmp_path / "oneshot.json")]
     code, err = nerfaug(["study", "--out", str(tmp_path / "gone"), *given], capsys)
     assert code == 2 and "not with a study of one round (--rounds 1)" in err
     assert not (tmp_path / "gone").exists()

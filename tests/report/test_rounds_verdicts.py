@@ -1,8 +1,8 @@
 """The study of rounds' hypotheses Q1-Q4 (docs/study-plan.md, plan of 2026-11-28) computed from
 constructed tables whose answers are known: p values against an enumeration of every sign pattern,
-Q2's pairing with the study's own one-shot arm (rows of one round in the same table) and with
-another table's one-shot runs, by seed, layout and engine version (and only runs whose fingerprint
-is current), Q3's three outcomes, the secondary curve area, and partial tables deciding nothing."""
+Q2's pairing with the one-shot arm's table by seed, layout and engine version (and only runs whose
+fingerprint is current; not judged without that table), Q3's three outcomes, the secondary curve
+area, and partial tables deciding nothing."""
 
 import itertools
 
@@ -16,6 +16,7 @@ from nerfaug.report.rounds_verdicts import (
     ROUNDS_METHODS,
     ROUNDS_SCENES,
     ROUNDS_TRIALS,
+    OneShotArm,
     auc_test,
     rounds_blocks,
     rounds_rows,
@@ -67,8 +68,14 @@ def table(offsets: dict[str, float], held_back: dict | None = None, shift: float
     return make_table(plan, rows, {s: {"initial_poses": initial, "layouts": layouts} for s in SCENES})
 
 
+def arm(one_shot: dict, current: set, source: str = "tables/rounds-oneshot-table.json") -> OneShotArm:
+    """`one_shot` as the one-shot arm's table, its runs with a fingerprint in `current` counted."""
+    return OneShotArm(one_shot, frozenset(current), source)
+
+
 def verdicts(rounds: dict, one_shot: dict | None = None, current: set | None = None) -> dict[str, list[str]]:
-    return {row[0]: row for row in rounds_rows(collect_study(rounds), ENGINE, one_shot, current)}
+    given = None if one_shot is None else arm(one_shot, current)
+    return {row[0]: row for row in rounds_rows(collect_study(rounds), ENGINE, given)}
 
 
 def sign_flip_by_enumeration(values) -> float:
@@ -113,7 +120,9 @@ def test_ours_ahead_everywhere_holds_with_the_enumerated_p_and_replicates_on_the
         assert f"{a} - {b}: mean {np.mean(seed_means(rounds, a, other=b)):+.2f} dB" in found["Q3"][4]
         assert f"p x 2 = {p:.3f}" in found["Q3"][4] or f"p x 2 = {p:.1e}" in found["Q3"][4]
     assert found["Q4"][3] == "**holds**"  # ours alone was found better; +2 dB on the held-back scene too
-    assert found["Q2"][3] == "**not judged**" and "no one-shot runs in the table" in found["Q2"][4]
+    # Without the one-shot arm's table, Q2 is not judged, and its row names the option that gives it.
+    assert found["Q2"][3] == "**not judged**"
+    assert "no one-shot table was given (nerfaug study --one-shot-table FILE" in found["Q2"][4]
 
 
 def test_the_secondary_curve_area_is_shown_beside_q1_and_decides_nothing():
@@ -165,7 +174,12 @@ def test_q2_pairs_each_rounds_run_with_the_one_shot_run_of_its_seed_and_layout()
     stale = verdicts(rounds, one_shot, {"fp-uniform-1"})["Q2"]
     assert stale[3] == "**not judged: no current one-shot runs of ours**"
     assert "left out: their fingerprints no longer match" in stale[4]
-    assert verdicts(rounds, one_shot, None)["Q2"][3] == "**not judged**"
+    # The arm part-way decides nothing.
+    part = one_shot | {"runs": [r for r in one_shot["runs"] if r["trial"] < 9]}
+    assert verdicts(rounds, part, current)["Q2"][3] == "**partial: 72 of 80 one-shot runs**"
+    # One-shot runs of another engine version are not paired with the runs in rounds.
+    other = one_shot | {"runs": [r | {"engine_version": "hash-cpu-1"} for r in one_shot["runs"]]}
+    assert verdicts(rounds, other, current)["Q2"][3] == "**not judged: no current one-shot runs of uniform, ours**"
     # Another layout for each seed: no pair at all.
     moved = table({"ours": 0.5}, shift=-1.5, rounds=1)
     for run in moved["runs"]:
@@ -199,37 +213,16 @@ def test_a_dead_run_stays_in_the_test_and_leaves_the_sensitivity_line():
     assert "dead runs per cell, engine nerfacto-cpu: mic 0; maryRose 0; dtu_scan24 0; cow 1 (ours seed 3)" in text
 
 
-def both_arms(rounds: dict, one_shot: dict) -> dict:
-    """One table holding the study's runs in rounds and its own one-shot arm (uniform and ours)."""
-    arm = [r for r in one_shot["runs"] if r["method"] in ("uniform", "ours") and r["scene"] in ROUNDS_SCENES]
-    return rounds | {"runs": rounds["runs"] + arm}
-
-
-def test_q2_pairs_with_the_studys_own_one_shot_arm_and_leaves_q1_to_the_runs_in_rounds():
-    rounds, one_shot = table({"ours": 0.5}), table({"ours": 0.5}, shift=-1.5, rounds=1)
-    alone = verdicts(rounds)
-    found = verdicts(both_arms(rounds, one_shot))
-    for method in ("uniform", "ours"):
-        means = seed_means(rounds, method, one_shot, method)
-        p = min(1.0, 2 * sign_flip_by_enumeration(means))
-        assert f"{method}: rounds - one-shot: mean {np.mean(means):+.2f} dB" in found["Q2"][4]
-        assert f"p x 2 = {p:.3f}" in found["Q2"][4]
-    assert found["Q2"][3] == "**holds**"
-    # The one-shot rows are no part of Q1, Q3 or Q4: their rows read as in the table of rounds alone.
-    assert [found[q] for q in ("Q1", "Q3", "Q4")] == [alone[q] for q in ("Q1", "Q3", "Q4")]
-    # One-shot runs ahead of the runs in rounds: contradicted.
-    ahead = table({"ours": 0.5}, shift=1.5, rounds=1)
-    assert verdicts(both_arms(rounds, ahead))["Q2"][3] == "**contradicted**"
-    # An arm part-way decides nothing.
-    part = both_arms(rounds, one_shot)
-    part["runs"] = [r for r in part["runs"] if r.get("curve") or r["trial"] < 9]
-    assert verdicts(part)["Q2"][3] == "**partial: 72 of 80 one-shot runs**"
-    # One-shot runs of another engine version are not paired with the runs in rounds.
+def test_the_page_names_the_one_shot_table_or_says_that_q2_waits_for_it():
+    rounds, one_shot = table({"ours": 0.5}), table({"ours": 0.5}, shift=1.5, rounds=1)
     for run in one_shot["runs"]:
-        run["engine_version"] = "hash-cpu-1"
-    assert verdicts(both_arms(rounds, one_shot))["Q2"][3] == "**not judged: no current one-shot runs of uniform, ours**"
-    text = to_markdown(rounds_blocks(collect_study(both_arms(rounds, ahead))), None)
-    assert "in the study's own one-shot arm" in text and "dead one-shot runs, engine nerfacto-cpu: 0" in text
-    assert "one round, in the same table)" in text  # where the arm was read from
-    text = to_markdown(rounds_blocks(collect_study(rounds), ahead, {"fp-uniform-1"}, "rounds-oneshot-table.json"), None)
-    assert "one round, read from the table rounds-oneshot-table.json)" in text and "same table" not in text
+        if (run["scene"], run["method"], run["seed"]) == ("mic", "ours", 2):
+            run.update(psnr=8.0, empty=True)
+    text = to_markdown(rounds_blocks(collect_study(rounds), arm(one_shot, {"fp-uniform-1", "fp-ours-1"})), None)
+    assert "in the study's own one-shot arm" in text and "same table" not in text
+    assert "one round, read from the table rounds-oneshot-table.json)" in text  # its file name, not its path
+    assert "tables/" not in text
+    assert "dead one-shot runs, engine nerfacto-cpu: 1 (mic ours seed 2)" in text
+    alone = to_markdown(rounds_blocks(collect_study(rounds)), None)
+    assert "given with --one-shot-table: none was given, so Q2 is not judged" in alone
+    assert "dead one-shot runs" not in alone and "| Q2 | " in alone and "**not judged**" in alone

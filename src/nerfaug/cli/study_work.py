@@ -25,7 +25,7 @@ from nerfaug.experiment.study_spec import StudySpec
 from nerfaug.experiment.sweep import default_workers
 from nerfaug.report import study_page, study_table
 from nerfaug.report.collect import ReportError
-from nerfaug.report.rounds_verdicts import OneShotArm, own_one_shot_arm
+from nerfaug.report.rounds_verdicts import OneShotArm
 from nerfaug.report.study import collect_study
 from nerfaug.report.study_hypotheses import plan_kind
 from nerfaug.selection import METHODS
@@ -114,19 +114,13 @@ def _version_key(row: study_table.RunRow) -> tuple[str, str | None, str]:
 
 
 def check_rounds_table(table: dict, path: Path, hypotheses: str, arm: OneShotArm) -> None:
-    """Refuse (one line) a one-shot arm given for a table that is not the study of rounds' or that
-    holds a one-shot arm of its own (the page would not say which arm Q2 read)."""
+    """Refuse (one line) a one-shot arm given for a table that is not the study of rounds'."""
     study = collect_study(table)
     kind = plan_kind(study, hypotheses)
     if kind != "rounds":
         raise SystemExit(
             f"--one-shot-table {arm.source}: read for the study of rounds' Q2 only; the table {path} is judged "
             f"by the {kind} plan (plan.config.rounds: {study.plan.get('config', {}).get('rounds', 1)})"
-        )
-    if own_one_shot_arm(study)[1] is not None:
-        raise SystemExit(
-            f"--one-shot-table {arm.source}: the table {path} holds a one-shot arm of its own (runs without a "
-            "learning curve beside its runs in rounds); give one arm or the other"
         )
 
 

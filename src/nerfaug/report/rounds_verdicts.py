@@ -8,12 +8,12 @@ when neither side is significantly better than both of the other, "not supported
 The primary outcome is the PSNR over every test view at the end; the area under the learning
 curve divided by its span of views (`RunRow.auc`) is shown beside Q1, deciding nothing.
 Q2 compares each rounds run with the one-shot run of the same method, seed, layout and engine
-version in the study's own one-shot arm (docs/study-plan.md, its amendment of 2026-11-28): the
-table's rows of one round (no learning curve) beside its rows in rounds. Those rows' fingerprints
-are the table's own, so they are current by construction. A caller may instead give another
-table's one-shot runs and the fingerprints they would have now (`OneShotArm`; `nerfaug study
---one-shot-table` re-derives them from that table's plan): a row whose fingerprint is not among
-them was made with other settings and is no arm of the comparison.
+version in the study's own one-shot arm (docs/study-plan.md, its amendment of 2026-11-28). A table
+keeps one run per engine, scene, method and trial, so that arm is a study, and a table, of its
+own: the caller gives its runs and the fingerprints they would have now (`OneShotArm`; `nerfaug
+study --one-shot-table` re-derives them from that table's plan), and a row whose fingerprint is not
+among them was made with other settings and is no arm of the comparison. Without it Q2 is not
+judged.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import PurePath
 
 from nerfaug.report.document import Block, Heading, Paragraph, Table
-from nerfaug.report.study import REFERENCE, Cell, Study, collect_study
+from nerfaug.report.study import REFERENCE, Cell, Study
 from nerfaug.report.study_table import RunRow, table_rows
 from nerfaug.report.study_verdicts import (
     ALPHA,
@@ -158,27 +158,6 @@ def _by_pair(rows: list[RunRow]) -> dict[tuple[str, str, int, int, str], RunRow]
     return {(r.scene, r.method, r.seed, r.layout, r.engine_version): r for r in rows}
 
 
-def own_one_shot_arm(study: Study) -> tuple[Study, dict | None]:
-    """The study split into its runs in rounds (what Q1-Q4 judge) and its own one-shot arm (Q2's
-    other side): a table holding both, the arm is its rows of one round, those without a learning
-    curve. (study, None) where the table holds runs of one kind only."""
-    runs = study.table["runs"]
-    rounds = [r for r in runs if r.get("curve")]
-    if not rounds or len(rounds) == len(runs):
-        return study, None
-    one_shot = study.table | {"runs": [r for r in runs if not r.get("curve")]}
-    return collect_study(study.table | {"runs": rounds}), one_shot
-
-
-def _arms(study: Study, one_shot: dict | None, current: set[str] | None) -> tuple[Study, dict | None, set | None]:
-    """(the rounds runs' study, the one-shot table, its current fingerprints): the caller's table,
-    else the study's own arm, whose fingerprints are the table's own."""
-    if one_shot is not None:
-        return study, one_shot, current
-    study, own = own_one_shot_arm(study)
-    return study, own, None if own is None else {r["fingerprint"] for r in own["runs"]}
-
-
 def q2_tests(study: Study, engine: str, one_shot: dict, current: set[str], drop: set | None = None) -> dict[str, dict]:
     """Per method of Q2: rounds - one-shot PSNR on the same scene, seed, layout and engine
     version, each seed's mean over the four scenes, exact sign-flip, x2. `study`: the runs in
@@ -214,27 +193,26 @@ def _arm_partial(arm: list[RunRow]) -> str | None:
     return None if len(done) == Q2_ONE_SHOT_RUNS else f"partial: {len(done)} of {Q2_ONE_SHOT_RUNS} one-shot runs"
 
 
-def q2(study: Study, engine: str, one_shot: dict | None, current: set[str] | None) -> list[str]:
-    """Q2's row. `study`: the runs in rounds; `one_shot`, `current`: the one-shot arm and its
-    current fingerprints (`_arms`)."""
+def q2(study: Study, engine: str, arm: OneShotArm | None) -> list[str]:
+    """Q2's row. `study`: the runs in rounds; `arm`: the one-shot arm's table (None: not judged)."""
     claim = "rounds beat one-shot at equal budget, for uniform and for ours (same seed, layout and engine version)"
     test = "per-regime sign-flip on rounds - one-shot PSNR, x2"
-    if one_shot is None or current is None:
+    if arm is None:
         why = (
-            "no one-shot runs in the table (the study's own one-shot arm: uniform and ours, one round)"
-            if one_shot is None
-            else "the one-shot runs' fingerprints were not checked"
+            "no one-shot table was given (nerfaug study --one-shot-table FILE: the table of the study's "
+            "one-shot arm, uniform and ours in one round)"
         )
         return verdict_row("Q2", claim, test, "not judged", [why], "", "")
+    one_shot, current = arm.table, set(arm.current)
     partial = _partial(study, engine, ROUNDS_SCENES)
     tests = q2_tests(study, engine, one_shot, current)
-    arm = [r for r in table_rows(one_shot) if r.engine == engine and r.method in Q2_METHODS]
-    stale = sum(r.fingerprint not in current for r in arm)
+    runs = [r for r in table_rows(one_shot) if r.engine == engine and r.method in Q2_METHODS]
+    stale = sum(r.fingerprint not in current for r in runs)
     missing = [m for m, t in tests.items() if t is None]
     verdict = (
         partial
         or (f"not judged: no current one-shot runs of {', '.join(missing)}" if missing else None)
-        or _arm_partial([r for r in arm if r.fingerprint in current])
+        or _arm_partial([r for r in runs if r.fingerprint in current])
         or all_hold([judged(t) for t in tests.values()])
     )
     evidence = [says(f"{m}: rounds - one-shot", t) for m, t in tests.items() if t is not None]
@@ -299,17 +277,13 @@ def q4(study: Study, engine: str, better: list[str], q1_partial: str | None) -> 
     return held_back_row("Q4", claim, test, study, engine, ROUNDS_HELD_BACK, better, partial, dead_runs(study))
 
 
-def rounds_rows(
-    study: Study, engine: str, one_shot: dict | None = None, current: set[str] | None = None
-) -> list[list[str]]:
+def rounds_rows(study: Study, engine: str, arm: OneShotArm | None = None) -> list[list[str]]:
     """Q1-Q4 on `engine`: each with its test, verdict, evidence, the smallest effect it could have
-    seen (beside "not supported") and its line without dead runs. Q2 pairs with the study's own
-    one-shot arm (`own_one_shot_arm`) unless the caller gives `one_shot`, another one-shot table,
-    and `current`, the fingerprints its runs would have now."""
-    study, one_shot, current = _arms(study, one_shot, current)
+    seen (beside "not supported") and its line without dead runs. Q2 pairs with `arm`, the one-shot
+    arm's table and the fingerprints its runs would have now; without it Q2 is not judged."""
     q1_row, better = q1(study, engine)
     partial = _partial(study, engine, ROUNDS_SCENES)
-    return [q1_row, q2(study, engine, one_shot, current), q3(study, engine), q4(study, engine, better, partial)]
+    return [q1_row, q2(study, engine, arm), q3(study, engine), q4(study, engine, better, partial)]
 
 
 def smallest_effect_note() -> str:
@@ -318,13 +292,14 @@ def smallest_effect_note() -> str:
     return f"{mde:.2f} per-seed SDs at x{Q1_K} with {ROUNDS_TRIALS} seeds" if math.isfinite(mde) else "none"
 
 
-def rounds_blocks(
-    study: Study, one_shot: dict | None = None, current: set[str] | None = None, source: str | None = None
-) -> list[Block]:
-    """The page's section: Q1-Q4 per engine of the table, with the dead runs per cell. `one_shot`,
-    `current`: another table's one-shot arm and its current fingerprints (else the study's own
-    arm); `source`: that table's file name, which the page names."""
-    where = "in the same table" if one_shot is None else f"read from the table {source or 'given'}"
+def rounds_blocks(study: Study, arm: OneShotArm | None = None) -> list[Block]:
+    """The page's section: Q1-Q4 per engine of the table, with the dead runs per cell. `arm`: the
+    one-shot arm's table (Q2), which the page names by its file name; without it Q2 is not judged."""
+    where = (
+        f"read from the table {arm.name}"
+        if arm is not None
+        else "kept in a table of its own, given with --one-shot-table: none was given, so Q2 is not judged"
+    )
     blocks: list[Block] = [
         Heading("The planned hypotheses (the study of rounds)"),
         Paragraph(
@@ -342,16 +317,15 @@ def rounds_blocks(
             "runs stay in their cells; the last column gives the same tests without the pairs holding one."
         ),
     ]
-    study, one_shot, current = _arms(study, one_shot, current)
     engines = list(study.engines)
     for engine in engines:
-        rows = rounds_rows(study, engine, one_shot, current)
+        rows = rounds_rows(study, engine, arm)
         if len(engines) > 1:
             rows = [[f"{r[0]} ({engine})", *r[1:]] for r in rows]
         scenes = (*ROUNDS_SCENES, ROUNDS_HELD_BACK)
         notes = [f"dead runs per cell, engine {engine}: {dead_per_cell(study, engine, scenes)}"]
-        if one_shot is not None:
-            dead = sorted((r.scene, r.method, r.seed) for r in table_rows(one_shot) if r.engine == engine and r.empty)
+        if arm is not None:
+            dead = sorted((r.scene, r.method, r.seed) for r in table_rows(arm.table) if r.engine == engine and r.empty)
             notes.append(
                 f"dead one-shot runs, engine {engine}: {len(dead)}"
                 + (f" ({'; '.join(f'{sc} {m} seed {k}' for sc, m, k in dead)})" if dead else "")
@@ -369,7 +343,6 @@ __all__ = [
     "ROUNDS_TRIALS",
     "auc_test",
     "family",
-    "own_one_shot_arm",
     "planned_runs",
     "q2_tests",
     "rounds_blocks",

@@ -412,9 +412,7 @@ def hypotheses_blocks(study: Study, plan: str = "auto", one_shot: OneShotArm | N
     if kind == "gpu":
         return gpu_blocks(study)
     if kind == "rounds":
-        if one_shot is None:
-            return rounds_blocks(study)
-        return rounds_blocks(study, one_shot.table, set(one_shot.current), one_shot.name)
+        return rounds_blocks(study, one_shot)
     if kind not in ("procedural", "real"):
         return []
     if kind == "real":
