@@ -62,7 +62,7 @@ def study(
     # The table's default place is in OUT, held to it (a link planted there is refused); --table
     # names a file of the user's choosing, anywhere.
     table_path = Path(spec.table) if spec.table is not None else runfiles.checked(out, StudyFolder(out).table.name)
-    previous = study_table.read_table(table_path) if table_path.exists() else None
+    previous = read_study_table(table_path, "--table " if spec.table is not None else "")
     failed = {} if summary_only else run(spec, selection, previous, workers, force, budget_s)
     recorded = record_table(out, table_path, previous)
     print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
@@ -77,6 +77,22 @@ def study(
         for key, why in failed.items():
             print(f"  {key}: {why}", file=sys.stderr)
         raise SystemExit(1)
+
+
+def read_study_table(path: Path, option: str = "") -> dict | None:
+    """The study's table at `path` (None where there is none yet), checked (`study_table.read_table`).
+
+    Raises:
+        SystemExit: a table that cannot be read (not JSON, not a study table, a row missing a
+            field): one line naming `option` (how the user gave it, "" for OUT's own), the file
+            and the field, before anything is run or written.
+    """
+    if not path.exists():
+        return None
+    try:
+        return study_table.read_table(path)
+    except ReportError as error:
+        raise SystemExit(f"{option}{error}") from None
 
 
 def one_shot_arm(path: Path) -> OneShotArm:
