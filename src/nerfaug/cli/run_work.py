@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from nerfaug.cli.run_size import per_cell, size_line
+from nerfaug.cli.run_size import RunKind, per_cell, scene_sizes, size_line
 from nerfaug.device import resolve_device
 from nerfaug.errors import Interrupted
 from nerfaug.experiment import sweep
@@ -35,7 +35,7 @@ def run(
     config = run_config(protocol, data)
     workers = workers if workers is not None else sweep.default_workers(config)
     checked = sweep.check_config(config)  # a refusal comes before the plan it would contradict
-    print(run_size_line(config, out, workers), flush=True)
+    print(run_size_line(config, out, workers, checked), flush=True)
     try:
         outcome = sweep.run_sweep(
             config,
@@ -74,9 +74,10 @@ def run_config(protocol: ExperimentConfig, data: Path | None) -> ExperimentConfi
         raise SystemExit(f"--device: {error}") from None
 
 
-def run_size_line(config: ExperimentConfig, out: Path, workers: int) -> str:
-    """How many runs `config` makes, how big, and about how long on this device (`nerfaug.cli.run_size`)."""
-    runs, finished = runs_to_do(config, Path(out))
+def run_size_line(config: ExperimentConfig, out: Path, workers: int, checked: dict | None = None) -> str:
+    """How many runs `config` makes, how big, and about how long on this device (`nerfaug.cli.run_size`);
+    `checked`: what `sweep.check_config` found of its scenes (a dataset's pool, test views, size)."""
+    runs, finished = runs_to_do(config, Path(out), checked=checked)
     shape = " x ".join(
         (
             per_cell(len(config.scenes), "scene"),
@@ -89,17 +90,24 @@ def run_size_line(config: ExperimentConfig, out: Path, workers: int) -> str:
     return size_line("nerfaug run", runs, finished, shape, config, workers, render=(builtin, views))
 
 
-def runs_to_do(config: ExperimentConfig, root: Path, recorded=None) -> tuple[dict[tuple[str, str], int], int]:
+def runs_to_do(
+    config: ExperimentConfig, root: Path, recorded=None, checked: dict | None = None
+) -> tuple[dict[RunKind, int], int]:
     """The runs of `config` a resume into `root` would make, as `nerfaug.cli.run_size` costs them
-    ((engine, the method's scoring estimator) -> runs), and how many it skips as finished (in
-    `root`, or `recorded` elsewhere: `sweep.finished_in_plan`)."""
-    runs: dict[tuple[str, str], int] = {}
+    (their `RunKind`: engine, the method's scoring estimator, this machine's engine version, the
+    scene's size where `checked`, `sweep.check_config`'s record, knows it -> runs), and how many it
+    skips as finished (in `root`, or `recorded` elsewhere: `sweep.finished_in_plan`)."""
+    sizes = scene_sizes(checked or {})
+    version = config.engine_version()
+    runs: dict[RunKind, int] = {}
     finished = 0
-    for method in config.methods:
-        done = sweep.finished_in_plan(config.replace(methods=(method,)), root, recorded)
-        kind = (str(config.engine), get_method(method).estimator)
-        runs[kind] = runs.get(kind, 0) + len(config.scenes) * config.trials - done
-        finished += done
+    for scene in config.scenes:
+        one, size = config.replace(scenes=(scene,)), sizes.get(sweep.scene_name(scene))
+        for method in config.methods:
+            done = sweep.finished_in_plan(one.replace(methods=(method,)), root, recorded)
+            kind = RunKind(str(config.engine), get_method(method).estimator, version, size)
+            runs[kind] = runs.get(kind, 0) + config.trials - done
+            finished += done
     return runs, finished
 
 

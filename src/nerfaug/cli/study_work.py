@@ -185,7 +185,8 @@ def study_size_line(plan, workers: int, table: dict | None = None) -> str:
     runs: dict[tuple[str, str], int] = {}
     finished = 0
     for engine in plan.engines:
-        to_do, done = runs_to_do(plan.engine_config(engine), study.engine(engine).root, table_keys(table, engine))
+        root = study.engine(engine).root
+        to_do, done = runs_to_do(plan.engine_config(engine), root, table_keys(table, engine), plan.checked)
         runs |= to_do
         finished += done
     shape = " x ".join(

@@ -121,6 +121,9 @@ class StudyPlan:
     scenes: list[str] = field(default_factory=list)
     datasets: dict[str, str] = field(default_factory=dict)
     command: list[str] = field(default_factory=list)
+    # What `check_config` found of each scene (a dataset's pool, test views, image size), by name:
+    # what the time estimate reads.
+    checked: dict[str, dict] = field(default_factory=dict)
 
     def engine_config(self, engine: str) -> ExperimentConfig:
         return self.config.replace(engine=engine, scenes=tuple(self.datasets[s] for s in self.scenes))
@@ -409,10 +412,11 @@ def make_plan(spec: StudySpec, command: list[str], progress: bool = True) -> Stu
     )
     scenes = tuple(spec.scenes) if spec.scenes else PROCEDURAL_SCENES
     # Every setting checked before any dataset is rendered (a bad --trials costs nothing).
+    checked: dict[str, dict] = {}
     for engine in chosen:
-        check_config(config.replace(scenes=scenes, engine=engine))
+        checked = check_config(config.replace(scenes=scenes, engine=engine))
     datasets = prepare_datasets(spec.out, scenes, config, progress=progress)
-    return StudyPlan(Path(spec.out), config, chosen, left_out, list(datasets), datasets, command)
+    return StudyPlan(Path(spec.out), config, chosen, left_out, list(datasets), datasets, command, checked)
 
 
 def _device_type(device: str) -> str:
