@@ -112,7 +112,7 @@ def test_a_run_is_costed_at_its_engine_versions_speed_on_its_scenes_own_pool_and
 
 
 def test_the_study_of_rounds_is_estimated_within_1_5x_of_its_mic_runs(two_cores):
-    # The study of rounds' first 24 runs, mic, two at a time on the 2-core VM shared with other work
+    # The study of rounds' first 25 runs, mic, two at a time on the 2-core VM shared with other work
     # (load 4-5; BENCHMARKS.md "The time estimate of the study of rounds against its mic runs"):
     # timing.total 191 s a run on average over the six methods. The estimate before it
     # (the reference engine, lego's 300 candidates for every scene) said 401 s.
