@@ -82,7 +82,7 @@ def main(argv=None) -> dict:
     result = {
         "scene": str(args.scene),
         "settings": {
-            "engine": config.engine,
+            "engine": config.engine.record(),
             "resolution": config.resolution,
             "n_initial": config.n_initial,
             "pool": len(data.pool),
