@@ -19,7 +19,7 @@ from nerfaug.cameras import Cameras, image_rays
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.registry import build_field, build_sampler
 from nerfaug.nerf.sampling import ray_box_span, unit_cube
-from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
+from nerfaug.nerf.volrend import RenderOutput, composite
 
 # Most samples one network pass evaluates when rendering without gradients on the CPU: passes
 # this size keep their intermediate tensors in the cache. Measured (100x100 image, 1 thread):
@@ -154,7 +154,7 @@ class NerfModel(nn.Module):
         index = live.nonzero().squeeze(-1)
         density, geometry = self.field.density(self._unit(points[index]))
         sigma = density.new_zeros(n_rays * n).index_put((index,), density).reshape(n_rays, n)
-        weights, transmittance = render_weights(sigma, t_ends - t_starts)
+        weights, transmittance = self.sampler.render_weights(sigma, t_ends - t_starts)
         return weights, transmittance, index, geometry
 
     def _shade(self, origins: Tensor, directions: Tensor, t_starts: Tensor, t_ends: Tensor) -> tuple[Tensor, Tensor]:
