@@ -4,17 +4,17 @@ engine versions, side by side in one sitting: the reference (hash grids on the P
 `cpu-fused-2` (the hash loop and the proposal sampler's C loops, `NERFAUG_CPU_KERNELS=fused`).
 
 One trainer is trained on the reference engine to step `--after` (past the proposal networks'
-warm-up) and checkpointed; each measurement restores that checkpoint, so every arm times the same
-model state. The arms alternate (reference, hash-cpu-1, cpu-fused-2, reference, ...) `--rounds`
-times so they meet the same load on a shared machine. CPU seconds by `getrusage` of this process
-(one torch thread), so other processes' load slows a measurement only through shared caches and
-memory, which the alternation spreads over the arms.
+warm-up) and checkpointed; each arm restores that checkpoint into its own trainer (its encodings
+built with its kernel), so the arms start from the same model state. The arms then alternate in
+short blocks (`--block-steps` training steps and one rendered test view each: reference,
+hash-cpu-1, cpu-fused-2, reference, ...) `--blocks` times, so they meet the same load on a shared
+machine. CPU seconds by `getrusage` of this process (one torch thread): other processes slow a
+block only through shared caches and memory, which the alternation spreads over the arms.
 
     python benchmarks/bench_cpu_fused.py --data data/lego100 --json docs/benchmarks/cpu-fused.json
 
-Printed and written: per arm and round the ms a training step and a rendered test view, each
-measurement's load average; per arm the median, and the medians' ratios to the reference and to
-hash-cpu-1.
+Printed and written: per arm and block the ms a training step and a rendered test view, and the
+load average; per arm the medians, and their ratios to the reference and to hash-cpu-1.
 """
 
 from __future__ import annotations
@@ -55,19 +55,15 @@ def select(arm: str) -> str | None:
     return STUDY_PRESETS.choose("study", engine="nerfacto-cpu").engine_version()
 
 
-def measure(checkpoint: Path, test, steps: int, views: int) -> tuple[float, float]:
-    """ms of CPU a training step (`steps` steps from the checkpoint, after 2 untimed ones) and a
-    rendered test view (the first `views` of `test`) with the engine selected now."""
-    trainer = Trainer.load_checkpoint(checkpoint, progress=False)
-    trainer.train(trainer.step + 2)
+def block(trainer: Trainer, test, steps: int, view: int) -> tuple[float, float]:
+    """ms of CPU a training step (`steps` more steps of `trainer`) and for rendering test view
+    `view`, with the engine selected now."""
     start = _cpu_seconds()
     trainer.train(trainer.step + steps)
     step_ms = 1000.0 * (_cpu_seconds() - start) / steps
     start = _cpu_seconds()
-    for index in range(views):
-        trainer.model.render_image(test.cameras, index)
-    view_ms = 1000.0 * (_cpu_seconds() - start) / max(views, 1)
-    return step_ms, view_ms
+    trainer.model.render_image(test.cameras, view % len(test.cameras))
+    return step_ms, 1000.0 * (_cpu_seconds() - start)
 
 
 def main(argv=None) -> int:
@@ -75,9 +71,8 @@ def main(argv=None) -> int:
     parser.add_argument("--data", type=Path, required=True, help="a prepared dataset folder (Blender format)")
     parser.add_argument("--engine", default="nerfacto-cpu")
     parser.add_argument("--after", type=int, default=300, help="steps trained before the timed ones")
-    parser.add_argument("--steps", type=int, default=100, help="timed training steps a measurement")
-    parser.add_argument("--views", type=int, default=5, help="test views rendered a measurement")
-    parser.add_argument("--rounds", type=int, default=3, help="alternations of the three arms")
+    parser.add_argument("--blocks", type=int, default=15, help="alternations of the three arms")
+    parser.add_argument("--block-steps", type=int, default=10, help="timed training steps an arm's block")
     parser.add_argument("--json", type=Path, help="where to write the figures")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
@@ -92,16 +87,23 @@ def main(argv=None) -> int:
         trainer = Trainer(load_dataset(args.data, "train"), NerfConfig.preset(args.engine), seed=0, progress=False)
         trainer.train(args.after)
         checkpoint = trainer.save_checkpoint(Path(scratch) / "after.pt")
-        for round_ in range(args.rounds):
-            for arm in ARMS:
-                select(arm)
-                step_ms, view_ms = measure(checkpoint, test, args.steps, args.views)
-                load = os.getloadavg()[0]
-                measurements[arm].append({"step_ms": step_ms, "view_ms": view_ms, "load_average_1min": load})
-                print(
-                    f"round {round_} {arm}: {step_ms:.1f} ms a step, {view_ms:.0f} ms a view, load {load:.1f}",
-                    flush=True,
-                )
+        trainers = {}
+        for arm in ARMS:  # each arm's encodings built with its kernel, 2 untimed steps
+            select(arm)
+            trainers[arm] = Trainer.load_checkpoint(checkpoint, progress=False)
+            trainers[arm].train(args.after + 2)
+    for index in range(args.blocks):
+        for arm in ARMS:
+            select(arm)
+            step_ms, view_ms = block(trainers[arm], test, args.block_steps, index)
+            load = os.getloadavg()[0]
+            measurements[arm].append({"step_ms": step_ms, "view_ms": view_ms, "load_average_1min": load})
+        print(
+            f"block {index}: "
+            + ", ".join(f"{arm} {rows[-1]['step_ms']:.1f} ms a step" for arm, rows in measurements.items())
+            + f", load {load:.1f}",
+            flush=True,
+        )
     arms = {}
     for arm, rows in measurements.items():
         arms[arm] = {
@@ -110,6 +112,7 @@ def main(argv=None) -> int:
             "engine_version": versions[arm],
             "measurements": rows,
             "step_ms_median": statistics.median(r["step_ms"] for r in rows),
+            "step_ms_mean": statistics.fmean(r["step_ms"] for r in rows),
             "view_ms_median": statistics.median(r["view_ms"] for r in rows),
         }
     for arm, a in arms.items():

@@ -297,6 +297,10 @@ class ProposalSampler(Sampler):
         sigma = network(unit_cube(points.reshape(-1, 3), self.half_size)).reshape(mids.shape)
         return self.render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
 
+    def fused_cpu(self, *tensors: Tensor) -> bool:
+        """See `Sampler.fused_cpu`: where `sampler_cpu` applies to `tensors`."""
+        return sampler_cpu.applies(*tensors)
+
     def render_weights(self, sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
         """See `Sampler.render_weights`: in one C pass a ray where `sampler_cpu` applies."""
         if sampler_cpu.applies(sigmas, deltas) and not deltas.requires_grad:

@@ -56,6 +56,11 @@ class Sampler(nn.Module, ABC):
         (n, 3), or None when every sample may (the field then sees all of them)."""
         return None
 
+    def fused_cpu(self, *tensors: Tensor) -> bool:
+        """Whether a pass of this sampler's engine on `tensors` runs the CPU engine version
+        cpu-fused-2's loops (`nerfaug.nerf.sampler_cpu`; the proposal sampler's, where chosen)."""
+        return False
+
     def render_weights(self, sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
         """The final samples' weights and transmittance from densities (n_rays, n) and interval
         lengths (n_rays, n): `nerfaug.nerf.volrend.render_weights`, unless a sampler computes
