@@ -18,52 +18,42 @@
 
 /* w_i = T_i alpha_i with T_i = exp(-sum_{j<i} sigma_j delta_j), alpha_i = 1 - exp(-sigma_i
  * delta_i); optical depths clamped at 80 and the transmittance beyond it 0, as
- * nerfaug.nerf.volrend.render_weights. */
+ * nerfaug.nerf.volrend.render_weights. decay (R, n) keeps exp(-sigma_i delta_i) for the backward. */
 void weights_forward(const float *sigma, const float *delta, int64_t rays, int64_t n, float *weights,
-                     float *transmittance) {
+                     float *transmittance, float *decay) {
     for (int64_t r = 0; r < rays; r++) {
         const float *s = sigma + r * n, *d = delta + r * n;
-        float *w = weights + r * n, *t = transmittance + r * n;
+        float *w = weights + r * n, *t = transmittance + r * n, *e = decay + r * n;
         double accumulated = 0.0;
         for (int64_t i = 0; i < n; i++) {
             float exclusive = (float)accumulated;
             float optical = s[i] * d[i];
             accumulated += optical;
             float trans = exclusive > MAX_OPTICAL_DEPTH ? 0.0f : expf(-exclusive);
-            float alpha = 1.0f - expf(-(optical > MAX_OPTICAL_DEPTH ? MAX_OPTICAL_DEPTH : optical));
+            e[i] = expf(-(optical > MAX_OPTICAL_DEPTH ? MAX_OPTICAL_DEPTH : optical));
             t[i] = trans;
-            w[i] = trans * alpha;
+            w[i] = trans * (1.0f - e[i]);
         }
     }
 }
 
 /* The gradient of the weights (and transmittance, grad_transmittance may be NULL) with respect
- * to sigma: d optical_k = gw_k T_k exp(-optical_k) - sum_{i>k} (gw_i alpha_i + gT_i) T_i, times
- * delta_k (no gradient through a clamped optical depth). */
-void weights_backward(const float *sigma, const float *delta, int64_t rays, int64_t n, const float *grad_weights,
-                      const float *grad_transmittance, float *grad_sigma) {
+ * to sigma, from the forward's transmittance and decay: d optical_k = gw_k T_k decay_k -
+ * sum_{i>k} (gw_i alpha_i + gT_i) T_i, times delta_k (no gradient through a clamped optical
+ * depth). */
+void weights_backward(const float *sigma, const float *delta, int64_t rays, int64_t n, const float *transmittance,
+                      const float *decay, const float *grad_weights, const float *grad_transmittance,
+                      float *grad_sigma) {
     for (int64_t r = 0; r < rays; r++) {
         const float *s = sigma + r * n, *d = delta + r * n, *gw = grad_weights + r * n;
+        const float *t = transmittance + r * n, *e = decay + r * n;
         const float *gt = grad_transmittance ? grad_transmittance + r * n : 0;
         float *gs = grad_sigma + r * n;
-        /* Forward again, keeping T and the alpha factor in gs (as scratch) and a suffix sum. */
-        double accumulated = 0.0;
-        for (int64_t i = 0; i < n; i++) {
-            float exclusive = (float)accumulated;
-            float optical = s[i] * d[i];
-            accumulated += optical;
-            gs[i] = exclusive > MAX_OPTICAL_DEPTH ? 0.0f : expf(-exclusive); /* T_i */
-        }
         double behind = 0.0; /* sum_{i>k} (gw_i alpha_i + gT_i) T_i */
         for (int64_t k = n - 1; k >= 0; k--) {
-            float trans = gs[k];
-            float optical = s[k] * d[k];
-            int clamped = optical > MAX_OPTICAL_DEPTH;
-            float decay = expf(-(clamped ? MAX_OPTICAL_DEPTH : optical));
-            float alpha = 1.0f - decay;
-            float own = clamped ? 0.0f : gw[k] * trans * decay;
-            float grad_optical = (float)((double)own - behind);
-            gs[k] = grad_optical * d[k];
+            float trans = t[k], alpha = 1.0f - e[k];
+            float own = s[k] * d[k] > MAX_OPTICAL_DEPTH ? 0.0f : gw[k] * trans * e[k];
+            gs[k] = (float)((double)own - behind) * d[k];
             behind += (double)((gw[k] * alpha + (gt ? gt[k] : 0.0f)) * trans);
         }
     }
@@ -115,14 +105,27 @@ void pdf_sample(const float *edges, const float *weights, int64_t rays, int64_t 
     }
 }
 
-/* For final sample i of a ray, the proposal bins its interval overlaps: low (the last bin
- * starting at or before its start) and high (the first bin ending after its end), clamped to
- * [0, m - 1], as nerfaug.nerf.proposal.outer_measure. */
-static inline void overlap(const float *pe, int64_t m, float start, float end, int64_t *low, int64_t *high) {
-    int64_t lo = upper_bound(pe, m, start) - 1;         /* among the bins' starts pe[0..m) */
-    int64_t hi = upper_bound(pe + 1, m, end);           /* among the bins' ends pe[1..m] */
-    *low = lo < 0 ? 0 : (lo > m - 1 ? m - 1 : lo);
-    *high = hi > m - 1 ? m - 1 : hi;
+/* Count of sorted[0..size) <= value, searched upwards from the count `from` of an earlier,
+ * smaller value (a ray's edges increase, so each search continues the last: O(n + m) a ray);
+ * where values decrease it searches afresh, so any order gives searchsorted's answer. */
+static inline int64_t count_from(const float *sorted, int64_t size, float value, float previous, int64_t from) {
+    if (!(value >= previous)) return upper_bound(sorted, size, value);
+    while (from < size && sorted[from] <= value) from++;
+    return from;
+}
+
+/* For each final sample of a ray (edges e[0..n]), the proposal bins its interval overlaps: low
+ * (the last bin starting at or before its start) and high (the first bin ending after its end),
+ * clamped to [0, m - 1], as nerfaug.nerf.proposal.outer_measure. */
+static inline void overlaps(const float *e, int64_t n, const float *pe, int64_t m, int64_t *low, int64_t *high) {
+    int64_t starts = 0, ends = 0;
+    for (int64_t i = 0; i < n; i++) {
+        starts = count_from(pe, m, e[i], i ? e[i - 1] : -INFINITY, starts);         /* bins' starts pe[0..m) */
+        ends = count_from(pe + 1, m, e[i + 1], i ? e[i] : -INFINITY, ends);          /* bins' ends pe[1..m] */
+        int64_t lo = starts - 1;
+        low[i] = lo < 0 ? 0 : (lo > m - 1 ? m - 1 : lo);
+        high[i] = ends > m - 1 ? m - 1 : ends;
+    }
 }
 
 /* The proposal's cumulative weights [0, cumsum(pw)] of one ray into c (m + 1 floats). */
@@ -136,15 +139,16 @@ static inline void cumulative(const float *pw, int64_t m, float *c) {
 }
 
 /* Per final sample the interlevel penalty max(w - bound, 0)^2 / (w + eps), bound the proposal's
- * outer measure over the sample's interval: terms (R, n). c is scratch of m + 1 floats. */
+ * outer measure over the sample's interval: terms (R, n). c is scratch of m + 1 floats, bins of
+ * 2 n int64. */
 void interlevel_forward(const float *edges, const float *weights, int64_t rays, int64_t n, const float *p_edges,
-                        const float *p_weights, int64_t m, float eps, float *c, float *terms) {
+                        const float *p_weights, int64_t m, float eps, float *c, int64_t *bins, float *terms) {
     for (int64_t r = 0; r < rays; r++) {
         const float *e = edges + r * (n + 1), *w = weights + r * n, *pe = p_edges + r * (m + 1);
         cumulative(p_weights + r * m, m, c);
+        overlaps(e, n, pe, m, bins, bins + n);
         for (int64_t i = 0; i < n; i++) {
-            int64_t low, high;
-            overlap(pe, m, e[i], e[i + 1], &low, &high);
+            int64_t low = bins[i], high = bins[n + i];
             float excess = w[i] - (c[high + 1] - c[low]);
             excess = excess > 0.0f ? excess : 0.0f;
             terms[r * n + i] = excess * excess / (w[i] + eps);
@@ -153,18 +157,18 @@ void interlevel_forward(const float *edges, const float *weights, int64_t rays, 
 }
 
 /* The gradient of the terms (grad (R, n)) with respect to the proposal weights (R, m): a bound
- * is c[high + 1] - c[low], and c[k] sums the weights before k. accumulated is scratch of m + 1
- * doubles. */
+ * is c[high + 1] - c[low], and c[k] sums the weights before k. Scratch as the forward's, and
+ * accumulated of m + 1 doubles. */
 void interlevel_backward(const float *edges, const float *weights, int64_t rays, int64_t n, const float *p_edges,
-                         const float *p_weights, int64_t m, float eps, const float *grad, float *c,
+                         const float *p_weights, int64_t m, float eps, const float *grad, float *c, int64_t *bins,
                          double *accumulated, float *grad_p_weights) {
     for (int64_t r = 0; r < rays; r++) {
         const float *e = edges + r * (n + 1), *w = weights + r * n, *pe = p_edges + r * (m + 1);
         cumulative(p_weights + r * m, m, c);
         for (int64_t k = 0; k <= m; k++) accumulated[k] = 0.0;
+        overlaps(e, n, pe, m, bins, bins + n);
         for (int64_t i = 0; i < n; i++) {
-            int64_t low, high;
-            overlap(pe, m, e[i], e[i + 1], &low, &high);
+            int64_t low = bins[i], high = bins[n + i];
             float excess = w[i] - (c[high + 1] - c[low]);
             if (!(excess > 0.0f)) continue;
             float grad_bound = -(grad[r * n + i] * (2.0f * excess) / (w[i] + eps));
@@ -190,6 +194,17 @@ static inline void normalised(const float *e, int64_t n, float eps, float *mids,
     }
 }
 
+/* sum_j w_j |m - mids_j| in four running sums (j mod 4) added at the end: a fixed order, and
+ * four independent chains of additions instead of one. */
+static inline float row_sum(const float *w, const float *mids, int64_t n, float m) {
+    float part[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    int64_t j = 0;
+    for (; j + 4 <= n; j += 4)
+        for (int q = 0; q < 4; q++) part[q] += w[j + q] * fabsf(m - mids[j + q]);
+    for (; j < n; j++) part[j & 3] += w[j] * fabsf(m - mids[j]);
+    return (part[0] + part[1]) + (part[2] + part[3]);
+}
+
 /* mip-NeRF 360's distortion of each ray, sum_ij w_i w_j |m_i - m_j| + sum_i w_i^2 width_i / 3 on
  * distances normalised per ray: out (R,). scratch holds 2 n floats. */
 void distortion_forward(const float *edges, const float *weights, int64_t rays, int64_t n, float eps, float *scratch,
@@ -200,7 +215,7 @@ void distortion_forward(const float *edges, const float *weights, int64_t rays, 
         normalised(edges + r * (n + 1), n, eps, mids, widths);
         double pairwise = 0.0, own = 0.0;
         for (int64_t i = 0; i < n; i++) {
-            for (int64_t j = 0; j < n; j++) pairwise += (double)(w[i] * w[j] * fabsf(mids[i] - mids[j]));
+            pairwise += (double)(w[i] * row_sum(w, mids, n, mids[i]));
             own += (double)(w[i] * w[i] * widths[i]);
         }
         out[r] = (float)pairwise + (float)own / 3.0f;
@@ -216,9 +231,7 @@ void distortion_backward(const float *edges, const float *weights, int64_t rays,
         const float *w = weights + r * n;
         normalised(edges + r * (n + 1), n, eps, mids, widths);
         for (int64_t k = 0; k < n; k++) {
-            double pairwise = 0.0;
-            for (int64_t j = 0; j < n; j++) pairwise += (double)(w[j] * fabsf(mids[k] - mids[j]));
-            float d = 2.0f * (float)pairwise + 2.0f * w[k] * widths[k] / 3.0f;
+            float d = 2.0f * row_sum(w, mids, n, mids[k]) + 2.0f * w[k] * widths[k] / 3.0f;
             grad_weights[r * n + k] = grad[r] * d;
         }
     }

@@ -36,11 +36,11 @@ MODE = os.environ.get("NERFAUG_CPU_KERNELS") or "hash"
 
 _P, _I, _F = ctypes.c_void_p, ctypes.c_int64, ctypes.c_float
 _SIGNATURES = {
-    "weights_forward": [_P, _P, _I, _I, _P, _P],
-    "weights_backward": [_P, _P, _I, _I, _P, _P, _P],
+    "weights_forward": [_P, _P, _I, _I, _P, _P, _P],
+    "weights_backward": [_P, _P, _I, _I, _P, _P, _P, _P, _P],
     "pdf_sample": [_P, _P, _I, _I, _P, _I, _F, _P, _P],
-    "interlevel_forward": [_P, _P, _I, _I, _P, _P, _I, _F, _P, _P],
-    "interlevel_backward": [_P, _P, _I, _I, _P, _P, _I, _F, _P, _P, _P, _P],
+    "interlevel_forward": [_P, _P, _I, _I, _P, _P, _I, _F, _P, _P, _P],
+    "interlevel_backward": [_P, _P, _I, _I, _P, _P, _I, _F, _P, _P, _P, _P, _P],
     "distortion_forward": [_P, _P, _I, _I, _F, _P, _P],
     "distortion_backward": [_P, _P, _I, _I, _F, _P, _P, _P],
 }
@@ -99,14 +99,15 @@ class FusedWeights(torch.autograd.Function):
     @staticmethod
     def forward(ctx, sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
         sigmas, deltas = sigmas.detach().contiguous(), deltas.detach().contiguous()
-        weights, transmittance = torch.empty_like(sigmas), torch.empty_like(sigmas)
-        _call("weights_forward", sigmas, deltas, sigmas.shape[0], sigmas.shape[1], weights, transmittance)
-        ctx.save_for_backward(sigmas, deltas)
+        weights, transmittance, decay = (torch.empty_like(sigmas) for _ in range(3))
+        rays, n = sigmas.shape
+        _call("weights_forward", sigmas, deltas, rays, n, weights, transmittance, decay)
+        ctx.save_for_backward(sigmas, deltas, transmittance, decay)
         return weights, transmittance
 
     @staticmethod
     def backward(ctx, grad_weights: Tensor | None, grad_transmittance: Tensor | None):
-        sigmas, deltas = ctx.saved_tensors
+        sigmas, deltas, transmittance, decay = ctx.saved_tensors
         if grad_weights is None:
             grad_weights = torch.zeros_like(sigmas)
         grad_weights = grad_weights.contiguous().float()
@@ -114,7 +115,11 @@ class FusedWeights(torch.autograd.Function):
             grad_transmittance = grad_transmittance.contiguous().float()
         grad_sigmas = torch.empty_like(sigmas)
         rays, n = sigmas.shape
-        _call("weights_backward", sigmas, deltas, rays, n, grad_weights, grad_transmittance, grad_sigmas)
+        _call(
+            "weights_backward",
+            *(sigmas, deltas, rays, n, transmittance, decay),
+            *(grad_weights, grad_transmittance, grad_sigmas),
+        )
         return grad_sigmas, None
 
 
@@ -149,9 +154,9 @@ class FusedInterlevel(torch.autograd.Function):
         rays, n = tensors[1].shape
         m = tensors[3].shape[1]
         terms = torch.empty(rays, n, dtype=torch.float32)
-        scratch = torch.empty(m + 1, dtype=torch.float32)
+        scratch, bins = torch.empty(m + 1, dtype=torch.float32), torch.empty(2 * n, dtype=torch.int64)
         if rays:
-            _call("interlevel_forward", tensors[0], tensors[1], rays, n, tensors[2], tensors[3], m, eps, scratch, terms)
+            _call("interlevel_forward", *tensors[:2], rays, n, *tensors[2:], m, eps, scratch, bins, terms)
         ctx.save_for_backward(*tensors)
         ctx.eps = eps
         return terms
@@ -162,13 +167,13 @@ class FusedInterlevel(torch.autograd.Function):
         rays, n = weights.shape
         m = p_weights.shape[1]
         grad_p = torch.empty_like(p_weights)
-        scratch = torch.empty(m + 1, dtype=torch.float32)
+        scratch, bins = torch.empty(m + 1, dtype=torch.float32), torch.empty(2 * n, dtype=torch.int64)
         accumulated = torch.empty(m + 1, dtype=torch.float64)
         if rays:
             _call(
                 "interlevel_backward",
                 *(edges, weights, rays, n, p_edges, p_weights, m, ctx.eps),
-                *(grad.contiguous().float(), scratch, accumulated, grad_p),
+                *(grad.contiguous().float(), scratch, bins, accumulated, grad_p),
             )
         return None, None, None, grad_p, None
 
