@@ -19,7 +19,13 @@ from nerfaug.device_choice import Device
 from nerfaug.experiment.fingerprints import defaults_of, engine_name, engine_record, surviving
 from nerfaug.experiment.schedule import check_schedule
 from nerfaug.nerf.bounds import Count, NonNegativeInt, Positive, Seed, Steps
-from nerfaug.nerf.config import HASH_CPU_ENGINE_VERSION, NerfConfig, uses_hash_grid
+from nerfaug.nerf.config import (
+    CPU_FUSED_ENGINE_VERSION,
+    HASH_CPU_ENGINE_VERSION,
+    NerfConfig,
+    ProposalConfig,
+    uses_hash_grid,
+)
 from nerfaug.nerf.engine import ENGINE_OPTION, Engine, RefusedEngine
 from nerfaug.registry import Presets
 from nerfaug.schema import SCHEMA, RequestError, Settings, unchecked
@@ -217,7 +223,9 @@ class ExperimentConfig(Settings):
         the CPU, where its hash grids run the fused C loop (`HASH_CPU_ENGINE_VERSION`: where a C
         compiler built it and `NERFAUG_HASH_KERNEL` is not "torch",
         `nerfaug.nerf.encoding.HashEncoding.default_kernel`), that version; else None, the reference
-        engine every run before it ran. A run in a batch of any size is computed as it would be alone
+        engine every run before it ran. With NERFAUG_CPU_KERNELS=fused (`nerfaug.nerf.sampler_cpu`)
+        an engine with proposal networks also runs their per-ray C loops: `CPU_FUSED_ENGINE_VERSION`.
+        A run in a batch of any size is computed as it would be alone
         (`nerfaug.nerf.trainer.Trainer`), so the batch's size is no part of it."""
         from nerfaug.device import device_kind  # torch: here, so that `nerfaug run --help` loads none
 
@@ -225,7 +233,13 @@ class ExperimentConfig(Settings):
             return None
         from nerfaug.nerf.encoding import HashEncoding  # torch, likewise
 
-        return HASH_CPU_ENGINE_VERSION if HashEncoding.cpu_loop_selected() else None
+        if not HashEncoding.cpu_loop_selected():
+            return None
+        from nerfaug.nerf import sampler_cpu
+
+        if sampler_cpu.selected() and isinstance(self.engine.config.sampler.kind, ProposalConfig):
+            return CPU_FUSED_ENGINE_VERSION
+        return HASH_CPU_ENGINE_VERSION
 
     def replace(self, **changes) -> ExperimentConfig:
         return dataclasses.replace(self, **changes)

@@ -470,6 +470,13 @@ runs are never mixed with the reference engine's in one cell of a study. The ref
 records no version."""
 
 
+CPU_FUSED_ENGINE_VERSION = "cpu-fused-2"
+"""The arithmetic of a run on the CPU with the hash loop (`HASH_CPU_ENGINE_VERSION`) and the
+proposal sampler's per-ray C loops (`nerfaug.nerf.sampler_cpu`: weights, resampling, interlevel
+and distortion losses), opt-in by NERFAUG_CPU_KERNELS=fused; its runs are never mixed with either
+earlier version's."""
+
+
 def uses_hash_grid(config: NerfConfig) -> bool:
     """Whether engine `config` has a hash grid (its field's encoding, or proposal networks)."""
     return isinstance(config.field.encoding, HashGridConfig) or isinstance(config.sampler.kind, ProposalConfig)

@@ -106,8 +106,12 @@ class NerfField(nn.Module):
 
         Returns: Tensor with shape (n, 3) in [0, 1].
         """
-        features = torch.cat([spherical_harmonics(directions, self.sh_levels), geometry], dim=-1)
-        return torch.sigmoid(self.color_mlp(features))
+        return self.color_of_encoded(geometry, spherical_harmonics(directions, self.sh_levels))
+
+    def color_of_encoded(self, geometry: Tensor, encoded: Tensor) -> Tensor:
+        """`color` with the directions' spherical harmonics given: (n, sh_levels ** 2), e.g. one
+        ray's computed once for all its samples. Returns: Tensor with shape (n, 3) in [0, 1]."""
+        return torch.sigmoid(self.color_mlp(torch.cat([encoded, geometry], dim=-1)))
 
 
 class DensityField(nn.Module):

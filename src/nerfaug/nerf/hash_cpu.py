@@ -44,24 +44,25 @@ def _cache_dir() -> Path:
     return Path(base) / "nerfaug"
 
 
-@functools.cache
-def _library() -> ctypes.CDLL | None:
-    """The compiled kernel, built on first use (None where no C compiler builds it)."""
-    source = _SOURCE.read_bytes()
+def compiled(source: Path) -> ctypes.CDLL | None:
+    """The C file `source` built with `_FLAGS` into the user's cache, once per source version and
+    compiler, and loaded (None where no C compiler builds it). Each caller keeps its library
+    (`_library`); also builds `nerfaug.nerf.sampler_cpu`'s loops."""
+    text = source.read_bytes()
     compiler = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if compiler is None:
         return None
-    digest = hashlib.sha256(source + " ".join((compiler, *_FLAGS)).encode()).hexdigest()[:16]
-    target = _cache_dir() / f"hash_cpu-{digest}.so"
+    digest = hashlib.sha256(text + " ".join((compiler, *_FLAGS)).encode()).hexdigest()[:16]
+    target = _cache_dir() / f"{source.stem}-{digest}.so"
     if not target.exists():
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
             # Built beside the target and renamed: processes of a sweep building at once each
             # write their own file, and the rename is atomic.
             with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
-                built = Path(scratch) / "hash_cpu.so"
+                built = Path(scratch) / f"{source.stem}.so"
                 subprocess.run(
-                    [compiler, *_FLAGS, "-o", str(built), str(_SOURCE), "-lm"],
+                    [compiler, *_FLAGS, "-o", str(built), str(source), "-lm"],
                     check=True,
                     capture_output=True,
                     timeout=120,
@@ -69,7 +70,15 @@ def _library() -> ctypes.CDLL | None:
                 os.replace(built, target)
         except (OSError, subprocess.SubprocessError):
             return None
-    library = ctypes.CDLL(str(target))
+    return ctypes.CDLL(str(target))
+
+
+@functools.cache
+def _library() -> ctypes.CDLL | None:
+    """The compiled kernel, built on first use (None where no C compiler builds it)."""
+    library = compiled(_SOURCE)
+    if library is None:
+        return None
     pointer, i64, i32 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int
     for name in ("hash_forward", "hash_backward"):
         function = getattr(library, name)

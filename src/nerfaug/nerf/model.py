@@ -17,9 +17,11 @@ from torch import Tensor, nn
 
 from nerfaug.cameras import Cameras, image_rays
 from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf.encoding import spherical_harmonics
+from nerfaug.nerf.field import NerfField
 from nerfaug.nerf.registry import build_field, build_sampler
 from nerfaug.nerf.sampling import ray_box_span, unit_cube
-from nerfaug.nerf.volrend import RenderOutput, composite, render_weights
+from nerfaug.nerf.volrend import RenderOutput, composite
 
 # Most samples one network pass evaluates when rendering without gradients on the CPU: passes
 # this size keep their intermediate tensors in the cache. Measured (100x100 image, 1 thread):
@@ -154,7 +156,7 @@ class NerfModel(nn.Module):
         index = live.nonzero().squeeze(-1)
         density, geometry = self.field.density(self._unit(points[index]))
         sigma = density.new_zeros(n_rays * n).index_put((index,), density).reshape(n_rays, n)
-        weights, transmittance = render_weights(sigma, t_ends - t_starts)
+        weights, transmittance = self.sampler.render_weights(sigma, t_ends - t_starts)
         return weights, transmittance, index, geometry
 
     def _shade(self, origins: Tensor, directions: Tensor, t_starts: Tensor, t_ends: Tensor) -> tuple[Tensor, Tensor]:
@@ -163,8 +165,16 @@ class NerfModel(nn.Module):
         n_rays, n = t_starts.shape
         weights, transmittance, index, geometry = self._densities(origins, directions, t_starts, t_ends)
         visible = transmittance.detach().reshape(-1)[index] > self.config.sampler.transmittance_eps
-        colour_index = index[visible]
-        colours = self.field.color(geometry[visible], directions[colour_index // n])
+        if isinstance(self.field, NerfField) and self.sampler.fused_cpu(geometry, directions):
+            # cpu-fused-2: each ray's harmonics once for its samples, rows picked by index (the
+            # gradient's scatter then writes each row once, where a mask's accumulates).
+            rows = visible.nonzero().squeeze(-1)
+            colour_index = index.index_select(0, rows)
+            encoded = spherical_harmonics(directions, self.field.sh_levels).index_select(0, colour_index // n)
+            colours = self.field.color_of_encoded(geometry.index_select(0, rows), encoded)
+        else:
+            colour_index = index[visible]
+            colours = self.field.color(geometry[visible], directions[colour_index // n])
         rgbs = colours.new_zeros(n_rays * n, 3).index_put((colour_index,), colours).reshape(n_rays, n, 3)
         return weights, rgbs
 

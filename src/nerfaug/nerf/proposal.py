@@ -13,10 +13,11 @@ from typing import Protocol
 import torch
 from torch import Tensor, nn
 
+from nerfaug.nerf import sampler_cpu
 from nerfaug.nerf.config import NerfConfig
 from nerfaug.nerf.field import DensityField
 from nerfaug.nerf.sampler import Sampler
-from nerfaug.nerf.sampling import sample_pdf, stratified_edges, unit_cube
+from nerfaug.nerf.sampling import cdf_positions, sample_pdf, stratified_edges, unit_cube
 from nerfaug.nerf.volrend import RenderOutput, render_weights
 
 _EPS = 1e-7
@@ -65,6 +66,9 @@ def _interlevel_terms(edges, weights, proposal_edges, proposal_weights):
     """Per proposal level, the interlevel penalty of every final sample: Tensors (n_rays, n)."""
     edges, weights = edges.detach(), weights.detach()
     for p_edges, p_weights in zip(proposal_edges, proposal_weights):
+        if sampler_cpu.applies(edges, weights, p_edges, p_weights) and not p_edges.requires_grad:
+            yield sampler_cpu.FusedInterlevel.apply(edges, weights, p_edges, p_weights, _EPS)
+            continue
         bound = outer_measure(edges, p_edges, p_weights)
         yield (weights - bound).clamp(min=0) ** 2 / (weights + _EPS)
 
@@ -87,6 +91,8 @@ def distortion_loss(edges: Tensor, weights: Tensor) -> Tensor:
 
 def distortion_per_ray(edges: Tensor, weights: Tensor) -> Tensor:
     """`distortion_loss` of each ray: Tensor with shape (n_rays,) (shapes as there)."""
+    if sampler_cpu.applies(edges, weights) and not edges.requires_grad:
+        return sampler_cpu.FusedDistortion.apply(edges, weights, _EPS)
     span = (edges[:, -1:] - edges[:, :1]).clamp_min(_EPS)
     t = (edges - edges[:, :1]) / span
     mids = 0.5 * (t[:, 1:] + t[:, :-1])
@@ -138,8 +144,17 @@ def place_samples(
             weights = weights_of(level, edges)
             proposal_edges.append(edges)
             proposal_weights.append(weights)
-            edges = sample_pdf(edges, weights.detach() ** anneal, n_next, jitter, generator)
+            edges = _resample(edges, weights.detach() ** anneal, n_next, jitter, generator)
     return edges, {"proposal_edges": proposal_edges, "proposal_weights": proposal_weights}
+
+
+def _resample(edges: Tensor, weights: Tensor, n_samples: int, jitter: bool, generator) -> Tensor:
+    """`sample_pdf` (shapes as there), in one C pass a ray where `sampler_cpu` applies; the same
+    random positions either way."""
+    if not sampler_cpu.applies(edges, weights):
+        return sample_pdf(edges, weights, n_samples, jitter, generator)
+    u = cdf_positions(edges.shape[0], n_samples + 1, jitter, generator, edges.device)
+    return sampler_cpu.sample_pdf(edges, weights, u, padding=0.01)
 
 
 class ProposalState(Protocol):
@@ -280,7 +295,17 @@ class ProposalSampler(Sampler):
         mids = 0.5 * (edges[:, 1:] + edges[:, :-1])
         points = origins[:, None, :] + directions[:, None, :] * mids[..., None]
         sigma = network(unit_cube(points.reshape(-1, 3), self.half_size)).reshape(mids.shape)
-        return render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
+        return self.render_weights(sigma, edges[:, 1:] - edges[:, :-1])[0]
+
+    def fused_cpu(self, *tensors: Tensor) -> bool:
+        """See `Sampler.fused_cpu`: where `sampler_cpu` applies to `tensors`."""
+        return sampler_cpu.applies(*tensors)
+
+    def render_weights(self, sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
+        """See `Sampler.render_weights`: in one C pass a ray where `sampler_cpu` applies."""
+        if sampler_cpu.applies(sigmas, deltas) and not deltas.requires_grad:
+            return sampler_cpu.render_weights(sigmas, deltas)
+        return render_weights(sigmas, deltas)
 
     def before_step(self, step, density_fn, generator=None) -> None:
         self.anneal.fill_(proposal_anneal(step, self.anneal_steps, self.anneal_slope))

@@ -14,7 +14,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor, nn
 
-from nerfaug.nerf.volrend import RenderOutput
+from nerfaug.nerf.volrend import RenderOutput, render_weights
 
 
 class Sampler(nn.Module, ABC):
@@ -55,6 +55,17 @@ class Sampler(nn.Module, ABC):
         """Which final samples may hold density: bool Tensor with shape (n,) for world points
         (n, 3), or None when every sample may (the field then sees all of them)."""
         return None
+
+    def fused_cpu(self, *tensors: Tensor) -> bool:
+        """Whether a pass of this sampler's engine on `tensors` runs the CPU engine version
+        cpu-fused-2's loops (`nerfaug.nerf.sampler_cpu`; the proposal sampler's, where chosen)."""
+        return False
+
+    def render_weights(self, sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:
+        """The final samples' weights and transmittance from densities (n_rays, n) and interval
+        lengths (n_rays, n): `nerfaug.nerf.volrend.render_weights`, unless a sampler computes
+        the same otherwise."""
+        return render_weights(sigmas, deltas)
 
     def before_step(
         self, step: int, density_fn: Callable[[Tensor], Tensor], generator: torch.Generator | None = None

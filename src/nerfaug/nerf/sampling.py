@@ -84,6 +84,17 @@ def stratified_edges(
     return t_min[:, None] + fractions * (t_max - t_min)[:, None]
 
 
+def cdf_positions(n_rays: int, n_edges: int, jitter: bool, generator: torch.Generator | None, device) -> Tensor:
+    """Where `sample_pdf` inverts the CDF: evenly spaced in [0, 1], or with `jitter` one uniform
+    position in each of `n_edges` equal strata of [0, 1). Returns: Tensor with shape (n_rays, n_edges)."""
+    if jitter:
+        u = torch.linspace(0.0, 1.0 - 1.0 / n_edges, n_edges, device=device)
+        u = u + _uniform((n_rays, n_edges), generator, device) / n_edges
+    else:
+        u = torch.linspace(0.0, 1.0, n_edges, device=device).expand(n_rays, -1)
+    return u.contiguous()
+
+
 def sample_pdf(
     edges: Tensor,
     weights: Tensor,
@@ -108,13 +119,7 @@ def sample_pdf(
         padded = weights + padding
         pdf = padded / padded.sum(dim=-1, keepdim=True)
         cdf = torch.cat([torch.zeros_like(pdf[:, :1]), torch.cumsum(pdf, dim=-1)], dim=-1).clamp(max=1.0)
-        n_edges = n_samples + 1
-        if jitter:
-            u = torch.linspace(0.0, 1.0 - 1.0 / n_edges, n_edges, device=edges.device)
-            u = u + _uniform((edges.shape[0], n_edges), generator, edges.device) / n_edges
-        else:
-            u = torch.linspace(0.0, 1.0, n_edges, device=edges.device).expand(edges.shape[0], -1)
-        u = u.contiguous()
+        u = cdf_positions(edges.shape[0], n_samples + 1, jitter, generator, edges.device)
         above = torch.searchsorted(cdf, u, side="right")
         last = cdf.shape[-1] - 1
         below = (above - 1).clamp(0, last)
