@@ -151,8 +151,12 @@ def test_a_proposal_made_while_the_viewer_is_open_appears_without_a_restart(run)
     try:
         assert viewer.server.scene.get_handle_by_name("/proposals/1/rank_1") is None
         propose(run, n=2)
+        # The scene is drawn before the panel within one redraw (another thread): wait for the
+        # redraw to end, not only for its first node.
+        drawn = viewer.redraws
         assert wait_for(lambda: viewer.server.scene.get_handle_by_name("/proposals/1/rank_2") is not None, 30)
-        assert viewer.picked == 1 and "#1: 2 views" in viewer.proposal_menu.value
+        assert wait_for(lambda: viewer.redraws > drawn and "#1: 2 views" in viewer.proposal_menu.value, 30)
+        assert viewer.picked == 1
         assert "proposal 1" in viewer.score_label.content
         # Picking the first proposal in the panel highlights its views instead (labelled by rank).
         viewer.proposal_menu.value = next(o for o in viewer.proposal_menu.options if o.startswith("#0:"))
