@@ -28,7 +28,7 @@ test: $(STAMP) lint
 # (unvectorised) and AVX2 kernels, each with 1 and 2 threads, so that a test that passes only by
 # this CPU's rounding fails here, not on a user's. tests/test_rounding_marker.py keeps the list whole.
 ROUNDING_TESTS := tests/experiment/test_rounds.py tests/nerf/test_batch.py tests/nerf/test_recorded_numbers.py tests/nerf/test_registry.py \
-	tests/nerf/test_trainer.py
+	tests/nerf/test_trainer.py tests/nerf/test_sampler_cpu.py
 
 test-rounding: $(STAMP)
 	@for kernels in default avx2; do for threads in 1 2; do \

@@ -171,6 +171,7 @@ RECORDED = [
 ]
 
 
+@pytest.mark.rounding
 def test_twelve_steps_stay_near_the_reference_engine_and_repeat_exactly(engine_numbers, fused):
     """Another summation order moves the losses by rounding, which 12 steps amplify little; the
     same seed gives the same numbers (one thread, a fixed order)."""
