@@ -9,6 +9,7 @@ read it.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Protocol
 
 
@@ -61,6 +62,32 @@ def curve_evaluations(config: ExperimentConfig) -> int:
     """Test-view evaluations a run makes besides its last: before the first round and after each
     round but the last (none with one round)."""
     return config.rounds if config.rounds > 1 else 0
+
+
+def schedule_words(settings: Mapping) -> str:
+    """A schedule in words, from settings as a record keeps them (a dict with `n_initial`, `n_new`,
+    `add_at_step` and, where more than one round, `rounds`, `round_every`, `round_growth`).
+
+    Example:
+        >>> schedule_words({"n_initial": 6, "n_new": 6, "add_at_step": 200})
+        '6 initial views, 6 added at step 200'
+        >>> schedule_words({"n_initial": 4, "n_new": 1, "add_at_step": 200, "rounds": 8, "round_every": 100})
+        '4 initial views, then 8 rounds of 1 view, at step 200 and every 100 steps after'
+        >>> schedule_words({"n_initial": 4, "n_new": 2, "add_at_step": 200, "rounds": 3, "round_every": 20,
+        ...                 "round_growth": "per-view"})
+        '4 initial views, then 3 rounds of 2 views, at step 200 and then 20 steps per view in the model between rounds'
+    """
+    get = settings.get
+    start = f"{get('n_initial', '?')} initial views"
+    rounds = get("rounds", 1)
+    if rounds == 1:
+        return f"{start}, {get('n_new', '?')} added at step {get('add_at_step', '?')}"
+    views = f"{get('n_new', '?')} view{'' if get('n_new') == 1 else 's'}"
+    if get("round_growth", "fixed") == "per-view":
+        spacing = f"then {get('round_every', '?')} steps per view in the model between rounds"
+    else:
+        spacing = f"every {get('round_every', '?')} steps after"
+    return f"{start}, then {rounds} rounds of {views}, at step {get('add_at_step', '?')} and {spacing}"
 
 
 def _refuse(name: str, value, problem: str) -> None:

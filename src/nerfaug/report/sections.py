@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nerfaug.experiment.schedule import schedule_words
 from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_DECIMALS, METRIC_LABELS, METRICS
 from nerfaug.report.collect import Results, Run
 from nerfaug.report.document import (
@@ -86,8 +87,7 @@ def header_section(results: Results) -> list[Block]:
                 f"trials per scene and method: {config.get('trials', '?')} "
                 f"(trial k uses seed {config.get('seed', 0)} + k)",
                 (
-                    f"steps: {config.get('steps', '?')}; {config.get('n_new', '?')} views added at step "
-                    f"{config.get('add_at_step', '?')} to {config.get('n_initial', '?')} initial views"
+                    f"steps: {config.get('steps', '?')}; {schedule_words(config)}"
                 ),
                 (
                     f"engine preset: {config.get('engine', '?')}; resolution: {config.get('resolution', '?')} px; "

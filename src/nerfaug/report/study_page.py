@@ -13,6 +13,7 @@ import numpy as np
 
 from nerfaug import runfiles
 from nerfaug.experiment.layout import StudyFolder
+from nerfaug.experiment.schedule import schedule_words
 from nerfaug.jsonio import atomic_write_bytes
 from nerfaug.metrics import HIGHER_IS_BETTER, METRIC_DECIMALS, METRIC_LABELS, METRICS
 from nerfaug.plotting import new_figure, save_figure
@@ -114,9 +115,8 @@ def _header(study: Study) -> list[Block]:
         f"trials per (scene, engine, method): {plan.get('trials', '?')} "
         f"(trial k uses seed {config.get('seed', 0)} + k)",
         (
-            f"protocol: {config.get('n_initial', '?')} initial views, {config.get('n_new', '?')} added at step "
-            f"{config.get('add_at_step', '?')}, {config.get('steps', '?')} steps, {config.get('resolution', '?')} px, "
-            f"{_pool_text(study, config)}, {_test_views_text(study, config)}"
+            f"protocol: {schedule_words(config)}, {config.get('steps', '?')} steps, "
+            f"{config.get('resolution', '?')} px, {_pool_text(study, config)}, {_test_views_text(study, config)}"
         ),
         f"runs in the table: {len(study.table['runs'])}",
     ]
