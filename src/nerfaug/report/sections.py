@@ -86,9 +86,7 @@ def header_section(results: Results) -> list[Block]:
                 f"methods: {methods}",
                 f"trials per scene and method: {config.get('trials', '?')} "
                 f"(trial k uses seed {config.get('seed', 0)} + k)",
-                (
-                    f"steps: {config.get('steps', '?')}; {schedule_words(config)}"
-                ),
+                (f"steps: {config.get('steps', '?')}; {schedule_words(config)}"),
                 (
                     f"engine preset: {config.get('engine', '?')}; resolution: {config.get('resolution', '?')} px; "
                     f"test views: {config.get('n_test', '?')}; candidate pool: {config.get('pool', '?')}"
