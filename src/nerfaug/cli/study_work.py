@@ -205,7 +205,9 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     run under OUT, written back; `previous` itself when OUT holds no study.
 
     Raises:
-        SystemExit: neither OUT/study.json nor the table exists.
+        SystemExit: neither OUT/study.json nor the table exists; or a run folder disagrees with
+            the other runs of its scene (other initial or test views: the table holds one set per
+            scene), refused before the table is written.
     """
     path = StudyFolder(Path(out)).record
     if not path.is_file():
@@ -218,7 +220,19 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
     record = study_runs.with_design(json.loads(runfiles.read_text(out, path.name)), Path(out))
     if previous is not None:
         record = study_runs.merge_records(previous["plan"], record)
-    rows, scenes = study_table.rows_from_folders(Path(out), record["engines"])
+    try:
+        rows, scenes = study_table.rows_from_folders(Path(out), record["engines"])
+    except ReportError as error:
+        # Runs of two versions of a dataset in one OUT (or a damaged sweep record): input this
+        # table cannot hold, not a failure of the work (the runs are complete), so the one-line
+        # refusal of bad input (exit 2), before anything is written.
+        advice = (
+            ": runs made from another version of the dataset belong to a study of their own (another --out, "
+            "another --table)"
+            if isinstance(error, study_table.RunsDisagree)
+            else ""
+        )
+        raise SystemExit(f"{error}; the table {table_path} was not written, and the runs are kept{advice}") from None
     for scene, folder in record.get("datasets", {}).items():
         if scene in scenes and (source := study_runs.prepared_source(Path(folder))) is not None:
             scenes[scene]["source"] = source

@@ -166,12 +166,17 @@ def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
     return row, rounded_poses(selection.train_poses)
 
 
+class RunsDisagree(ReportError):
+    """A run folder whose initial or test views differ from those of the other runs of its scene
+    (runs of two versions of a dataset): the table holds one set per scene."""
+
+
 def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dict[str, dict]]:
     """Every valid run under `root/<engine>/` as rows, and what each scene's runs started from
     and were scored on: {scene: {"initial_poses", "layouts"?, "test_views"?, "views"?}}.
 
     Raises:
-        ReportError: two runs of a scene and layout started from different initial views, or two
+        RunsDisagree: two runs of a scene and layout started from different initial views, or two
             runs of a scene were scored on different test views (the table holds one set each).
     """
     rows, scenes = [], {}
@@ -187,14 +192,14 @@ def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dic
             scene = scenes.setdefault(row.scene, {})
             layouts = scene.setdefault("layouts", {})
             if layouts.setdefault(str(row.layout), poses) != poses:
-                raise ReportError(f"{run.folder}: its initial views differ from other runs of scene {row.scene!r}")
+                raise RunsDisagree(f"{run.folder}: its initial views differ from other runs of scene {row.scene!r}")
             views = dict(run.result.get("views", {}))
             half = views.get("half")
             if half is not None and scene.setdefault("halves", {}).setdefault(str(row.layout), half) != half:
-                raise ReportError(f"{run.folder}: its initial half differs from other runs of scene {row.scene!r}")
+                raise RunsDisagree(f"{run.folder}: its initial half differs from other runs of scene {row.scene!r}")
             if "test" in views:
                 if scene.setdefault("test_views", views.pop("test")) != run.result["views"]["test"]:
-                    raise ReportError(f"{run.folder}: its test views differ from other runs of scene {row.scene!r}")
+                    raise RunsDisagree(f"{run.folder}: its test views differ from other runs of scene {row.scene!r}")
                 views.pop("initial", None)
                 scene["views"] = {k: v for k, v in views.items() if k != "half"}
             rows.append(row)
@@ -435,6 +440,7 @@ def engine_results(table: dict, engine: str) -> Results:
 
 __all__ = [
     "RunRow",
+    "RunsDisagree",
     "engine_results",
     "homogeneous",
     "halves_by_layout",
