@@ -1,7 +1,8 @@
-"""Run folders of one scene that disagree (other test views or other initial views: runs of two
-versions of a dataset in one study folder) given to `nerfaug study --summary-only`: one line naming
-the run folder and the table, exit 2 (input the table cannot hold), and nothing written: the table
-as it was (or still absent), every run folder byte for byte as it was."""
+"""Run folders of one scene that disagree with each other or with the table's record of the scene
+(other test views or other initial views: runs of two versions of a dataset) given to `nerfaug study
+--summary-only`: one line naming the run folder or the scene and the table, exit 2 (input the table
+cannot hold), and nothing written: the table as it was (or still absent), every run folder byte for
+byte as it was."""
 
 import json
 import shutil
@@ -97,3 +98,85 @@ def test_runs_that_disagree_are_one_line_exit_2_and_nothing_is_written(study_out
     assert err.count("\n") == 1 and "internal error" not in err, err
     assert files(tmp_path) == before  # the table as it was (or absent), the run folders untouched
     assert path.is_file() == (table != "--table not yet written")
+
+
+def tamper_table(table: dict, what: str) -> dict:
+    """The table as if its runs were made from another version of the dataset than OUT's."""
+    scene = table["scenes"]["scene"]
+    if what == "test views":
+        scene["test_views"] = scene["test_views"][:-1]
+        return table
+    scene["initial_poses"][0][0][3] += 0.5
+    return table
+
+
+def summarise(out: Path, path: Path, capsys) -> tuple[int, str]:
+    from nerfaug.cli import main
+
+    try:
+        main(["study", "--summary-only", "--out", str(out), "--table", str(path)])
+    except SystemExit as done:
+        return done.code, capsys.readouterr().err
+    return 0, capsys.readouterr().err
+
+
+@pytest.mark.parametrize("what", ["test views", "initial views"])
+def test_runs_that_disagree_with_the_tables_scene_are_one_line_exit_2(study_out, what, tmp_path, capsys):
+    out = tmp_path / "study"
+    shutil.copytree(study_out, out)
+    path = tmp_path / "tables" / "study-table.json"
+    path.parent.mkdir()
+    table = tamper_table(json.loads((study_out / "study-table.json").read_text()), what)
+    path.write_text(json.dumps(table))
+    before = files(tmp_path)
+    code, err = summarise(out, path, capsys)
+    field = "test_views" if what == "test views" else "initial_poses"
+    assert code == 2, err
+    assert err.startswith(
+        f"nerfaug: scene 'scene': the runs' {what} differ from those the table records "
+        f"({path}: scenes.scene.{field}); the table {path} was not written, and the runs are kept"
+    ), err
+    assert "another --out" in err and err.count("\n") == 1 and "internal error" not in err, err
+    assert files(tmp_path) == before  # the table byte for byte as it was, the run folders untouched
+
+
+def test_a_layout_the_table_has_not_seen_and_poses_within_its_rounding_are_accepted(study_out, tmp_path, capsys):
+    """The table knows the scene only from runs of another layout (its layout 0 unrecorded), and
+    records the test views with a pose a unit of the last decimal away: both agree with the runs."""
+    out = tmp_path / "study"
+    shutil.copytree(study_out, out)
+    table = json.loads((study_out / "study-table.json").read_text())
+    ours = table["scenes"]["scene"].pop("initial_poses")
+    theirs = json.loads(json.dumps(ours))
+    theirs[0][0][3] += 0.5
+    table["scenes"]["scene"]["layouts"] = {"1": theirs}
+    for run in table["runs"]:
+        run["layout"] = 1
+    path = tmp_path / "study-table.json"
+    path.write_text(json.dumps(table))
+    code, err = summarise(out, path, capsys)
+    assert code == 0, err
+    written = json.loads(path.read_text())["scenes"]["scene"]
+    assert written["initial_poses"] == ours and written["layouts"] == {"1": theirs}
+
+    nudged = json.loads(path.read_text())
+    nudged["scenes"]["scene"]["initial_poses"][0][0][3] += 1e-6
+    path.write_text(json.dumps(nudged))
+    code, err = summarise(out, path, capsys)
+    assert code == 0, err
+
+
+def test_halves_are_compared_per_layout_and_fields_an_older_table_lacks_are_not():
+    from nerfaug.report.study_table import RunsDisagree, check_against_table
+
+    poses = [[[1.0, 0.0, 0.0, 0.5], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 2.0]]]
+    half = {"start_deg": 0.0, "width_deg": 180.0}
+    runs = {"mic": {"initial_poses": poses, "halves": {"0": half}, "test_views": ["r_0", "r_1"]}}
+    older = {"scenes": {"mic": {"initial_poses": poses}}}  # no halves, no test views recorded
+    check_against_table(runs, older, Path("t.json"))
+    other_layout = {"scenes": {"mic": {"layouts": {"1": poses}, "halves": {"1": {**half, "start_deg": 90.0}}}}}
+    check_against_table(runs, other_layout, Path("t.json"))
+    turned = {"scenes": {"mic": {"initial_poses": poses, "halves": {"0": {**half, "start_deg": 90.0}}}}}
+    field = r"\(t\.json: scenes\.mic\.halves\.0\)$"
+    with pytest.raises(RunsDisagree, match=r"^scene 'mic': the runs' initial half differs from those .*" + field):
+        check_against_table(runs, turned, Path("t.json"))

@@ -206,8 +206,9 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
 
     Raises:
         SystemExit: neither OUT/study.json nor the table exists; or a run folder disagrees with
-            the other runs of its scene (other initial or test views: the table holds one set per
-            scene), refused before the table is written.
+            the other runs of its scene, or the runs of a scene with what the previous table records
+            for it (other initial or test views: the table holds one set per scene), refused before
+            the table is written.
     """
     path = StudyFolder(Path(out)).record
     if not path.is_file():
@@ -222,6 +223,7 @@ def record_table(out: Path, table_path: Path, previous: dict | None) -> dict:
         record = study_runs.merge_records(previous["plan"], record)
     try:
         rows, scenes = study_table.rows_from_folders(Path(out), record["engines"])
+        study_table.check_against_table(scenes, previous, table_path)
     except ReportError as error:
         # Runs of two versions of a dataset in one OUT (or a damaged sweep record): input this
         # table cannot hold, not a failure of the work (the runs are complete), so the one-line

@@ -167,8 +167,9 @@ def row_of(engine: str, run: Run) -> tuple[RunRow, list] | None:
 
 
 class RunsDisagree(ReportError):
-    """A run folder whose initial or test views differ from those of the other runs of its scene
-    (runs of two versions of a dataset): the table holds one set per scene."""
+    """A run folder whose initial or test views differ from those of the other runs of its scene,
+    or from those the previous table records for it (runs of two versions of a dataset): the table
+    holds one set per scene."""
 
 
 def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dict[str, dict]]:
@@ -204,6 +205,62 @@ def rows_from_folders(root: Path, engines: list[str]) -> tuple[list[RunRow], dic
                 scene["views"] = {k: v for k, v in views.items() if k != "half"}
             rows.append(row)
     return rows, {name: scene_record(scene) for name, scene in scenes.items()}
+
+
+def check_against_table(initial: dict[str, dict], previous: dict | None, path: Path) -> None:
+    """Refuse scene records (`initial`, as `rows_from_folders` gives them) that disagree with what
+    the table at `path` (`previous`) records for their scene: other test views, or other initial
+    views or half for a layout it has. A layout the table has not seen is new, and a field it
+    lacks (a table of an older nerfaug) is not compared.
+
+    Raises:
+        RunsDisagree: naming the scene, the table and its field.
+    """
+    for scene, record in initial.items():
+        recorded = (previous or {}).get("scenes", {}).get(scene)
+        found = _disagreement(record, recorded) if isinstance(recorded, dict) else None
+        if found is not None:
+            what, field = found
+            raise RunsDisagree(
+                f"scene {scene!r}: the runs' {what} from those the table records ({path}: scenes.{scene}.{field})"
+            )
+
+
+def _disagreement(record: dict, recorded: dict) -> tuple[str, str] | None:
+    """(what differs, the table's field) between a scene's record from its runs and the table's."""
+    if "test_views" in record and "test_views" in recorded and record["test_views"] != recorded["test_views"]:
+        return "test views differ", "test_views"
+    had = initial_poses_by_layout(recorded)
+    for layout, poses in sorted(initial_poses_by_layout(record).items()):
+        if layout in had and not _same_poses(poses, had[layout]):
+            return "initial views differ", "initial_poses" if layout == 0 else f"layouts.{layout}"
+    had_halves = halves_by_layout(recorded)
+    for layout, half in sorted(halves_by_layout(record).items()):
+        if layout in had_halves and not _same_half(half, had_halves[layout]):
+            return "initial half differs", f"halves.{layout}"
+    return None
+
+
+def _same_poses(a: list, b: list) -> bool:
+    """Poses equal up to the table's rounding: both sides are rounded to `POSE_DECIMALS`, so one
+    computed from a float a few bits apart can land a unit of the last decimal away; another
+    version of a dataset moves them far more."""
+    try:
+        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    except (TypeError, ValueError):  # not numbers, or ragged: not the runs' poses either
+        return False
+    return a.shape == b.shape and bool(np.allclose(a, b, rtol=0.0, atol=10.0 ** (1 - POSE_DECIMALS)))
+
+
+def _same_half(a: dict, b: dict) -> bool:
+    if not isinstance(a, dict) or not isinstance(b, dict) or a.keys() != b.keys():
+        return a == b
+    return all(
+        math.isclose(a[k], b[k], rel_tol=1e-9, abs_tol=1e-9)
+        if _number(a[k]) is not None and _number(b[k]) is not None
+        else a[k] == b[k]
+        for k in a
+    )
 
 
 def scene_record(found: dict) -> dict:
@@ -441,6 +498,7 @@ def engine_results(table: dict, engine: str) -> Results:
 __all__ = [
     "RunRow",
     "RunsDisagree",
+    "check_against_table",
     "engine_results",
     "homogeneous",
     "halves_by_layout",
