@@ -165,3 +165,20 @@ def test_the_user_facing_texts_state_what_the_committed_study_found_per_engine(w
     if "entropy was worse than uniform on every engine measured" in text:
         for engine, regime in study.regimes.items():
             assert regime["entropy"]["significant"] and not regime["entropy"]["better"], engine
+
+
+ROUNDS_PAGE = ROOT / "docs" / "results-rounds.md"
+ROUNDS_TABLE = ROOT / "docs" / "results" / "rounds-study-table.json"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not ROUNDS_TABLE.is_file(), reason="no committed table of the study of rounds yet")
+def test_the_committed_page_of_the_study_of_rounds_is_what_its_table_gives(tmp_path):
+    """Part-way or complete, the page and every verdict on it come from the committed table alone."""
+    from nerfaug.report.study_page import write_results_doc
+    from nerfaug.report.study_table import read_table
+
+    table = read_table(ROUNDS_TABLE)
+    page = write_results_doc(table, ROUNDS_TABLE.relative_to(ROOT), tmp_path / ROUNDS_PAGE.name, "rounds")
+    generated, _ = split_page(ROUNDS_PAGE.read_text())
+    assert without_provenance(page.read_text()).split() == without_provenance(generated).split()
