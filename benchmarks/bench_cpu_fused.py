@@ -20,10 +20,8 @@ load average; per arm the medians, and their ratios to the reference and to hash
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import resource
 import statistics
 import sys
@@ -32,6 +30,7 @@ from pathlib import Path
 
 import torch
 
+from machine_figures import at_end, at_start
 from nerfaug.data import load_dataset
 from nerfaug.nerf import sampler_cpu
 from nerfaug.nerf.config import NerfConfig
@@ -86,8 +85,7 @@ def main(argv=None) -> dict:
 
 
 def _run(args) -> dict:
-    started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    load_at_start = os.getloadavg()
+    start = at_start()
     test = load_dataset(args.data, "test")
     versions = {arm: select(arm) for arm in ARMS}
     measurements: dict[str, list[dict]] = {arm: [] for arm in ARMS}
@@ -133,17 +131,7 @@ def _run(args) -> dict:
             f"({a['step_speedup_over_reference']:.2f}x the reference, {a['step_speedup_over_hash_cpu_1']:.2f}x "
             f"hash-cpu-1), {a['view_ms_median']:.0f} ms a view ({a['view_speedup_over_reference']:.2f}x)"
         )
-    figures = {
-        "date": started,
-        "host": platform.node(),
-        "cpu": platform.processor() or platform.machine(),
-        "cores": os.cpu_count(),
-        "load_average_at_start": load_at_start,
-        "load_average_at_end": os.getloadavg(),
-        "torch": torch.__version__,
-        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
-        "arms": arms,
-    }
+    figures = {**at_end(start, vars(args)), "arms": arms}
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(figures, indent=2) + "\n")

@@ -19,10 +19,8 @@ ratio; each run's PSNR and engine version.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import resource
 import sys
 import time
@@ -30,6 +28,7 @@ from pathlib import Path
 
 import torch
 
+from machine_figures import at_end, at_start
 from nerfaug.experiment.config import STUDY_PRESETS
 from nerfaug.experiment.sweep import run_sweep
 from nerfaug.nerf.encoding import HashEncoding
@@ -96,8 +95,7 @@ def main(argv=None) -> int:
     base = STUDY_PRESETS.choose("study", scenes=(str(args.data),), methods=(args.method,), trials=1, engine=args.engine)
     if args.steps is not None:
         base = base.replace(steps=args.steps)
-    started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    load_at_start = os.getloadavg()
+    start = at_start()
     runs: dict[str, list[dict]] = {arm: [] for arm in ARMS}
     for seed in range(args.runs):
         for arm, kernel in ARMS.items():
@@ -128,18 +126,7 @@ def main(argv=None) -> int:
             "records": records,
         }
     ratio = arms["fused"]["runs_per_core_hour"] / arms["reference"]["runs_per_core_hour"]
-    figures = {
-        "date": started,
-        "host": platform.node(),
-        "cpu": platform.processor() or platform.machine(),
-        "cores": os.cpu_count(),
-        "load_average_at_start": load_at_start,
-        "load_average_at_end": os.getloadavg(),
-        "torch": torch.__version__,
-        "settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
-        "arms": arms,
-        "runs_per_core_hour_ratio": ratio,
-    }
+    figures = {**at_end(start, vars(args)), "arms": arms, "runs_per_core_hour_ratio": ratio}
     for arm, a in arms.items():
         print(
             f"{arm}: {a['runs']} runs, {a['cpu_s']:.0f} CPU s, {a['runs_per_core_hour']:.1f} runs per core-hour, "
