@@ -64,7 +64,11 @@ def test_study_applies_engine_settings_to_every_engine(monkeypatch, tmp_path):
     monkeypatch.setattr(study_work, "record_table", lambda *args: {"runs": []})
     monkeypatch.setattr(study_work.study_page, "write_study", lambda *args: [])
     main(["study", "--out", str(tmp_path / "study"), "--engines", "cpu", "nerfacto-cpu", "--preset", "tiny", *OVERRIDE])
-    assert seen[0].engines == ("cpu+hidden_dim=48+batch_size=64", "nerfacto-cpu+hidden_dim=48+batch_size=64")
+    # each cell named by the settings' nested names, as records name them
+    assert seen[0].engines == (
+        "cpu+field.hidden_dim=48+optimiser.batch_size=64",
+        "nerfacto-cpu+field.hidden_dim=48+optimiser.batch_size=64",
+    )
 
 
 def test_train_records_the_variant_trains_with_its_settings_and_logs(tmp_path):
@@ -145,3 +149,62 @@ def test_a_setting_is_refused_as_the_option_on_run_and_study(capsys, tmp_path):
             main([*command, "--engine.optimiser.batch-size", "0"])
         assert capsys.readouterr().err == "nerfaug: --engine.optimiser.batch-size 0: must be >= 1\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def study_engines(monkeypatch, tmp_path, engines: list[str]) -> tuple[str, ...]:
+    """The cells `nerfaug study --engines ENGINES` would run (nothing runs)."""
+    import nerfaug.cli.study_work as study_work
+
+    seen = []
+    monkeypatch.setattr(study_work, "run", lambda spec, *args, **kwargs: seen.append(spec) or {})
+    monkeypatch.setattr(study_work, "record_table", lambda *args: {"runs": []})
+    monkeypatch.setattr(study_work.study_page, "write_study", lambda *args: [])
+    main(["study", "--out", str(tmp_path / "study"), "--engines", *engines, "--preset", "tiny"])
+    return seen[0].engines
+
+
+def test_a_study_cell_is_named_by_its_settings_nested_names(monkeypatch, tmp_path):
+    # the value as the engine holds it (5e-3 is 0.005), the settings in the engine's order, hyphens read as on
+    # the command line; the same engine twice is one cell
+    cells = study_engines(
+        monkeypatch,
+        tmp_path,
+        ["cpu+optimiser.lr=5e-3+field.hidden-dim=48", "cpu+field.hidden_dim=48+optimiser.lr=0.005", "test"],
+    )
+    assert cells == ("cpu+field.hidden_dim=48+optimiser.lr=0.005", "test")
+
+
+def test_an_earlier_records_flat_cell_name_is_refused_with_the_nested_name_it_means(monkeypatch, tmp_path, capsys):
+    with pytest.raises(SystemExit) as refused:
+        study_engines(monkeypatch, tmp_path, ["cpu+lr=0.005"])
+    assert refused.value.code == 2
+    message = capsys.readouterr().err.strip()
+    assert "\n" not in message and "--engines cpu+lr=0.005" in message and "cpu+optimiser.lr=0.005" in message
+    assert not (tmp_path / "study").exists()
+
+
+def test_a_nested_name_that_is_no_setting_is_refused_naming_it(monkeypatch, tmp_path, capsys):
+    with pytest.raises(SystemExit) as refused:
+        study_engines(monkeypatch, tmp_path, ["cpu+optimiser.rate=0.005"])
+    assert refused.value.code == 2
+    message = capsys.readouterr().err.strip()
+    assert "\n" not in message and "'optimiser.rate' is no engine setting" in message
+
+
+@pytest.mark.parametrize(
+    "flat",
+    [
+        "nerfacto-cpu+background_mode=last_sample+hidden_dim=48",
+        "paper+hidden_dim=32+proposal_samples=64,32+random_background=true",
+        "nerfacto-cpu+encoding=kplanes+hidden_dim=48+sampler=occupancy+transmittance_eps=0.001",
+        "cpu",
+    ],
+)
+def test_a_cell_name_reads_back_as_its_engine_and_fingerprints_as_the_flat_name_did(flat):
+    from nerfaug.nerf.engine import Engine
+
+    engine = Engine.read(flat)
+    cell = engine.cell_name()
+    assert Engine.read(cell) == engine and Engine.read(cell).cell_name() == cell
+    assert all("." in part.partition("=")[0] for part in cell.split("+")[1:])
+    assert ExperimentConfig(engine=cell).fingerprinted() == ExperimentConfig(engine=flat).fingerprinted()

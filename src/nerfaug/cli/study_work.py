@@ -20,7 +20,7 @@ from nerfaug.cli.run_work import runs_to_do
 from nerfaug.device import device_kind
 from nerfaug.experiment import study as study_runs
 from nerfaug.experiment.layout import StudyFolder
-from nerfaug.experiment.study import default_engines, table_keys
+from nerfaug.experiment.study import cell_names, default_engines, table_keys
 from nerfaug.experiment.study_spec import StudySpec
 from nerfaug.experiment.sweep import default_workers
 from nerfaug.report import study_page, study_table
@@ -48,6 +48,8 @@ def study(
     table and the page (and `results_doc`); `engine_settings` (flat name -> value) change every
     engine the study runs; `hypotheses` names the plan whose hypotheses the pages judge;
     `one_shot_table` the study of rounds' one-shot arm (Q2), read and checked before any run."""
+    if spec.engines:  # each cell by its one name, checked before anything runs
+        spec = replace(spec, engines=tuple(cell_names(spec.engines)))
     if engine_settings:
         spec = with_engine_settings(spec, engine_settings)
     arm = None
@@ -142,10 +144,10 @@ def check_rounds_table(table: dict, path: Path, hypotheses: str, arm: OneShotArm
 
 def with_engine_settings(spec: StudySpec, settings: dict) -> StudySpec:
     """`spec` whose engines (--engines, or the default ones for its device) each have `settings`
-    changed, checked once here; a study names each engine's cell and folder by its flat name
-    (`Engine.flat_name`), as its tables always have."""
+    changed, checked once here; a study names each engine's cell and folder by the settings'
+    nested names (`Engine.cell_name`: "nerfacto-cpu+optimiser.lr=0.005")."""
     engines = spec.engines or default_engines(device_kind(spec.device))[0]
-    return replace(spec, engines=tuple(engine_with(engine, settings).flat_name() for engine in engines))
+    return replace(spec, engines=tuple(engine_with(engine, settings).cell_name() for engine in engines))
 
 
 def method_records() -> dict[str, dict]:

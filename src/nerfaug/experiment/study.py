@@ -37,7 +37,7 @@ from nerfaug.experiment.study_spec import PROCEDURAL_SCENES, StudySpec
 from nerfaug.experiment.sweep import check_config, run_sweep, scene_name, sweep_record
 from nerfaug.jsonio import read_json
 from nerfaug.nerf.config import PRESETS
-from nerfaug.nerf.engine import Engine
+from nerfaug.nerf.engine import Engine, is_flat_variant
 from nerfaug.nerf.registry import check_names
 from nerfaug.schema import RequestError, validated
 from nerfaug.selection import METHODS
@@ -430,12 +430,28 @@ def _engines(engines, device_type: str) -> tuple[list[str], dict[str, str]]:
     """The engines a study runs (`engines`, or by default those for `device_type`), and those left out with why."""
     if engines is None:
         return default_engines(device_type)
+    return cell_names(engines), {}
+
+
+def cell_names(engines) -> list[str]:
+    """The cells `--engines` names, each by `Engine.cell_name` (the settings' nested names, values
+    as the engine holds them), once each.
+
+    Raises:
+        SystemExit: one line naming an engine that is refused, or given by an earlier record's flat
+            names (with the cell name it means).
+    """
+    cells = []
     for engine in engines:
         try:
-            check_names(Engine.read(engine).config)
+            read = Engine.read(engine)
+            check_names(read.config)
         except ValueError as error:
             raise SystemExit(f"--engines: {error}") from None
-    return list(dict.fromkeys(engines)), {}
+        if is_flat_variant(engine):  # an earlier record's form: read from tables, not taken as a new cell
+            raise SystemExit(f"--engines {engine}: give each setting by its nested name: {read.cell_name()}")
+        cells.append(read.cell_name())
+    return list(dict.fromkeys(cells))
 
 
 __all__ = [

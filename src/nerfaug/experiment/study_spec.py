@@ -67,7 +67,8 @@ class StudySpec(Settings):
 
     Args:
         out: the study folder.
-        engines: engine presets, or variants written BASE+FIELD=VALUE.
+        engines: engine presets, or variants written PRESET+GROUP.SETTING=VALUE (e.g.
+            nerfacto-cpu+optimiser.lr=0.005), the name the study gives the cell.
         scenes: built-in scene names or dataset folders.
         methods: selection methods (`nerfaug methods`).
         trials: trials per (scene, method, engine).

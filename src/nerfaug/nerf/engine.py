@@ -8,8 +8,9 @@ setting the engine does not read (a hash grid's setting on a K-planes engine) is
 one `RequestError` naming the setting by its path; past that the `Engine` is handed on as it is
 and its `config` is what trains.
 
-The flat form of earlier records ("nerfacto-cpu+hidden_dim=48", `nerf.config.parse_variant`) is
-read here and nowhere else. Light: no torch.
+A study names an engine's cell by the same nested names, "nerfacto-cpu+field.hidden_dim=48"
+(`Engine.cell_name`). The flat form of earlier records ("nerfacto-cpu+hidden_dim=48",
+`nerf.config.parse_variant`) is read here and nowhere else. Light: no torch.
 """
 
 from __future__ import annotations
@@ -65,7 +66,7 @@ class Engine:
         if isinstance(value, RefusedEngine):
             raise ValueError(f"engine {value.given!r}: {value.why}")
         if isinstance(value, str):
-            base, flat = parse_variant(value)
+            base, flat = parse_variant(flat_variant(value))
             return cls.of(base, _nested({FLAT_NAMES[name]: v for name, v in flat.items()}))
         if isinstance(value, dict):
             rest = dict(value)
@@ -107,10 +108,16 @@ class Engine:
         given = [f"--engine.{'.'.join(path).replace('_', '-')} {_words(v)}" for path, v in self.changes().items()]
         return " ".join([f"--engine {self.preset}", *given])
 
+    def cell_name(self) -> str:
+        """The name a study gives this engine's cell, table rows and folder: the preset, then each
+        setting changed by its nested name, "nerfacto-cpu+field.hidden_dim=48" (`read` reads it)."""
+        parts = [f"{'.'.join(path)}={_text(v)}" for path, v in _in_flat_order(self.changes())]
+        return VARIANT_SEPARATOR.join([self.preset, *parts])
+
     def flat_name(self) -> str:
         """The name earlier records gave this engine ("nerfacto-cpu+hidden_dim=48"): what a
         fingerprint hashes as "engine" (`experiment.fingerprints`), so that results recorded under
-        it keep theirs, and what a study names its cell."""
+        it keep theirs."""
         flat = {path: name for name, path in FLAT_NAMES.items()}
         parts = [f"{flat[path]}={_text(v)}" for path, v in _in_flat_order(self.changes())]
         return VARIANT_SEPARATOR.join([self.preset, *parts])
@@ -160,6 +167,35 @@ ENGINE_OPTION = PrimitiveConstructorSpec(
 )
 """How tyro reads `--engine NAME` as an `Engine` (its settings are the --engine.GROUP.SETTING
 options, read apart: `cli.engine_options`)."""
+
+
+def flat_variant(name: str) -> str:
+    """A cell's name with each setting by its flat name, as `parse_variant` reads it:
+    "nerfacto-cpu+field.hidden_dim=48" -> "nerfacto-cpu+hidden_dim=48" (a flat part, of an earlier
+    record, as it is; "-" in a nested name read as "_", as on the command line).
+
+    Raises:
+        ValueError: a nested name that is no setting's, naming the cell and the part.
+    """
+    base, *parts = name.split(VARIANT_SEPARATOR)
+    by_path = {path: flat for flat, path in FLAT_NAMES.items()}
+    written = []
+    for part in parts:
+        key, equals, text = part.partition("=")
+        if "." in key:
+            path = tuple(step.replace("-", "_") for step in key.split("."))
+            if path not in by_path:
+                known = ", ".join(".".join(p) for p in FLAT_NAMES.values())
+                raise ValueError(f"engine {name!r}: {key!r} is no engine setting (one of {known})")
+            key = by_path[path]
+        written.append(f"{key}{equals}{text}")
+    return VARIANT_SEPARATOR.join([base, *written])
+
+
+def is_flat_variant(name: str) -> bool:
+    """Whether the cell name `name` gives a setting by its flat name ("nerfacto-cpu+hidden_dim=48"),
+    as records written before nesting did."""
+    return any("." not in part.partition("=")[0] for part in name.split(VARIANT_SEPARATOR)[1:])
 
 
 def _leaves(settings: dict, path: tuple[str, ...] = ()) -> dict[tuple[str, ...], Any]:
