@@ -180,3 +180,49 @@ def test_halves_are_compared_per_layout_and_fields_an_older_table_lacks_are_not(
     field = r"\(t\.json: scenes\.mic\.halves\.0\)$"
     with pytest.raises(RunsDisagree, match=r"^scene 'mic': the runs' initial half differs from those .*" + field):
         check_against_table(runs, turned, Path("t.json"))
+
+
+def study_again(study_out: Path, out: Path, table: Path) -> list[str]:
+    """`nerfaug study` with the toy study's settings, into `out`, resuming from `table`."""
+    dataset = json.loads((study_out / "study-table.json").read_text())["plan"]["datasets"]["scene"]
+    return (
+        ["study", "--out", str(out), "--table", str(table), "--preset", "tiny", "--engines", "test"]
+        + ["--scenes", dataset, "--methods", "uniform", "--trials", "2", "--resolution", str(SIZE)]
+        + ["--steps", "30", "--workers", "1", "--device", "cpu"]
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("what", ["test views", "initial views"])
+def test_a_study_whose_scene_differs_from_its_tables_is_refused_before_any_run(study_out, what, tmp_path, capsys):
+    """The dataset as it is on disk would give the runs other views than the table records for the
+    scene: one line, exit 2, before anything runs or is written."""
+    from nerfaug.cli import main
+
+    path = tmp_path / "tables" / "study-table.json"
+    path.parent.mkdir()
+    path.write_text(json.dumps(tamper_table(json.loads((study_out / "study-table.json").read_text()), what)))
+    out = tmp_path / "again"
+    before = files(tmp_path)
+    with pytest.raises(SystemExit) as done:
+        main(study_again(study_out, out, path))
+    err = capsys.readouterr().err
+    field = "test_views" if what == "test views" else "initial_poses"
+    assert done.value.code == 2, err
+    assert err.startswith(
+        f"nerfaug: scene 'scene': the runs' {what} differ from those the table records ({path}: scenes.scene.{field}), "
+        "before any run"
+    ), err
+    assert "another --out" in err and err.count("\n") == 1 and "internal error" not in err, err
+    assert files(tmp_path) == before and not out.exists()
+
+
+def test_a_study_resumed_from_its_own_table_is_not_refused(study_out, tmp_path, capsys):
+    """The same dataset and settings: every view agrees with the table, and every run it records is kept."""
+    from nerfaug.cli import main
+
+    path = tmp_path / "study-table.json"
+    shutil.copy(study_out / "study-table.json", path)
+    main(study_again(study_out, tmp_path / "again", path))
+    err = capsys.readouterr().err
+    assert "before any run" not in err, err
+    assert json.loads(path.read_text())["runs"] == json.loads((study_out / "study-table.json").read_text())["runs"]

@@ -65,7 +65,7 @@ def study(
     # names a file of the user's choosing, anywhere.
     table_path = Path(spec.table) if spec.table is not None else runfiles.checked(out, StudyFolder(out).table.name)
     previous = read_study_table(table_path, "--table " if spec.table is not None else "")
-    failed = {} if summary_only else run(spec, selection, previous, workers, force, budget_s)
+    failed = {} if summary_only else run(spec, selection, previous, workers, force, budget_s, table_path)
     recorded = record_table(out, table_path, previous)
     print(f"study table: {table_path} ({len(recorded['runs'])} runs)")
     if arm is not None:
@@ -166,17 +166,66 @@ def run(
     workers: int | None,
     force: bool,
     budget_s: float | None,
+    table_path: Path | None = None,
 ) -> dict[str, str]:
     """Plan the study and run its sweeps (runs `previous`, the table, records are not run
-    again); the runs that failed, "engine: run" -> why."""
+    again); the runs that failed, "engine: run" -> why. Refused in one line before any run
+    (SystemExit) where a scene's runs would start from or be scored on other views than the
+    table at `table_path` records for it."""
     plan = study_runs.make_plan(spec, spec.command() + selection.flags())
     plan.config = plan.config.replace(selection=selection)
+    if previous is not None:
+        check_scenes_before_running(plan, previous, table_path)
     for engine, why in plan.left_out.items():
         print(f"study: engine {engine} left out: {why}", file=sys.stderr)
     workers = workers if workers is not None else default_workers(plan.config)
     print(study_size_line(plan, workers, previous), flush=True)
     outcomes = study_runs.run_study(plan, workers=workers, force=force, table=previous, budget_s=budget_s)
     return {f"{engine}: {key}": why for engine, o in outcomes.items() for key, why in o["failed"].items()}
+
+
+def check_scenes_before_running(plan, previous: dict, table_path: Path | None) -> None:
+    """Refuse a study whose scenes' datasets, as they are on disk now, would give runs other initial
+    views (per layout), another initial half or other test views than the table records for the
+    scene: runs of two versions of a dataset, which its table cannot hold (`record_table` refuses
+    them after running too, for a dataset that changes while the study runs). Scenes whose
+    dataset is not on disk yet (a built-in scene this sitting renders) are checked after their
+    runs. Reads cameras and names only, no image.
+
+    Raises:
+        SystemExit: one line naming the scene, the table and its field.
+    """
+    from nerfaug.experiment.protocol import load_scene_data, scene_dataset_dir
+
+    config, study = plan.config, StudyFolder(Path(plan.out))
+    expected = {}
+    for name in plan.scenes:
+        if name not in previous.get("scenes", {}):
+            continue
+        scene = plan.datasets[name]
+        folders = [scene_dataset_dir(study.engine(engine).root, scene, config) for engine in plan.engines]
+        found = next((folder for folder in folders if (folder / "transforms_train.json").is_file()), None)
+        folder = found or folders[0]
+        layouts, halves, test = {}, {}, None
+        try:
+            for layout in range(config.layouts):
+                data = load_scene_data(folder, config, layout=layout, lazy=True)
+                layouts[str(layout)] = study_table.rounded_poses(data.initial.cameras.camera_to_world)
+                if "half" in data.record:
+                    halves[str(layout)] = data.record["half"]
+                test = data.names()["test"]
+        except (OSError, ValueError):  # not on disk yet (rendered by this sitting), or refused when its run loads it
+            continue
+        expected[name] = study_table.scene_record(
+            {"layouts": layouts, "test_views": test} | ({"halves": halves} if halves else {})
+        )
+    try:
+        study_table.check_against_table(expected, previous, table_path or Path("the table"))
+    except study_table.RunsDisagree as error:
+        raise SystemExit(
+            f"{error}, before any run: runs from other views (another version of the dataset, or other --layouts, "
+            "--n-initial or --n-test) belong to a study of their own (another --out, another --table)"
+        ) from None
 
 
 def study_size_line(plan, workers: int, table: dict | None = None) -> str:

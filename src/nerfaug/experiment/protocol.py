@@ -172,19 +172,22 @@ def is_captured_set(folder: Path) -> bool:
 
 
 def load_scene_data(
-    folder: Path, config: ExperimentConfig, cache_dir: Path | None = None, layout: int = 0
+    folder: Path, config: ExperimentConfig, cache_dir: Path | None = None, layout: int = 0, lazy: bool = False
 ) -> SceneData:
     """Initial, pool (candidates) and test views of a dataset folder at the configured size, for
     initial layout `layout` (of `config.layouts`; `nerfaug.experiment.scene_views`).
 
     With `cache_dir`, each split's downscaled images are read from (or written to) a cache there
     (`nerfaug.scenes.cache`), keyed by the digest of the folder's files: the same images, bit for
-    bit, without decoding and shrinking every image in every run.
+    bit, without decoding and shrinking every image in every run. With `lazy`, no image is read
+    (the same views, cameras and names: what a run will start from, known before it runs).
     """
     folder = Path(folder)
     probe = load_dataset(folder, "train", lazy=True)
     downscale = max(1, probe.cameras.width // config.resolution)
-    if cache_dir is None:
+    if lazy:
+        load = functools.partial(load_dataset, folder, downscale=downscale, lazy=True)
+    elif cache_dir is None:
         load = functools.partial(load_dataset, folder, downscale=downscale)
     else:
         load = functools.partial(
