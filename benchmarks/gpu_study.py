@@ -275,9 +275,9 @@ def _one_config(sweep, todo: list) -> list:
 def _memory_batch(args) -> int:
     """Runs a trial batch may hold on this GPU, by its free memory (`auto_batch_size`)."""
     from nerfaug.nerf.batch_size import auto_batch_size
-    from nerfaug.nerf.config import NerfConfig
+    from nerfaug.nerf.engine import Engine
 
-    size, text = auto_batch_size(NerfConfig.preset(args.engine), args.device, 10**6)
+    size, text = auto_batch_size(Engine.read(args.engine).config, args.device, 10**6)
     print(text, flush=True)
     return size
 
@@ -493,6 +493,9 @@ def main(argv: list[str] | None = None):
     if args.mode == "pack":
         return pack(args.folder, args.out, args.scene, args.max_mib)
     if args.mode == "run":
+        from nerfaug.nerf.engine import Engine
+
+        args.engine = Engine.read(args.engine).cell_name()  # the study's cell and table name it so
         return run(args)
     if args.mode == "toy":
         return toy(args.out, args.packs)

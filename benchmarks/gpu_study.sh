@@ -33,7 +33,7 @@ if [ "$DEVICE" = cpu ]; then
     # The toy scene (3 initial, 12 candidate, 4 test views of 24 px) and an engine with the paper
     # engine's structure (hash grid, proposal sampler) that trains in trial batches, small.
     ARGS=(--device cpu --toy "$WORK/toy/sphere" --packs "$WORK/packs" --table "$WORK/no-table.json"
-          --engine "nerfacto-cpu+batch_size=64+num_samples=8+proposal_samples=16,8" --preset tiny
+          --engine "nerfacto-cpu+sampler.num_samples=8+sampler.proposal.samples=16,8+optimiser.batch_size=64" --preset tiny
           --resolution 24 --steps 30 --threads 1 --margin-s 5 --probe-steps 8)
     KEEP=10
 else
