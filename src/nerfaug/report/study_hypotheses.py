@@ -302,7 +302,7 @@ KINDS = ("auto", "procedural", "real", "gpu", "rounds", "none")
 
 
 def _base(engine: str) -> str:
-    return engine.split("+")[0]  # a variant "paper+batch_size=64" is of its preset's study
+    return engine.split("+")[0]  # a variant "paper+optimiser.batch_size=64" is of its preset's study
 
 
 def plan_kind(study: Study, plan: str = "auto") -> str:
