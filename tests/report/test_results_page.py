@@ -191,3 +191,36 @@ def test_the_committed_page_of_the_study_of_rounds_is_what_its_table_gives(tmp_p
     )
     generated, _ = split_page(ROUNDS_PAGE.read_text())
     assert without_provenance(page.read_text()).split() == without_provenance(generated).split()
+
+
+def rounds_findings() -> str:
+    """The README's paragraph on what the study of rounds found (or that it is under way), in one line."""
+    readme = (ROOT / "README.md").read_text()
+    openings = ("That study is under way", "What the study of rounds found")
+    (paragraph,) = [p for p in readme.split("\n\n") if p.startswith(openings)]
+    return " ".join(paragraph.split())
+
+
+@pytest.mark.skipif(not ROUNDS_TABLE.is_file(), reason="no committed table of the study of rounds yet")
+def test_the_readme_states_the_verdicts_of_the_study_of_rounds_as_computed_and_no_advice_before():
+    """Each of Q1-Q4 the committed tables decide is stated in the README as the page computes it
+    ("Q1, not supported"); one they do not decide yet (partial, not judged) is claimed nowhere, and
+    while Q1 is undecided the README gives no advice for the protocol."""
+    from nerfaug.cli.study_work import one_shot_arm
+    from nerfaug.report.rounds_verdicts import rounds_rows
+    from nerfaug.report.study import collect_study
+    from nerfaug.report.study_table import read_table
+
+    study = collect_study(read_table(ROUNDS_TABLE))
+    arm = one_shot_arm(ONE_SHOT_TABLE) if ONE_SHOT_TABLE.is_file() else None
+    text = rounds_findings()
+    for engine in study.engines:
+        verdicts = {row[0]: row[3].strip("*") for row in rounds_rows(study, engine, arm)}
+        decided = {q: v for q, v in verdicts.items() if not v.startswith(("partial", "not judged"))}
+        if "Q1" not in decided:
+            assert "gives no advice for this protocol yet" in text, verdicts
+        for q in verdicts:
+            if q in decided:
+                assert f"{q}, {decided[q]}" in text, (q, decided[q])
+            else:
+                assert not re.search(rf"\b{q}, (holds|not supported|contradicted|not applicable)", text), q
