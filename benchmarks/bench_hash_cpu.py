@@ -73,6 +73,17 @@ def one_run(config, arm: str, root: Path) -> dict:
     }
 
 
+def warm_up() -> None:
+    """What a process pays once, not each run: importing torchmetrics (SSIM) and loading LPIPS;
+    done before the first arm so that no arm's CPU seconds hold it."""
+    from nerfaug.evaluation import ssim
+    from nerfaug.experiment.protocol import cached_lpips
+
+    image = torch.rand(32, 32, 3, generator=torch.Generator().manual_seed(0))
+    ssim(image, image)
+    cached_lpips()
+
+
 def step_seconds(data: Path, engine: str, arm: str, steps: int = 100, after: int = 300) -> float:
     """CPU seconds a training step (one thread) of `engine` on all of `data`'s training views on
     engine `arm`: steps `after` .. `after + steps`, past the proposal networks' warm-up."""
@@ -108,6 +119,7 @@ def main(argv=None) -> int:
     if args.steps is not None:
         base = base.replace(steps=args.steps)
     start = at_start()
+    warm_up()
     runs: dict[str, list[dict]] = {arm: [] for arm in args.arms}
     for seed in range(args.runs):
         for arm in args.arms:
