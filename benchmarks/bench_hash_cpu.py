@@ -106,6 +106,7 @@ def main(argv=None) -> int:
     parser.add_argument("--engine", default="nerfacto-cpu")
     parser.add_argument("--method", default="uniform")
     parser.add_argument("--steps", type=int, default=None, help="override the protocol's 2000 steps (smoke runs)")
+    parser.add_argument("--resolution", type=int, default=None, help="override the protocol's 100 px (toy data)")
     parser.add_argument("--step-repeats", type=int, default=2, help="timings of 100 training steps per arm")
     parser.add_argument("--out", type=Path, required=True, help="a folder for every run")
     parser.add_argument("--arms", nargs="+", choices=list(ARMS), default=list(ARMS), help="the engines compared")
@@ -118,6 +119,8 @@ def main(argv=None) -> int:
     base = STUDY_PRESETS.choose("study", scenes=(str(args.data),), methods=(args.method,), trials=1, engine=args.engine)
     if args.steps is not None:
         base = base.replace(steps=args.steps)
+    if args.resolution is not None:
+        base = base.replace(resolution=args.resolution)
     start = at_start()
     warm_up()
     runs: dict[str, list[dict]] = {arm: [] for arm in args.arms}
@@ -157,8 +160,8 @@ def main(argv=None) -> int:
         print(
             f"{arm}: {a['runs']} runs, {a['cpu_s']:.0f} CPU s, {a['runs_per_core_hour']:.1f} runs per core-hour "
             f"({a['runs_per_core_hour_ratio']:.2f}x the reference), "
-            f"{min(a['step_ms']):.1f} ms a step (CPU), "
-            f"{a['training_s']:.1f} s training, {a['evaluation_s']:.1f} s evaluation"
+            + (f"{min(a['step_ms']):.1f} ms a step (CPU), " if a["step_ms"] else "")
+            + f"{a['training_s']:.1f} s training, {a['evaluation_s']:.1f} s evaluation"
         )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
