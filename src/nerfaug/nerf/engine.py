@@ -34,6 +34,8 @@ from nerfaug.registry import lookup
 from nerfaug.schema import RequestError
 
 PRESET_KEY = "preset"
+_FLAT_BY_PATH = {path: flat for flat, path in FLAT_NAMES.items()}
+"""Each setting's nested name (its path) -> the flat name earlier records gave it."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,15 +113,18 @@ class Engine:
     def cell_name(self) -> str:
         """The name a study gives this engine's cell, table rows and folder: the preset, then each
         setting changed by its nested name, "nerfacto-cpu+field.hidden_dim=48" (`read` reads it)."""
-        parts = [f"{'.'.join(path)}={_text(v)}" for path, v in _in_flat_order(self.changes())]
-        return VARIANT_SEPARATOR.join([self.preset, *parts])
+        return self._variant_name(".".join)
 
     def flat_name(self) -> str:
         """The name earlier records gave this engine ("nerfacto-cpu+hidden_dim=48"): what a
         fingerprint hashes as "engine" (`experiment.fingerprints`), so that results recorded under
         it keep theirs."""
-        flat = {path: name for name, path in FLAT_NAMES.items()}
-        parts = [f"{flat[path]}={_text(v)}" for path, v in _in_flat_order(self.changes())]
+        return self._variant_name(_FLAT_BY_PATH.__getitem__)
+
+    def _variant_name(self, setting_name) -> str:
+        """The preset, then each changed setting as "NAME=VALUE" in the settings' order, NAME being
+        `setting_name(path)`."""
+        parts = [f"{setting_name(path)}={_text(v)}" for path, v in _in_flat_order(self.changes())]
         return VARIANT_SEPARATOR.join([self.preset, *parts])
 
     def __eq__(self, other: object) -> bool:
@@ -178,16 +183,15 @@ def flat_variant(name: str) -> str:
         ValueError: a nested name that is no setting's, naming the cell and the part.
     """
     base, *parts = name.split(VARIANT_SEPARATOR)
-    by_path = {path: flat for flat, path in FLAT_NAMES.items()}
     written = []
     for part in parts:
         key, equals, text = part.partition("=")
         if "." in key:
             path = tuple(step.replace("-", "_") for step in key.split("."))
-            if path not in by_path:
+            if path not in _FLAT_BY_PATH:
                 known = ", ".join(".".join(p) for p in FLAT_NAMES.values())
                 raise ValueError(f"engine {name!r}: {key!r} is no engine setting (one of {known})")
-            key = by_path[path]
+            key = _FLAT_BY_PATH[path]
         written.append(f"{key}{equals}{text}")
     return VARIANT_SEPARATOR.join([base, *written])
 
