@@ -30,15 +30,12 @@ from pathlib import Path
 
 import torch
 
+import cpu_engines
+from cpu_engines import ARMS
 from machine_figures import at_end, at_start
 from nerfaug.data import load_dataset
-from nerfaug.nerf import sampler_cpu
 from nerfaug.nerf.config import NerfConfig
-from nerfaug.nerf.encoding import HashEncoding
 from nerfaug.nerf.trainer import Trainer
-
-ARMS = {"reference": ("torch", "hash"), "hash-cpu-1": ("auto", "hash"), "cpu-fused-2": ("auto", "fused")}
-"""Each arm's hash kernel (`HashEncoding.default_kernel`) and `sampler_cpu.MODE`."""
 
 
 def _cpu_seconds() -> float:
@@ -50,7 +47,7 @@ def select(arm: str) -> str | None:
     """Make `arm` this process's engine; returns the engine version a study run would record."""
     from nerfaug.experiment.config import STUDY_PRESETS
 
-    HashEncoding.default_kernel, sampler_cpu.MODE = ARMS[arm]
+    cpu_engines.select(arm)
     return STUDY_PRESETS.choose("study", engine="nerfacto-cpu").engine_version()
 
 
@@ -75,12 +72,12 @@ def main(argv=None) -> dict:
     parser.add_argument("--block-steps", type=int, default=10, help="timed training steps an arm's block")
     parser.add_argument("--json", type=Path, help="where to write the figures")
     args = parser.parse_args(argv)
-    chosen, threads = (HashEncoding.default_kernel, sampler_cpu.MODE), torch.get_num_threads()
+    threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _run(args)
-    finally:  # the process's own choice back (a test calls main)
-        HashEncoding.default_kernel, sampler_cpu.MODE = chosen
+        with cpu_engines.choice_kept():
+            return _run(args)
+    finally:
         torch.set_num_threads(threads)
 
 

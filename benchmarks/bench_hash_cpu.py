@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import resource
 import sys
 import time
@@ -29,22 +28,10 @@ from pathlib import Path
 
 import torch
 
+from cpu_engines import ARMS, choice_kept, select
 from machine_figures import at_end, at_start
 from nerfaug.experiment.config import STUDY_PRESETS
 from nerfaug.experiment.sweep import run_sweep
-from nerfaug.nerf import sampler_cpu
-from nerfaug.nerf.encoding import HashEncoding
-
-ARMS = {"reference": ("torch", "hash"), "hash-cpu-1": ("auto", "hash"), "cpu-fused-2": ("auto", "fused")}
-"""Each arm's hash-encoding kernel (`HashEncoding.default_kernel`, as NERFAUG_HASH_KERNEL sets it)
-and `sampler_cpu.MODE` (as NERFAUG_CPU_KERNELS sets it)."""
-
-
-def select(arm: str) -> None:
-    """Make `arm` this process's engine, and any process a run starts."""
-    kernel, mode = ARMS[arm]
-    HashEncoding.default_kernel, sampler_cpu.MODE = kernel, mode
-    os.environ["NERFAUG_HASH_KERNEL"], os.environ["NERFAUG_CPU_KERNELS"] = kernel, mode
 
 
 def _cpu_seconds() -> float:
@@ -114,8 +101,16 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if "reference" not in args.arms:
         parser.error("--arms must include reference: every ratio is to the reference's runs per core-hour")
+    threads = torch.get_num_threads()
     torch.set_num_threads(1)
+    try:
+        with choice_kept():  # the process's own engine and environment back (a test calls main)
+            return _run(args)
+    finally:
+        torch.set_num_threads(threads)
 
+
+def _run(args) -> int:
     base = STUDY_PRESETS.choose("study", scenes=(str(args.data),), methods=(args.method,), trials=1, engine=args.engine)
     if args.steps is not None:
         base = base.replace(steps=args.steps)
