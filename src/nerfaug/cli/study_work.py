@@ -188,24 +188,21 @@ def check_scenes_before_running(plan, previous: dict, table_path: Path | None) -
     """Refuse a study whose scenes' datasets, as they are on disk now, would give runs other initial
     views (per layout), another initial half or other test views than the table records for the
     scene: runs of two versions of a dataset, which its table cannot hold (`record_table` refuses
-    them after running too, for a dataset that changes while the study runs). Scenes whose
-    dataset is not on disk yet (a built-in scene this sitting renders) are checked after their
-    runs. Reads cameras and names only, no image.
+    them after running too, for a dataset that changes while the study runs). Every dataset is
+    on disk by now (`make_plan` prepares them); one that does not load is left to its runs to
+    refuse. Reads cameras and names only, no image.
 
     Raises:
         SystemExit: one line naming the scene, the table and its field.
     """
-    from nerfaug.experiment.protocol import load_scene_data, scene_dataset_dir
+    from nerfaug.experiment.protocol import load_scene_data
 
-    config, study = plan.config, StudyFolder(Path(plan.out))
+    config = plan.config
     expected = {}
     for name in plan.scenes:
         if name not in previous.get("scenes", {}):
             continue
-        scene = plan.datasets[name]
-        folders = [scene_dataset_dir(study.engine(engine).root, scene, config) for engine in plan.engines]
-        found = next((folder for folder in folders if (folder / "transforms_train.json").is_file()), None)
-        folder = found or folders[0]
+        folder = Path(plan.datasets[name])  # prepared by `make_plan`: a user's folder, or a rendered built-in
         layouts, halves, test = {}, {}, None
         try:
             for layout in range(config.layouts):
@@ -214,7 +211,7 @@ def check_scenes_before_running(plan, previous: dict, table_path: Path | None) -
                 if "half" in data.record:
                     halves[str(layout)] = data.record["half"]
                 test = data.names()["test"]
-        except (OSError, ValueError):  # not on disk yet (rendered by this sitting), or refused when its run loads it
+        except (OSError, ValueError):  # refused, in its own words, when its runs load it
             continue
         expected[name] = study_table.scene_record(
             {"layouts": layouts, "test_views": test} | ({"halves": halves} if halves else {})
