@@ -1,13 +1,13 @@
 """CPU seconds of a `nerfacto-cpu` training step and of rendering test views on the three CPU
 engine versions, side by side in one sitting: the reference (hash grids on the PyTorch path,
 `NERFAUG_HASH_KERNEL=torch`), `hash-cpu-1` (the fused hash loop, today's default) and
-`cpu-fused-2` (the hash loop and the proposal sampler's C loops, `NERFAUG_CPU_KERNELS=fused`).
+`cpu-fused-3` (the hash loop, the proposal sampler's and the MLPs' C loops, `NERFAUG_CPU_KERNELS=fused`).
 
 One trainer is trained on the reference engine to step `--after` (past the proposal networks'
 warm-up) and checkpointed; each arm restores that checkpoint into its own trainer (its encodings
 built with its kernel), so the arms start from the same model state. The arms then alternate in
 short blocks (`--block-steps` training steps and one rendered test view each: reference,
-hash-cpu-1, cpu-fused-2, reference, ...) `--blocks` times, so they meet the same load on a shared
+hash-cpu-1, cpu-fused-3, reference, ...) `--blocks` times, so they meet the same load on a shared
 machine. CPU seconds by `getrusage` of this process (one torch thread): other processes slow a
 block only through shared caches and memory, which the alternation spreads over the arms.
 

@@ -1,7 +1,7 @@
 """The study protocol's runs per core-hour on the CPU for each CPU engine version, side by side in
 one sitting: the reference engine (the hash grids on the PyTorch path), `hash-cpu-1` (the hash grids
-in one C loop, `nerfaug.nerf.hash_cpu`) and `cpu-fused-2` (also the proposal sampler's C loops,
-`nerfaug.nerf.sampler_cpu`); `--arms` chooses which.
+in one C loop, `nerfaug.nerf.hash_cpu`) and `cpu-fused-3` (also the proposal sampler's C loops,
+`nerfaug.nerf.sampler_cpu`, and the MLPs', `nerfaug.nerf.mlp_cpu`); `--arms` chooses which.
 
 Each run is one run of the study protocol (`STUDY_PRESETS["study"]`: 100 px, 6 initial views, 6
 added at step 200 by `--method`, 2000 steps, 50 test views, LPIPS) with `--engine`, alone in this
@@ -61,14 +61,16 @@ def one_run(config, arm: str, root: Path) -> dict:
 
 
 def warm_up() -> None:
-    """What a process pays once, not each run: importing torchmetrics (SSIM) and loading LPIPS;
-    done before the first arm so that no arm's CPU seconds hold it."""
+    """What a process pays once, not each run: importing torchmetrics (SSIM), loading LPIPS and
+    the first optimiser (`torch.optim` imports torch._dynamo then, about 2.6 s); done before the
+    first arm so that no arm's CPU seconds hold it."""
     from nerfaug.evaluation import ssim
     from nerfaug.experiment.protocol import cached_lpips
 
     image = torch.rand(32, 32, 3, generator=torch.Generator().manual_seed(0))
     ssim(image, image)
     cached_lpips()
+    torch.optim.Adam([torch.zeros(1, requires_grad=True)])
 
 
 def step_seconds(data: Path, engine: str, arm: str, steps: int = 100, after: int = 300) -> float:

@@ -10,7 +10,7 @@ import os
 from nerfaug.nerf import sampler_cpu
 from nerfaug.nerf.encoding import HashEncoding
 
-ARMS = {"reference": ("torch", "hash"), "hash-cpu-1": ("auto", "hash"), "cpu-fused-2": ("auto", "fused")}
+ARMS = {"reference": ("torch", "hash"), "hash-cpu-1": ("auto", "hash"), "cpu-fused-3": ("auto", "fused")}
 """Each engine version's (hash kernel, sampler loops); the reference records no version."""
 
 _VARIABLES = ("NERFAUG_HASH_KERNEL", "NERFAUG_CPU_KERNELS")

@@ -30,7 +30,7 @@ def test_the_three_arms_alternate_on_their_own_engine_versions(bench, dataset, t
     )
     assert (HashEncoding.default_kernel, sampler_cpu.MODE) == chosen
     arms = figures["arms"]
-    assert [a["engine_version"] for a in arms.values()] == [None, "hash-cpu-1", "cpu-fused-2"]
+    assert [a["engine_version"] for a in arms.values()] == [None, "hash-cpu-1", "cpu-fused-3"]
     for arm in arms.values():
         assert len(arm["measurements"]) == 2
         assert all(m["step_ms"] > 0 and m["view_ms"] > 0 for m in arm["measurements"])

@@ -33,9 +33,9 @@ def test_every_engine_version_runs_the_protocol_and_is_compared_with_the_referen
     assert (HashEncoding.default_kernel, sampler_cpu.MODE) == chosen
     assert {name: os.environ.get(name) for name in environment} == environment
     arms = json.loads((tmp_path / "f.json").read_text())["arms"]
-    assert list(arms) == ["reference", "hash-cpu-1", "cpu-fused-2"]
+    assert list(arms) == ["reference", "hash-cpu-1", "cpu-fused-3"]
     versions = [[r["engine_version"] for r in arm["records"]] for arm in arms.values()]
-    assert versions == [[None], ["hash-cpu-1"], ["cpu-fused-2"]]
+    assert versions == [[None], ["hash-cpu-1"], ["cpu-fused-3"]]
     assert arms["reference"]["runs_per_core_hour_ratio"] == 1.0
     for arm in arms.values():
         assert arm["cpu_s"] > 0 and arm["runs"] == 1
@@ -45,6 +45,6 @@ def test_every_engine_version_runs_the_protocol_and_is_compared_with_the_referen
 
 def test_the_reference_must_be_an_arm(bench, tmp_path, capsys):
     with pytest.raises(SystemExit) as refused:
-        bench.main(["--data", str(tmp_path), "--out", str(tmp_path), "--arms", "cpu-fused-2"])
+        bench.main(["--data", str(tmp_path), "--out", str(tmp_path), "--arms", "cpu-fused-3"])
     assert refused.value.code == 2
     assert "--arms must include reference" in capsys.readouterr().err

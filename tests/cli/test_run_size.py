@@ -94,14 +94,14 @@ DTU = SceneSize("dtu_scan24", pool=33, test=12, pixels=100 * 75)
 def test_a_run_is_costed_at_its_engine_versions_speed_on_its_scenes_own_pool_and_views():
     # By hand from BENCHMARKS.md's nerfacto-cpu costs (0.065 s a step, 0.6 s a 100x100 test view,
     # 7.4 s / 28 s to score 100 candidates with ours / FisherRF, 1.5 s of setup and files) and the
-    # fused hash loop's 1.40x: each round scores the scene's own candidates, 8 curve points of
+    # fused hash loop's 1.61x: each round scores the scene's own candidates, 8 curve points of
     # min(8, test views) and the scene's test views at its own pixels.
     reference_uniform = 2000 * 0.065 + 50 * 0.6 + 8 * 8 * 0.6 + 1.5
     assert run_seconds("nerfacto-cpu", "none", ROUNDS) == pytest.approx(reference_uniform)
-    ours_on_mic = (2000 * 0.065 + 8 * 7.4 * 96 / 100 + 50 * 0.6 + 8 * 8 * 0.6) / 1.40 + 1.5
+    ours_on_mic = (2000 * 0.065 + 8 * 7.4 * 96 / 100 + 50 * 0.6 + 8 * 8 * 0.6) / 1.61 + 1.5
     assert run_seconds("nerfacto-cpu", "combined", ROUNDS, "hash-cpu-1", MIC) == pytest.approx(ours_on_mic)
     view = 0.6 * 0.75  # 100x75 pixels
-    fisher_on_dtu = (2000 * 0.065 + 8 * 28.0 * 33 / 100 + 12 * view + 8 * 8 * view) / 1.40 + 1.5
+    fisher_on_dtu = (2000 * 0.065 + 8 * 28.0 * 33 / 100 + 12 * view + 8 * 8 * view) / 1.61 + 1.5
     assert run_seconds("nerfacto-cpu", "fisher", ROUNDS, "hash-cpu-1", DTU) == pytest.approx(fisher_on_dtu)
     # An engine version not measured runs at the reference's speed; the scene's size alone changes
     # only what depends on it.
@@ -165,7 +165,7 @@ def test_the_size_line_says_what_it_assumed_beyond_the_config(two_cores):
     }
     line = size_line("nerfaug study", runs, 0, "2 scenes x 2 methods x 5 trials", ROUNDS, 2)
     assert line.endswith(
-        "An estimate from the costs measured in BENCHMARKS.md (engine version hash-cpu-1 at 1.40x the "
+        "An estimate from the costs measured in BENCHMARKS.md (engine version hash-cpu-1 at 1.61x the "
         "reference engine's speed; candidates scored a round: mic 96, dtu_scan24 33): a busy machine takes longer."
     )
     # Nothing is said where nothing but the config was read, nor pools where no method scores.

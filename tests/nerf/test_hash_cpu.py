@@ -141,3 +141,50 @@ def test_without_a_c_compiler_runs_take_the_reference_path_and_record_it(monkeyp
         assert ExperimentConfig(device="cpu", engine="nerfacto-cpu").engine_version() is None
     finally:
         hash_cpu._library.cache_clear()  # the next call builds with the real compiler
+
+
+def _loop(library, name: str, x: torch.Tensor, tensor: torch.Tensor, out: torch.Tensor, encoding) -> torch.Tensor:
+    """`library`'s loop `name` (hash_forward, hash_backward or their *_reference) on `x`, as
+    `hash_cpu._call` calls it; returns `out`."""
+    function = getattr(library, name)
+    function.argtypes = hash_cpu._library().hash_forward.argtypes
+    levels, features = encoding.num_levels, encoding.features_per_level
+    function(
+        *(x.data_ptr(), x.shape[0], tensor.data_ptr(), features, levels, encoding.resolutions.data_ptr()),
+        *(encoding.factors.data_ptr(), encoding.dense_levels, encoding.table_size, out.data_ptr()),
+    )
+    return out
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_the_eight_point_loops_give_the_one_point_loops_bits_on_every_build(size, tmp_path):
+    """Eight points at a time on vectors (AVX2 where the machine has it, and the build for any
+    machine) and the one-point loop: the same features and table gradients to the last bit, for
+    counts that are not multiples of 8, points outside the cube, on its faces and NaN."""
+    import ctypes
+    import shutil
+    import subprocess
+
+    _, fused = pair(size)
+    x = torch.cat([points(size[-1], n=3001), torch.tensor([[float("nan"), 0.5, 0.5], [1.5, -0.5, 0.25]])])
+    x[::97, 1] = float("nan")  # NaN lanes among valid ones
+    table = fused.table.detach()
+    grad = torch.randn(x.shape[0], fused.output_dim, generator=torch.Generator().manual_seed(3))
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    plain = tmp_path / "plain.so"
+    subprocess.run(
+        [compiler, *hash_cpu._FLAGS, "-DNERFAUG_ONE_VERSION", "-o", str(plain), str(hash_cpu._SOURCE), "-lm"],
+        check=True,
+        capture_output=True,
+    )
+    for library in (hash_cpu._library(), ctypes.CDLL(str(plain))):
+        features = {
+            name: _loop(library, name, x, table, torch.empty(x.shape[0], fused.output_dim), fused)
+            for name in ("hash_forward", "hash_forward_reference")
+        }
+        gradients = {
+            name: _loop(library, name, x, grad, torch.zeros_like(table), fused)
+            for name in ("hash_backward", "hash_backward_reference")
+        }
+        assert torch.equal(features["hash_forward"], features["hash_forward_reference"])
+        assert torch.equal(gradients["hash_backward"], gradients["hash_backward_reference"])

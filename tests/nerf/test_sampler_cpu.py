@@ -1,4 +1,4 @@
-"""The proposal sampler's C loops (`nerfaug.nerf.sampler_cpu`, engine version cpu-fused-2) against
+"""The proposal sampler's C loops (`nerfaug.nerf.sampler_cpu`, engine version cpu-fused-3) against
 the PyTorch functions they replace: volume-rendering weights, the inverse-CDF resampling, the
 interlevel and distortion losses, values and gradients within float32 rounding on random rays
 (hypothesis) and on edge cases (opaque rays, empty histograms, edges that coincide); the choice of
@@ -28,7 +28,7 @@ pytestmark = pytest.mark.skipif(
 
 @pytest.fixture(name="fused")
 def fused_fixture(monkeypatch):
-    """This process on cpu-fused-2 for one test."""
+    """This process on cpu-fused-3 for one test."""
     monkeypatch.setattr(HashEncoding, "default_kernel", "auto")
     monkeypatch.setattr(sampler_cpu, "MODE", "fused")
 

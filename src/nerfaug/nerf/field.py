@@ -12,7 +12,8 @@ import math
 import torch
 from torch import Tensor, nn
 
-from nerfaug.nerf.config import NerfConfig
+from nerfaug.nerf import mlp_cpu
+from nerfaug.nerf.config import NerfConfig, ProposalConfig
 from nerfaug.nerf.encoding import HashEncoding, spherical_harmonics
 
 
@@ -87,6 +88,9 @@ class NerfField(nn.Module):
         self.encoding = encoding
         self.density_mlp = mlp(self.encoding.output_dim, field.hidden_dim, 1 + field.geo_feat_dim, 1)
         self.color_mlp = mlp(field.sh_levels**2 + field.geo_feat_dim, field.color_hidden_dim, 3, field.color_layers)
+        # cpu-fused-3 (`mlp_cpu`): the MLPs in one C pass where the CPU loops are chosen, for the
+        # engines that version is recorded for (those with proposal networks)
+        self.fused_mlps = isinstance(config.sampler.kind, ProposalConfig)
         # Zero bias on the density output: a fresh field then has about the configured density.
         with torch.no_grad():
             self.density_mlp[-1].bias.zero_()
@@ -98,7 +102,8 @@ class NerfField(nn.Module):
             density: Tensor with shape (n,), >= 0, per world unit.
             geometry: Tensor with shape (n, geo_feat_dim), input to `color`.
         """
-        raw, geometry = self.density_mlp(self.encoding(x)).split([1, self.geo_feat_dim], dim=-1)
+        raw = mlp_cpu.run(self.density_mlp, self.encoding(x), self.fused_mlps)
+        raw, geometry = raw.split([1, self.geo_feat_dim], dim=-1)
         return density_activation(raw[:, 0], self.density_kind, self.average_init_density), geometry
 
     def color(self, geometry: Tensor, directions: Tensor) -> Tensor:
@@ -111,7 +116,7 @@ class NerfField(nn.Module):
     def color_of_encoded(self, geometry: Tensor, encoded: Tensor) -> Tensor:
         """`color` with the directions' spherical harmonics given: (n, sh_levels ** 2), e.g. one
         ray's computed once for all its samples. Returns: Tensor with shape (n, 3) in [0, 1]."""
-        return torch.sigmoid(self.color_mlp(torch.cat([encoded, geometry], dim=-1)))
+        return torch.sigmoid(mlp_cpu.run(self.color_mlp, torch.cat([encoded, geometry], dim=-1), self.fused_mlps))
 
 
 class DensityField(nn.Module):
@@ -129,4 +134,6 @@ class DensityField(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         """Args: x: Tensor with shape (n, 3) in [0, 1]^3. Returns: density, shape (n,)."""
-        return density_activation(self.mlp(self.encoding(x))[:, 0], self.density_kind, self.average_init_density)
+        # cpu-fused-3: the network in one C pass (`mlp_cpu`) where the CPU loops are chosen
+        raw = mlp_cpu.run(self.mlp, self.encoding(x), fused=True)
+        return density_activation(raw[:, 0], self.density_kind, self.average_init_density)

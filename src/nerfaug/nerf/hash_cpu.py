@@ -80,7 +80,8 @@ def _library() -> ctypes.CDLL | None:
     if library is None:
         return None
     pointer, i64, i32 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int
-    for name in ("hash_forward", "hash_backward"):
+    # The *_reference loops take one point at a time: what the eight-point loops are tested against.
+    for name in ("hash_forward", "hash_backward", "hash_forward_reference", "hash_backward_reference"):
         function = getattr(library, name)
         function.argtypes = [pointer, i64, pointer, i32, i32, pointer, pointer, i32, i64, pointer]
         function.restype = None

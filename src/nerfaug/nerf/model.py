@@ -166,7 +166,7 @@ class NerfModel(nn.Module):
         weights, transmittance, index, geometry = self._densities(origins, directions, t_starts, t_ends)
         visible = transmittance.detach().reshape(-1)[index] > self.config.sampler.transmittance_eps
         if isinstance(self.field, NerfField) and self.sampler.fused_cpu(geometry, directions):
-            # cpu-fused-2: each ray's harmonics once for its samples, rows picked by index (the
+            # cpu-fused-3: each ray's harmonics once for its samples, rows picked by index (the
             # gradient's scatter then writes each row once, where a mask's accumulates).
             rows = visible.nonzero().squeeze(-1)
             colour_index = index.index_select(0, rows)

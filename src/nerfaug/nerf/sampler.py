@@ -58,7 +58,7 @@ class Sampler(nn.Module, ABC):
 
     def fused_cpu(self, *tensors: Tensor) -> bool:
         """Whether a pass of this sampler's engine on `tensors` runs the CPU engine version
-        cpu-fused-2's loops (`nerfaug.nerf.sampler_cpu`; the proposal sampler's, where chosen)."""
+        cpu-fused-3's loops (`nerfaug.nerf.sampler_cpu`; the proposal sampler's, where chosen)."""
         return False
 
     def render_weights(self, sigmas: Tensor, deltas: Tensor) -> tuple[Tensor, Tensor]:

@@ -9,8 +9,9 @@ each ray, with its gradient written out by hand (tests/nerf/test_sampler_cpu.py 
 the PyTorch functions they replace).
 
 Chosen by the environment variable `NERFAUG_CPU_KERNELS` ("hash", the default: the hash loop
-alone, engine version hash-cpu-1; "fused": these loops too, engine version cpu-fused-2,
-`nerfaug.nerf.config.CPU_FUSED_ENGINE_VERSION`), which a benchmark may override by setting `MODE`.
+alone, engine version hash-cpu-1; "fused": these loops and the MLP loop (`nerfaug.nerf.mlp_cpu`)
+too, engine version cpu-fused-3, `nerfaug.nerf.config.CPU_FUSED_ENGINE_VERSION`), which a benchmark
+may override by setting `MODE`.
 They run only where the hash loop runs (`HashEncoding.cpu_loop_selected`), on float32 CPU
 tensors, and where a C compiler built them; elsewhere the PyTorch functions run. Sums run in a
 fixed order on one thread (running sums in double, as PyTorch's CPU cumsum), so a run is
@@ -64,8 +65,8 @@ def available() -> bool:
 
 
 def selected() -> bool:
-    """Whether this process trains with the fused sampler loops: `MODE` "fused", the hash loop
-    selected (`HashEncoding.cpu_loop_selected`) and these loops built.
+    """Whether this process trains with the fused sampler and MLP loops: `MODE` "fused", the hash
+    loop selected (`HashEncoding.cpu_loop_selected`) and these loops and `mlp_cpu`'s built.
 
     Raises:
         ValueError: `MODE` (NERFAUG_CPU_KERNELS) is neither "hash" nor "fused".
@@ -74,9 +75,10 @@ def selected() -> bool:
         raise ValueError(f"NERFAUG_CPU_KERNELS must be one of {', '.join(MODES)}, got {MODE!r}")
     if MODE != "fused":
         return False
+    from nerfaug.nerf import mlp_cpu  # here: mlp_cpu reads this module's choice
     from nerfaug.nerf.encoding import HashEncoding
 
-    return HashEncoding.cpu_loop_selected() and available()
+    return HashEncoding.cpu_loop_selected() and available() and mlp_cpu.available()
 
 
 def applies(*tensors: Tensor) -> bool:
