@@ -22,10 +22,26 @@ class FolderRefused(NerfaugError):
     """An operation would delete or overwrite files that nerfaug cannot prove it wrote."""
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, as Ctrl-C is (`nerfaug.cli` installs the handler):
+    `finally` blocks run, so a child process (the Blender render worker, a sweep's workers) is
+    stopped and what was saved is kept."""
+
+
 class Interrupted(NerfaugError):
-    """Ctrl-C, with one line saying what was kept."""
+    """Ctrl-C (exit 130) or SIGTERM (exit 143), with one line saying what was kept."""
 
     exit_code = 130
+
+    def __init__(self, message: str, stop: KeyboardInterrupt | None = None):
+        super().__init__(message)
+        if isinstance(stop, Terminated):
+            self.exit_code = 143
+
+    @staticmethod
+    def why(stop: KeyboardInterrupt) -> str:
+        """How the program was stopped, as its last line says it."""
+        return "stopped (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
 
 
 class DatasetError(ValueError):

@@ -66,3 +66,43 @@ def test_killing_a_sweep_ends_its_workers_and_its_resource_tracker(bases, tmp_pa
             sweep.kill()
             sweep.wait()
         sweep.stderr.close()
+
+
+@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGINT])
+def test_sigterm_or_ctrl_c_stops_a_sweep_at_once_and_ends_its_workers(bases, tmp_path, stop):
+    """A stopped sweep does not wait for its running runs (which would take minutes here): it
+    kills its workers, exits with the signal's code and one line, and leaves no process behind."""
+    argv = ["run", "--data", str(bases.dataset), "--out", str(tmp_path / "out"), *TINY]
+    argv += ["--trials", "2", "--steps", "100000", "--workers", "2"]
+    sweep = subprocess.Popen(
+        [sys.executable, "-m", "nerfaug.cli", *argv],
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while len([cmd for cmd in members(sweep.pid).values() if "spawn_main" in cmd]) < 2:
+            assert sweep.poll() is None, sweep.stderr.read().decode()
+            assert time.monotonic() < deadline, "no two workers after 120 s"
+            time.sleep(0.2)
+        time.sleep(2.0)  # the workers into their runs
+        os.kill(sweep.pid, stop)
+        code = sweep.wait(30)  # a guard: the runs themselves would take far longer
+        err = sweep.stderr.read().decode()
+        deadline = time.monotonic() + 5.0
+        while members(sweep.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not members(sweep.pid), members(sweep.pid)
+    finally:
+        for pid in members(sweep.pid):
+            os.kill(pid, signal.SIGKILL)
+        if sweep.poll() is None:
+            sweep.kill()
+            sweep.wait()
+        sweep.stderr.close()
+    assert code == (143 if stop == signal.SIGTERM else 130), err[-2000:]
+    why = "stopped (SIGTERM)" if stop == signal.SIGTERM else "interrupted"
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"nerfaug: {tmp_path / 'out'}: {why}; "), last
+    assert last.endswith("re-run the same command to resume"), last

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import tyro
 
 from nerfaug.cli.engine_options import ENGINE_COMMANDS, engine_settings_given, split_engine_options
-from nerfaug.errors import NerfaugError
+from nerfaug.errors import Interrupted, NerfaugError, Terminated
 from nerfaug.registry import unknown
 from nerfaug.schema import built_then_checked
 
@@ -104,11 +104,6 @@ def one_line(error: BaseException) -> str:
     return text or type(error).__name__
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, as Ctrl-C is: `finally` blocks run, so a child process
-    (the Blender render worker) is stopped and what was saved is kept."""
-
-
 def _terminate(signum, frame):
     raise Terminated
 
@@ -140,8 +135,10 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt as stop:
         if debug:
             raise
-        why = "stopped (SIGTERM)" if isinstance(stop, Terminated) else "interrupted"
-        print(f"nerfaug: {why}; files already written are kept (finished runs, saved sessions)", file=sys.stderr)
+        print(
+            f"nerfaug: {Interrupted.why(stop)}; files already written are kept (finished runs, saved sessions)",
+            file=sys.stderr,
+        )
         raise SystemExit(143 if isinstance(stop, Terminated) else 130) from None
     except Exception as error:
         if debug:

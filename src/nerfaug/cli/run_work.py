@@ -47,10 +47,11 @@ def run(
             command=["nerfaug", *sys.argv[1:]],
             checked=checked,
         )
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         raise Interrupted(
-            f"{out}: interrupted; its {len(finished_runs(out))} finished run(s) are kept; re-run the "
-            "same command to resume"
+            f"{out}: {Interrupted.why(stop)}; its {len(finished_runs(out))} finished run(s) are kept; "
+            "re-run the same command to resume",
+            stop,
         ) from None
     if report:
         paths = write_report(out, paper_tables())

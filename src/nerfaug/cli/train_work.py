@@ -187,10 +187,11 @@ def train_session(session, steps: int, checkpoint_every: float, logger: Logger =
     previous = signal.signal(signal.SIGINT, stop)
     try:
         last = session.train_for(steps, checkpoint_every, stop=lambda: bool(asked), log=log)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         raise Interrupted(
-            f"{session.run_dir}: interrupted at step {session.step}; the session saved at step "
-            f"{session.saved_step} is kept (`{go_on}` goes on from there)"
+            f"{session.run_dir}: {Interrupted.why(stop)} at step {session.step}; the session saved at "
+            f"step {session.saved_step} is kept (`{go_on}` goes on from there)",
+            stop,
         ) from None
     finally:
         signal.signal(signal.SIGINT, previous)

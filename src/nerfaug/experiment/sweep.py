@@ -42,7 +42,7 @@ from nerfaug.experiment.store import (
     read_result,
     run_fingerprint,
 )
-from nerfaug.experiment.workers import worker_pool
+from nerfaug.experiment.workers import stop_now, worker_pool
 from nerfaug.nerf.registry import check_names
 from nerfaug.progress import progress_bar
 from nerfaug.registry import did_you_mean
@@ -477,28 +477,38 @@ def _execute_local(units, datasets, config, root, workers, progress, deadline=No
         # Spawned workers that end with this process (`workers`). Units are handed out as workers
         # free up, so that a deadline can stop the handing out.
         with worker_pool(workers) as pool:
-            pending = {}
-            while queue or pending:
-                while queue and len(pending) < workers and (budget.allows() or not budget.longest):
-                    unit = queue.pop(0)
-                    future = pool.submit(_run_unit, unit, datasets, config, root)
-                    pending[future] = unit
-                    budget.start(future)
-                    for key in unit:
-                        display.queue(key)
-                if not pending:
-                    break
-                done, _ = futures.wait(pending, timeout=0.5, return_when=futures.FIRST_COMPLETED)
-                display.poll()
-                for future in done:
-                    unit = pending.pop(future)
-                    budget.end(future)
-                    try:
-                        outcomes = future.result()
-                    except Exception as error:  # the worker itself died (e.g. killed for memory)
-                        outcomes = [(key, None, _failure_text(error)) for key in unit]
-                    _collect(outcomes, results, failed, root, display)
+            try:
+                _hand_out(pool, queue, workers, datasets, config, root, budget, display, results, failed)
+            except BaseException:  # Ctrl-C, SIGTERM (raised as an exception by the CLI), a bug here
+                stop_now(pool)
+                raise
     return results, failed, sum(len(unit) for unit in queue)
+
+
+def _hand_out(pool, queue: list, workers: int, datasets, config, root: Path, budget, display, results, failed) -> None:
+    """Run the `queue`'s units on `pool`, handing one out as a worker frees up (so that a
+    deadline can stop the handing out), filing each unit's outcomes as it ends."""
+    pending = {}
+    while queue or pending:
+        while queue and len(pending) < workers and (budget.allows() or not budget.longest):
+            unit = queue.pop(0)
+            future = pool.submit(_run_unit, unit, datasets, config, root)
+            pending[future] = unit
+            budget.start(future)
+            for key in unit:
+                display.queue(key)
+        if not pending:
+            break
+        done, _ = futures.wait(pending, timeout=0.5, return_when=futures.FIRST_COMPLETED)
+        display.poll()
+        for future in done:
+            unit = pending.pop(future)
+            budget.end(future)
+            try:
+                outcomes = future.result()
+            except Exception as error:  # the worker itself died (e.g. killed for memory)
+                outcomes = [(key, None, _failure_text(error)) for key in unit]
+            _collect(outcomes, results, failed, root, display)
 
 
 def _collect(outcomes: list[tuple], results: list, failed: dict, root: Path, display: _Display) -> None:

@@ -34,6 +34,20 @@ def worker_pool(workers: int) -> futures.ProcessPoolExecutor:
     )
 
 
+def stop_now(pool: futures.ProcessPoolExecutor) -> None:
+    """Cancel the pool's queued work and kill its workers, for a sweep stopped by Ctrl-C or
+    SIGTERM: leaving the pool would wait for every running run to finish (minutes). A killed
+    worker loses only its unfinished run, which a resumed sweep runs again."""
+    # The pool's processes are a private attribute: Python 3.11's executor has no public way to
+    # end its workers (3.14 adds `terminate_workers`).
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        process.kill()
+    for process in processes:
+        process.join(timeout=5)
+
+
 def end_with_parent(parent: int) -> None:
     """In a child process: end it when the process `parent` (the pid that started it) ends.
 
