@@ -106,39 +106,6 @@ static inline void backward_level(const float *x, int64_t n, const float *grad, 
     }
 }
 
-void hash_forward_reference(const float *x, int64_t n, const float *table, int features, int levels,
-                  const int32_t *resolutions, const int32_t *factors, int dense_levels, int64_t table_size,
-                  float *out) {
-    uint32_t mask = (uint32_t)(table_size - 1);
-    for (int l = 0; l < levels; l++) {
-        uint32_t offset = (uint32_t)(l * table_size);
-        int dense = l < dense_levels;
-        if (features == 2)
-            forward_level(x, n, table, 2, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset, out);
-        else
-            forward_level(x, n, table, features, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset,
-                          out);
-    }
-}
-
-/* The one-point loops: the reference the eight-point loops are tested against. grad_table must be
- * zero on entry (or hold what the gradients are added to). */
-void hash_backward_reference(const float *x, int64_t n, const float *grad, int features, int levels,
-                   const int32_t *resolutions, const int32_t *factors, int dense_levels, int64_t table_size,
-                   float *grad_table) {
-    uint32_t mask = (uint32_t)(table_size - 1);
-    for (int l = 0; l < levels; l++) {
-        uint32_t offset = (uint32_t)(l * table_size);
-        int dense = l < dense_levels;
-        if (features == 2)
-            backward_level(x, n, grad, 2, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset,
-                           grad_table);
-        else
-            backward_level(x, n, grad, features, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset,
-                           grad_table);
-    }
-}
-
 /* The rows and weights of the 8 vertices (k = 4z + 2y + x) of 8 points' cells at one level,
  * rows[k][lane] and weights[k][lane]: lane by lane `cell`'s operations in `cell`'s order. */
 static INLINE void cells8(const float *p, int32_t res, const int32_t *factor, int dense, uint32_t mask,
@@ -234,41 +201,39 @@ static INLINE void backward_level8(const float *x, int64_t n, const float *grad,
 #define HASH_ARGS                                                                                              \
     const float *x, int64_t n, const float *tensor, int features, int levels, const int32_t *resolutions,      \
         const int32_t *factors, int dense_levels, int64_t table_size, float *result
+#define PASS_ARGS x, n, tensor, features, levels, resolutions, factors, dense_levels, table_size, result
 
-static INLINE void forward_body(HASH_ARGS) {
-    uint32_t mask = (uint32_t)(table_size - 1);
-    for (int l = 0; l < levels; l++) {
-        uint32_t offset = (uint32_t)(l * table_size);
-        int dense = l < dense_levels;
-        if (features == 2)
-            forward_level8(x, n, tensor, 2, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset, result);
-        else
-            forward_level8(x, n, tensor, features, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset,
-                           result);
-    }
+/* One level of the n points: the eight-point loop where `eight`, else the one-point loop (the
+ * reference it is tested against). */
+static INLINE void level_pass(HASH_ARGS, int F, int l, int backward, int eight) {
+    (void)features; /* F is it (a literal where it is 2) */
+    uint32_t mask = (uint32_t)(table_size - 1), offset = (uint32_t)(l * table_size);
+    int dense = l < dense_levels;
+    const int32_t *factor = factors + 3 * l;
+    if (backward && eight)
+        backward_level8(x, n, tensor, F, levels, l, resolutions[l], factor, dense, mask, offset, result);
+    else if (backward)
+        backward_level(x, n, tensor, F, levels, l, resolutions[l], factor, dense, mask, offset, result);
+    else if (eight)
+        forward_level8(x, n, tensor, F, levels, l, resolutions[l], factor, dense, mask, offset, result);
+    else
+        forward_level(x, n, tensor, F, levels, l, resolutions[l], factor, dense, mask, offset, result);
 }
 
-static INLINE void backward_body(HASH_ARGS) {
-    uint32_t mask = (uint32_t)(table_size - 1);
+/* Every level; F = 2 (every preset's) passed as a literal, so that the compiler specialises it. */
+static INLINE void levels_pass(HASH_ARGS, int backward, int eight) {
     for (int l = 0; l < levels; l++) {
-        uint32_t offset = (uint32_t)(l * table_size);
-        int dense = l < dense_levels;
         if (features == 2)
-            backward_level8(x, n, tensor, 2, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset,
-                            result);
+            level_pass(PASS_ARGS, 2, l, backward, eight);
         else
-            backward_level8(x, n, tensor, features, levels, l, resolutions[l], factors + 3 * l, dense, mask, offset,
-                            result);
+            level_pass(PASS_ARGS, features, l, backward, eight);
     }
 }
 
 #if TWO_VERSIONS
 /* AVX2 without fused multiply-adds (-ffp-contract=off): the same operations as the plain build. */
-__attribute__((target("avx2"))) static void forward_fast(HASH_ARGS) {
-    forward_body(x, n, tensor, features, levels, resolutions, factors, dense_levels, table_size, result);
-}
-__attribute__((target("avx2"))) static void backward_fast(HASH_ARGS) {
-    backward_body(x, n, tensor, features, levels, resolutions, factors, dense_levels, table_size, result);
+__attribute__((target("avx2"))) static void eight_point_pass_avx2(HASH_ARGS, int backward) {
+    levels_pass(PASS_ARGS, backward, 1);
 }
 static int fast_machine(void) {
     static int known = -1;
@@ -280,25 +245,24 @@ static int fast_machine(void) {
 }
 #endif
 
-/* out (n, levels * features) from table. */
-void hash_forward(HASH_ARGS) {
+static void eight_point_pass(HASH_ARGS, int backward) {
 #if TWO_VERSIONS
     if (fast_machine()) {
-        forward_fast(x, n, tensor, features, levels, resolutions, factors, dense_levels, table_size, result);
+        eight_point_pass_avx2(PASS_ARGS, backward);
         return;
     }
 #endif
-    forward_body(x, n, tensor, features, levels, resolutions, factors, dense_levels, table_size, result);
+    levels_pass(PASS_ARGS, backward, 1);
 }
+
+/* out (n, levels * features) from table. */
+void hash_forward(HASH_ARGS) { eight_point_pass(PASS_ARGS, 0); }
 
 /* grad (n, levels * features) scattered into grad_table (zero on entry, or holding what the
  * gradients are added to). */
-void hash_backward(HASH_ARGS) {
-#if TWO_VERSIONS
-    if (fast_machine()) {
-        backward_fast(x, n, tensor, features, levels, resolutions, factors, dense_levels, table_size, result);
-        return;
-    }
-#endif
-    backward_body(x, n, tensor, features, levels, resolutions, factors, dense_levels, table_size, result);
-}
+void hash_backward(HASH_ARGS) { eight_point_pass(PASS_ARGS, 1); }
+
+/* The one-point loops: the reference the eight-point loops are tested against (the same bits). */
+void hash_forward_reference(HASH_ARGS) { levels_pass(PASS_ARGS, 0, 0); }
+
+void hash_backward_reference(HASH_ARGS) { levels_pass(PASS_ARGS, 1, 0); }
