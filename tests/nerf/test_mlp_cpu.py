@@ -160,21 +160,25 @@ def test_the_loop_runs_for_engines_with_proposal_networks_only_when_chosen(monke
     real = mlp_cpu.CpuMlp.apply
     monkeypatch.setattr(mlp_cpu.CpuMlp, "apply", lambda *a: calls.append(1) or real(*a))
     proposal_engine = NerfConfig.preset("nerfacto-cpu")
-    field = build_field(proposal_engine)
+    field, proposal_network = build_field(proposal_engine), DensityField(proposal_engine, 64)
     assert isinstance(field, NerfField) and field.fused_mlps
-    points = torch.rand(100, 3)
-    density, geometry = field.density(points)
-    field.color(geometry, torch.nn.functional.normalize(torch.randn(100, 3), dim=-1))
-    assert len(calls) == 2
-    DensityField(proposal_engine, 64)(points)
+    points, directions = torch.rand(100, 3), torch.nn.functional.normalize(torch.randn(100, 3), dim=-1)
+
+    def every_network():
+        _, geometry = field.density(points)
+        field.color(geometry, directions)
+        proposal_network(points)
+
+    every_network()
     assert len(calls) == 3
     assert not build_field(NerfConfig.preset("cpu")).fused_mlps  # K-planes, occupancy grid
     network, x, _ = network_and_data(0, 10, [4, 8, 2])
     mlp_cpu.run(network.double(), x.double(), fused=True)
     with torch.autocast("cpu", dtype=torch.bfloat16):
         mlp_cpu.run(network.float(), x, fused=True)
+    assert len(calls) == 3
     monkeypatch.setattr(sampler_cpu, "MODE", "hash")
-    mlp_cpu.run(network, x, fused=True)
+    every_network()
     assert len(calls) == 3
 
 

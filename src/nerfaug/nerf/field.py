@@ -12,7 +12,7 @@ import math
 import torch
 from torch import Tensor, nn
 
-from nerfaug.nerf import mlp_cpu
+from nerfaug.nerf import mlp_cpu, sampler_cpu
 from nerfaug.nerf.config import NerfConfig, ProposalConfig
 from nerfaug.nerf.encoding import HashEncoding, spherical_harmonics
 
@@ -102,7 +102,7 @@ class NerfField(nn.Module):
             density: Tensor with shape (n,), >= 0, per world unit.
             geometry: Tensor with shape (n, geo_feat_dim), input to `color`.
         """
-        raw = mlp_cpu.run(self.density_mlp, self.encoding(x), self.fused_mlps)
+        raw = mlp_cpu.run(self.density_mlp, self.encoding(x), self.fused_mlps and sampler_cpu.selected())
         raw, geometry = raw.split([1, self.geo_feat_dim], dim=-1)
         return density_activation(raw[:, 0], self.density_kind, self.average_init_density), geometry
 
@@ -116,7 +116,8 @@ class NerfField(nn.Module):
     def color_of_encoded(self, geometry: Tensor, encoded: Tensor) -> Tensor:
         """`color` with the directions' spherical harmonics given: (n, sh_levels ** 2), e.g. one
         ray's computed once for all its samples. Returns: Tensor with shape (n, 3) in [0, 1]."""
-        return torch.sigmoid(mlp_cpu.run(self.color_mlp, torch.cat([encoded, geometry], dim=-1), self.fused_mlps))
+        fused = self.fused_mlps and sampler_cpu.selected()
+        return torch.sigmoid(mlp_cpu.run(self.color_mlp, torch.cat([encoded, geometry], dim=-1), fused))
 
 
 class DensityField(nn.Module):
@@ -135,5 +136,5 @@ class DensityField(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """Args: x: Tensor with shape (n, 3) in [0, 1]^3. Returns: density, shape (n,)."""
         # cpu-fused-3: the network in one C pass (`mlp_cpu`) where the CPU loops are chosen
-        raw = mlp_cpu.run(self.mlp, self.encoding(x), fused=True)
+        raw = mlp_cpu.run(self.mlp, self.encoding(x), fused=sampler_cpu.selected())
         return density_activation(raw[:, 0], self.density_kind, self.average_init_density)

@@ -13,9 +13,10 @@ round alike, so a run computes the same bits on every machine (mlp_cpu.c says ho
 ordered). No library has such a kernel for the CPU (tiny-cuda-nn's fully fused MLP is CUDA-only;
 oneDNN fuses one layer's ReLU but not the layers or the backward).
 
-Chosen where the sampler loops are (`sampler_cpu.selected()`), for the MLPs of an engine with
-proposal networks (the engines `cpu-fused-3` is recorded for), on float32 CPU tensors; elsewhere
-(float16 autocast, the GPU, other engines) `nn.Sequential` runs. The parameters stay the
+Chosen where the sampler loops are (`sampler_cpu.selected()`, which the fields ask before calling
+`run`), for the MLPs of an engine with proposal networks (the engines `cpu-fused-3` is recorded
+for), on float32 CPU tensors; elsewhere (float16 autocast, the GPU, other engines) `nn.Sequential`
+runs. The parameters stay the
 `nn.Linear` layers' own, so checkpoints and optimisers see no difference.
 """
 
@@ -29,7 +30,6 @@ from pathlib import Path
 import torch
 from torch import Tensor, nn
 
-from nerfaug.nerf import sampler_cpu
 from nerfaug.nerf.hash_cpu import compiled
 
 _SOURCE = Path(__file__).with_name("mlp_cpu.c")
@@ -70,13 +70,12 @@ _LINEARS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def applies(x: Tensor, first: nn.Linear) -> bool:
-    """Whether the C loops compute a network whose first layer is `first` on `x`: the CPU loops
-    chosen (`sampler_cpu.selected()`, which needs these loops built), `x` and the layer float32 on
-    the CPU, and no float16/bfloat16 autocast."""
+    """Whether the C loops compute a network whose first layer is `first` on `x`: the loops
+    built, `x` and the layer float32 on the CPU, and no float16/bfloat16 autocast."""
     if x.device.type != "cpu" or x.dtype != torch.float32 or torch.is_autocast_enabled("cpu"):
         return False
     weight = first.weight
-    return weight.device.type == "cpu" and weight.dtype == torch.float32 and sampler_cpu.selected()
+    return weight.device.type == "cpu" and weight.dtype == torch.float32 and available()
 
 
 def _pointers(tensors: list[Tensor]):
@@ -153,11 +152,11 @@ class CpuMlp(torch.autograd.Function):
 
 
 def run(network: nn.Sequential, x: Tensor, fused: bool) -> Tensor:
-    """`network(x)` for x (n, in) -> (n, out): through the C loops where `fused` (the engine is
-    one `cpu-fused-3` is recorded for) and they apply, else PyTorch's layers."""
-    # `selected()` first: where the loops are not chosen nothing else is looked at, so that a
-    # compiled field (`--compile`) traces exactly PyTorch's layers, as before these loops existed.
-    if fused and sampler_cpu.selected():
+    """`network(x)` for x (n, in) -> (n, out): through the C loops where `fused` (the caller's
+    engine is one `cpu-fused-3` is recorded for, and `sampler_cpu.selected()`) and they apply,
+    else PyTorch's layers. Where not `fused` nothing else is looked at, so that a compiled field
+    (`--compile`) traces exactly PyTorch's layers."""
+    if fused:
         linears = _LINEARS.get(network, ())
         if linears == ():
             linears = _LINEARS[network] = linear_layers(network)

@@ -28,6 +28,7 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+from nerfaug.nerf import mlp_cpu
 from nerfaug.nerf.hash_cpu import compiled
 
 _SOURCE = Path(__file__).with_name("sampler_cpu.c")
@@ -75,7 +76,6 @@ def selected() -> bool:
         raise ValueError(f"NERFAUG_CPU_KERNELS must be one of {', '.join(MODES)}, got {MODE!r}")
     if MODE != "fused":
         return False
-    from nerfaug.nerf import mlp_cpu  # here: mlp_cpu reads this module's choice
     from nerfaug.nerf.encoding import HashEncoding
 
     return HashEncoding.cpu_loop_selected() and available() and mlp_cpu.available()
