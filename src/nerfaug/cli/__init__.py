@@ -135,11 +135,11 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt as stop:
         if debug:
             raise
-        print(
-            f"nerfaug: {Interrupted.why(stop)}; files already written are kept (finished runs, saved sessions)",
-            file=sys.stderr,
+        stopped = Interrupted(
+            f"{Interrupted.why(stop)}; files already written are kept (finished runs, saved sessions)", stop
         )
-        raise SystemExit(143 if isinstance(stop, Terminated) else 130) from None
+        print(f"nerfaug: {stopped}", file=sys.stderr)
+        raise SystemExit(stopped.exit_code) from None
     except Exception as error:
         if debug:
             raise

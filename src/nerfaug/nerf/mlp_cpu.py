@@ -16,15 +16,14 @@ oneDNN fuses one layer's ReLU but not the layers or the backward).
 Chosen where the sampler loops are (`sampler_cpu.selected()`, which the fields ask before calling
 `run`), for the MLPs of an engine with proposal networks (the engines `cpu-fused-3` is recorded
 for), on float32 CPU tensors; elsewhere (float16 autocast, the GPU, other engines) `nn.Sequential`
-runs. The parameters stay the
-`nn.Linear` layers' own, so checkpoints and optimisers see no difference.
+runs. The parameters stay the `nn.Linear` layers' own, so checkpoints and optimisers see no
+difference.
 """
 
 from __future__ import annotations
 
 import ctypes
 import functools
-import weakref
 from pathlib import Path
 
 import torch
@@ -63,10 +62,6 @@ def linear_layers(network: nn.Sequential) -> list[nn.Linear] | None:
     if not all(isinstance(m, nn.ReLU) for m in modules[1::2]):
         return None
     return linears
-
-
-_LINEARS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-"""Each network's `linear_layers`, found once (a network's layers are not replaced)."""
 
 
 def applies(x: Tensor, first: nn.Linear) -> bool:
@@ -157,9 +152,7 @@ def run(network: nn.Sequential, x: Tensor, fused: bool) -> Tensor:
     else PyTorch's layers. Where not `fused` nothing else is looked at, so that a compiled field
     (`--compile`) traces exactly PyTorch's layers."""
     if fused:
-        linears = _LINEARS.get(network, ())
-        if linears == ():
-            linears = _LINEARS[network] = linear_layers(network)
+        linears = linear_layers(network)
         if linears is not None and applies(x, linears[0]):
             parameters = [p for layer in linears for p in (layer.weight, layer.bias)]
             keep = torch.is_grad_enabled() and (x.requires_grad or any(p.requires_grad for p in parameters))
